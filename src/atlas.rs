@@ -1,0 +1,880 @@
+//! Lightmap UV atlas: charts every mesh with xatlas and packs all charts into one atlas page.
+//!
+//! [`pack`] takes world-space triangle meshes, splits them into charts (groups of connected
+//! triangles that flatten with little distortion), parameterizes each chart and packs the charts
+//! into a single page of texels with a uniform texel density (`texels_per_unit` texels per scene
+//! unit) and a padding between charts. Each output mesh carries, for every output vertex (input
+//! vertices are split at chart seams), the input vertex it came from and its UV in texels.
+//!
+//! # The xatlas-rs traps this module works around
+//!
+//! It uses the `xatlas-rs` 0.1.3 crate (xatlas of 2019, vendored C++), which has these problems:
+//!
+//! - **It does not link outside MSVC.** Its pre-generated bindings name the C++ functions by their
+//!   MSVC decorated names (`?Create@xatlas@@YAPEAUAtlas@1@XZ`, ...), while gcc and clang export
+//!   Itanium names (`_ZN6xatlas6CreateEv`, ...). This module exports, under the exact MSVC names,
+//!   shim functions that forward to the Itanium symbols of the same functions. Only the four that
+//!   xatlas-rs's safe API calls are shimmed (`Create`, `Destroy`, `AddMesh`, `Generate`); its other
+//!   bindings (`ComputeCharts`, `PackCharts`, `SetPrint`, ...) are never called by it, so the
+//!   linker never asks for them. The shims only exist on non-MSVC targets: on MSVC, xatlas's own
+//!   symbols would collide with them (and the module refuses to compile there).
+//! - **`AddMesh`'s error code is dropped** by `Xatlas::add_mesh`. The `AddMesh` shim keeps the last
+//!   result in a thread-local; [`pack`] checks it after each mesh. (Inputs are checked before they
+//!   reach xatlas anyway: non-finite positions, indices out of range, an index count that is not a
+//!   multiple of 3.)
+//! - **The atlas size is hidden** (`Atlas::width`, `height`, `atlasCount`, `texelsPerUnit`): the
+//!   `Generate` shim reads them from the `xatlas::Atlas` after forwarding and keeps them in a
+//!   thread-local.
+//! - **`padding` is ignored unless `conservative` is set**: [`pack`] always sets it.
+//! - **Index format defaults to 16 bits** in `xatlas_rs::MeshDecl`: [`pack`] passes 32-bit indices.
+//! - **An `AddMesh` with no indices is taken as an unindexed triangle soup** (every 3 vertices a
+//!   triangle): [`pack`] never adds a mesh without triangles; it outputs an empty [`AtlasMesh`].
+//! - **Charts larger than `maxChartSize` (default 1024 texels) are silently scaled down**, which
+//!   breaks the uniform texel density. [`pack`] sets `maxChartSize` to the largest chart that fits
+//!   the page and treats a chart that reaches it as "does not fit" (see below).
+//! - **With a fixed `resolution`, charts that don't fit spill onto more atlas pages**
+//!   (`atlasCount > 1`), and a chart larger than the page gets UVs outside it, both silently.
+//!   [`pack`] wants one page: it re-packs (xatlas `PackCharts` on the same atlas, charts are not
+//!   recomputed) with a smaller `texels_per_unit` until everything fits, and then checks that every
+//!   UV lies in `[0, width] x [0, height]` and every charted vertex is on page 0.
+//! - **One large connected chart is very slow** (a 20k-triangle grid: over a minute) unless
+//!   `ChartOptions::maxChartArea` is set. [`pack`] sets it so that a chart of average triangles has
+//!   at most [`TRIANGLES_PER_CHART`] triangles.
+//! - **xatlas prints warnings with `printf` to stdout** (e.g. "Chart 3: doesn't have disk
+//!   topology"). The module turns xatlas's printing off once (xatlas `SetPrint(nullptr, false)`),
+//!   so stdout stays the program's own.
+//!
+//! Output is deterministic: xatlas's random generators are seeded with constants per atlas, and
+//! its worker threads write each chart group's results to its own slot, so the same input gives the
+//! same bytes on every run, also when several threads pack at once (each call has its own xatlas
+//! atlas and its own worker pool; the shim stash is thread-local, so calls need no lock).
+//!
+//! Triangle order is kept: xatlas writes output triangle `k` at `indexArray[3k..3k+3]` for input
+//! face `k` (it maps faces back to their source face), and [`pack`] checks that output triangle
+//! `k`'s vertices come from input triangle `k`'s vertices in the same order.
+
+use std::cell::Cell;
+use std::ffi::{c_int, c_void};
+use std::ptr;
+
+#[cfg(target_env = "msvc")]
+compile_error!(
+    "penumbra's atlas module shims xatlas-rs's MSVC symbol names onto the Itanium-ABI names that \
+     gcc/clang export; on MSVC targets xatlas already exports the MSVC names and the shims would \
+     collide"
+);
+
+/// A chart made of average-sized triangles has at most about this many triangles: `pack` sets
+/// xatlas's `maxChartArea` to `total area / total triangles * TRIANGLES_PER_CHART`. Without a limit,
+/// xatlas takes over a minute on one 20k-triangle connected chart.
+pub const TRIANGLES_PER_CHART: f64 = 2000.0;
+
+/// Largest atlas side, in texels, that [`pack`] accepts or produces.
+pub const MAX_RESOLUTION: u32 = 16384;
+
+/// Atlas side used when neither `texels_per_unit` nor `resolution` is given.
+pub const DEFAULT_RESOLUTION: u32 = 1024;
+
+/// How many times [`pack`] re-packs with a smaller texel density before giving up.
+const MAX_PACK_ATTEMPTS: u32 = 40;
+
+/// xatlas's `PackOptions::attempts` (its default): random placements tried per chart.
+const PACK_ATTEMPTS_PER_CHART: i32 = 4096;
+
+/// What can go wrong in [`pack`].
+#[derive(Debug, thiserror::Error)]
+pub enum AtlasError {
+    /// An input mesh is malformed; `mesh` is its index in the inputs.
+    #[error("mesh {mesh}: {reason}")]
+    InvalidInput { mesh: usize, reason: String },
+    /// An [`AtlasOptions`] value is out of range.
+    #[error("invalid atlas option {option}: {reason}")]
+    InvalidOptions { option: &'static str, reason: String },
+    /// xatlas's `AddMesh` rejected a mesh (its error code, which xatlas-rs drops).
+    #[error("mesh {mesh}: xatlas rejected it: {reason}")]
+    AddMesh { mesh: usize, reason: String },
+    /// There is no triangle to chart: no input, or every input mesh is empty or degenerate.
+    #[error("no triangles to chart (every input mesh is empty or degenerate)")]
+    Empty,
+    /// With a fixed resolution, the charts do not fit on one page even after shrinking the texel
+    /// density `attempts` times.
+    #[error(
+        "charts do not fit on one {resolution}x{resolution} page, even at {texels_per_unit} \
+         texels per unit after {attempts} attempts"
+    )]
+    DoesNotFit {
+        resolution: u32,
+        texels_per_unit: f32,
+        attempts: u32,
+    },
+    /// Without a fixed resolution, the atlas (or one chart) would be wider than
+    /// [`MAX_RESOLUTION`] at the requested texel density.
+    #[error(
+        "an atlas at {texels_per_unit} texels per unit would need about {texels} texels a side, \
+         more than {max}; lower texels_per_unit or give a resolution"
+    )]
+    TooLarge {
+        texels_per_unit: f32,
+        texels: u64,
+        max: u32,
+    },
+    /// An output UV lies outside the atlas (checked after packing).
+    #[error(
+        "mesh {mesh}: output vertex {vertex} has UV ({u}, {v}) outside the {width}x{height} atlas"
+    )]
+    OutOfBounds {
+        mesh: usize,
+        vertex: usize,
+        u: f32,
+        v: f32,
+        width: u32,
+        height: u32,
+    },
+    /// An output vertex is on an atlas page other than the first (checked after packing).
+    #[error("mesh {mesh}: output vertex {vertex} is on atlas page {page}, not on the single page")]
+    NotOnePage { mesh: usize, vertex: usize, page: u32 },
+    /// xatlas's output does not match its input as documented (a bug in xatlas or this module).
+    #[error("mesh {mesh}: unexpected xatlas output: {reason}")]
+    Internal { mesh: usize, reason: String },
+}
+
+/// One mesh to chart: world-space positions (so texel density is uniform in the scene's units) and
+/// triangle indices.
+#[derive(Debug, Clone, Copy)]
+pub struct AtlasInput<'a> {
+    /// Vertex positions in scene units. All must be finite.
+    pub positions: &'a [[f32; 3]],
+    /// Triangle list: three indices into `positions` per triangle. An empty list is allowed (the
+    /// output mesh is then empty).
+    pub indices: &'a [u32],
+}
+
+/// How to size the atlas.
+///
+/// - `texels_per_unit` only: the page grows to fit the charts at that density (its size is the
+///   packed extent, not a power of two), up to [`MAX_RESOLUTION`].
+/// - `resolution` given (or neither, which means `resolution` = [`DEFAULT_RESOLUTION`]): the page
+///   is exactly `resolution` x `resolution` texels. The density is `texels_per_unit` if given, else
+///   estimated by xatlas from the surface area; if the charts do not fit on one page at that
+///   density, [`pack`] retries with a smaller density until they do, and [`Atlas::texels_per_unit`]
+///   reports the one used.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AtlasOptions {
+    /// Texels per scene unit (metre). None: derived from `resolution`.
+    pub texels_per_unit: Option<f32>,
+    /// Target atlas width and height in texels. None with texels_per_unit None: 1024.
+    pub resolution: Option<u32>,
+    /// Texels of padding between charts (>= 2).
+    pub padding: u32,
+}
+
+impl Default for AtlasOptions {
+    /// A 1024 x 1024 page, density estimated, 2 texels of padding.
+    fn default() -> Self {
+        Self {
+            texels_per_unit: None,
+            resolution: None,
+            padding: 2,
+        }
+    }
+}
+
+/// One output mesh, in the order of the inputs. Output vertices are split at chart seams.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct AtlasMesh {
+    /// For each output vertex, the index of the input vertex it comes from.
+    pub xref: Vec<u32>,
+    /// For each output vertex, its UV in texels (0..width, 0..height), texel centres at +0.5.
+    ///
+    /// Vertices of triangles that xatlas leaves out of every chart (degenerate ones: a repeated
+    /// index, a zero-length edge, or an area <= `f32::EPSILON` in scene units²) have UV (0, 0),
+    /// so those triangles cover no texel.
+    pub uv: Vec<[f32; 2]>,
+    /// Triangles over the output vertices; triangle k is input triangle k (same order, same
+    /// count, and its corners come from input triangle k's corners in the same order).
+    pub indices: Vec<u32>,
+}
+
+/// The packed atlas: one page of `width` x `height` texels.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Atlas {
+    /// Page width in texels.
+    pub width: u32,
+    /// Page height in texels.
+    pub height: u32,
+    /// Texels per scene unit actually used (may be lower than requested, see [`AtlasOptions`]).
+    pub texels_per_unit: f32,
+    /// One output mesh per input, in input order.
+    pub meshes: Vec<AtlasMesh>,
+}
+
+/// Charts and packs all meshes into one atlas page.
+///
+/// Checks the inputs first (finite positions, indices in range, index count a multiple of 3;
+/// meshes with no triangles give an empty [`AtlasMesh`]) and the output after (one page, UVs
+/// inside it, triangle order kept). See the module documentation for what it works around in
+/// xatlas-rs, and [`AtlasOptions`] for how the page is sized (with a fixed resolution it lowers the
+/// texel density until all charts fit on one page).
+pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, AtlasError> {
+    let sizing = Sizing::from_options(options)?;
+    let stats = check_inputs(inputs)?;
+    if stats.triangles == 0 || stats.area <= 0.0 {
+        return Err(AtlasError::Empty);
+    }
+    let max_chart_size = match sizing {
+        Sizing::Fixed { resolution, .. } => {
+            // A chart's bit image is ceil(extent) + 1 + padding texels wide; it must fit the page.
+            let size = resolution.saturating_sub(options.padding + 1);
+            if size < 1 {
+                return Err(AtlasError::InvalidOptions {
+                    option: "padding",
+                    reason: format!(
+                        "{} texels of padding leave no room on a {resolution}-texel page",
+                        options.padding
+                    ),
+                });
+            }
+            size
+        }
+        Sizing::Grow { texels_per_unit } => {
+            // xatlas sizes a page for 75% utilization; refuse before it allocates a huge one.
+            let side = (stats.area / 0.75).sqrt() * f64::from(texels_per_unit);
+            if side > f64::from(MAX_RESOLUTION) {
+                return Err(AtlasError::TooLarge {
+                    texels_per_unit,
+                    texels: side.ceil() as u64,
+                    max: MAX_RESOLUTION,
+                });
+            }
+            MAX_RESOLUTION
+        }
+    };
+
+    silence_xatlas();
+    let mut xatlas = xatlas_rs::Xatlas::new();
+    let handle = LAST_HANDLE.with(|h| h.replace(ptr::null_mut()));
+    if handle.is_null() {
+        return Err(internal(0, "xatlas Create returned no atlas"));
+    }
+
+    // Add the meshes that have triangles; `added[i]` is the input index of xatlas mesh i.
+    let mut added = Vec::new();
+    for (m, input) in inputs.iter().enumerate() {
+        if input.indices.is_empty() {
+            continue;
+        }
+        let decl = xatlas_rs::MeshDecl {
+            vertex_count: input.positions.len() as u32,
+            vertex_position_data: positions_as_bytes(input.positions),
+            vertex_position_stride: 12,
+            index_count: input.indices.len() as u32,
+            index_data: indices_as_bytes(input.indices),
+            index_format: xatlas_rs::IndexFormat::Uint32,
+            ..Default::default()
+        };
+        LAST_ADD_MESH.with(|r| r.set(None));
+        xatlas.add_mesh(&decl);
+        match LAST_ADD_MESH.with(|r| r.take()) {
+            Some(ADD_MESH_SUCCESS) => {}
+            Some(code) => {
+                return Err(AtlasError::AddMesh {
+                    mesh: m,
+                    reason: add_mesh_error_text(code),
+                });
+            }
+            None => return Err(internal(m, "the AddMesh shim was not called")),
+        }
+        added.push(m);
+    }
+
+    let chart_options = xatlas_rs::ChartOptions {
+        max_chart_area: (stats.area / stats.triangles as f64 * TRIANGLES_PER_CHART) as f32,
+        ..Default::default()
+    };
+    let mut pack_options = ffi::PackOptions {
+        attempts: PACK_ATTEMPTS_PER_CHART,
+        texels_per_unit: match sizing {
+            Sizing::Fixed {
+                texels_per_unit, ..
+            } => texels_per_unit.unwrap_or(0.0),
+            Sizing::Grow { texels_per_unit } => texels_per_unit,
+        },
+        resolution: match sizing {
+            Sizing::Fixed { resolution, .. } => resolution,
+            Sizing::Grow { .. } => 0,
+        },
+        max_chart_size,
+        block_align: false,
+        conservative: true,
+        padding: options.padding,
+    };
+    LAST_GENERATE.with(|g| g.set(None));
+    xatlas.generate_simple(chart_options, pack_options.to_xatlas_rs());
+    let mut info = LAST_GENERATE
+        .with(|g| g.take())
+        .ok_or_else(|| internal(0, "the Generate shim was not called"))?;
+    if info.chart_count == 0 {
+        return Err(AtlasError::Empty);
+    }
+
+    let mut attempt = 1;
+    loop {
+        let meshes = xatlas.meshes();
+        if meshes.len() != added.len() {
+            return Err(internal(
+                0,
+                format!("{} output meshes for {} inputs", meshes.len(), added.len()),
+            ));
+        }
+        let shrink = match sizing {
+            Sizing::Grow { texels_per_unit } => {
+                if largest_chart(&meshes) > max_chart_size as f32 - 0.5 {
+                    return Err(AtlasError::TooLarge {
+                        texels_per_unit,
+                        texels: u64::from(max_chart_size) + 1,
+                        max: MAX_RESOLUTION,
+                    });
+                }
+                None
+            }
+            Sizing::Fixed { resolution, .. } => fixed_page_shrink(&meshes, &info, max_chart_size)
+                .map(|factor| (resolution, factor)),
+        };
+        let Some((resolution, factor)) = shrink else {
+            return collect_output(inputs, &added, &meshes, &info);
+        };
+        if attempt >= MAX_PACK_ATTEMPTS {
+            return Err(AtlasError::DoesNotFit {
+                resolution,
+                texels_per_unit: info.texels_per_unit,
+                attempts: attempt,
+            });
+        }
+        drop(meshes);
+        attempt += 1;
+        pack_options.texels_per_unit = info.texels_per_unit * factor;
+        // SAFETY: `handle` is the atlas owned by `xatlas`, alive until it drops; charts were
+        // computed and parameterized by Generate, and PackCharts may be called again (it restores
+        // the original chart UVs first). It frees the output meshes, whose views were dropped.
+        unsafe {
+            ffi::pack_charts(handle, pack_options, None, ptr::null_mut());
+            info = PackInfo::read(handle);
+        }
+    }
+}
+
+/// How the page is sized, from [`AtlasOptions`].
+#[derive(Debug, Clone, Copy)]
+enum Sizing {
+    /// A `resolution` x `resolution` page.
+    Fixed {
+        resolution: u32,
+        texels_per_unit: Option<f32>,
+    },
+    /// A page that grows to fit the charts at this density.
+    Grow { texels_per_unit: f32 },
+}
+
+impl Sizing {
+    fn from_options(options: &AtlasOptions) -> Result<Self, AtlasError> {
+        if options.padding < 2 {
+            return Err(AtlasError::InvalidOptions {
+                option: "padding",
+                reason: format!("{} is below the minimum of 2 texels", options.padding),
+            });
+        }
+        if let Some(tpu) = options.texels_per_unit
+            && !(tpu.is_finite() && tpu > 0.0)
+        {
+            return Err(AtlasError::InvalidOptions {
+                option: "texels_per_unit",
+                reason: format!("{tpu} is not a positive number"),
+            });
+        }
+        if let Some(resolution) = options.resolution
+            && !(1..=MAX_RESOLUTION).contains(&resolution)
+        {
+            return Err(AtlasError::InvalidOptions {
+                option: "resolution",
+                reason: format!("{resolution} is not in 1..={MAX_RESOLUTION}"),
+            });
+        }
+        Ok(match (options.resolution, options.texels_per_unit) {
+            (Some(resolution), texels_per_unit) => Sizing::Fixed {
+                resolution,
+                texels_per_unit,
+            },
+            (None, Some(texels_per_unit)) => Sizing::Grow { texels_per_unit },
+            (None, None) => Sizing::Fixed {
+                resolution: DEFAULT_RESOLUTION,
+                texels_per_unit: None,
+            },
+        })
+    }
+}
+
+/// Totals over the valid inputs.
+struct InputStats {
+    /// Triangles in all meshes.
+    triangles: usize,
+    /// Total surface area, in scene units².
+    area: f64,
+}
+
+/// Checks every input mesh, and sums their triangles and surface area.
+fn check_inputs(inputs: &[AtlasInput<'_>]) -> Result<InputStats, AtlasError> {
+    let mut stats = InputStats {
+        triangles: 0,
+        area: 0.0,
+    };
+    for (mesh, input) in inputs.iter().enumerate() {
+        let invalid = |reason: String| AtlasError::InvalidInput { mesh, reason };
+        if input.positions.len() > u32::MAX as usize {
+            return Err(invalid(format!(
+                "{} vertices, more than xatlas's limit of {}",
+                input.positions.len(),
+                u32::MAX
+            )));
+        }
+        if input.indices.len() > u32::MAX as usize {
+            return Err(invalid(format!(
+                "{} indices, more than xatlas's limit of {}",
+                input.indices.len(),
+                u32::MAX
+            )));
+        }
+        if input.indices.len() % 3 != 0 {
+            return Err(invalid(format!(
+                "{} indices, not a multiple of 3 (a triangle list is expected)",
+                input.indices.len()
+            )));
+        }
+        if let Some((v, p)) = input
+            .positions
+            .iter()
+            .enumerate()
+            .find(|(_, p)| !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(invalid(format!("vertex {v} has a non-finite position {p:?}")));
+        }
+        let vertex_count = input.positions.len();
+        if let Some((i, &index)) = input
+            .indices
+            .iter()
+            .enumerate()
+            .find(|&(_, &index)| index as usize >= vertex_count)
+        {
+            return Err(invalid(format!(
+                "index {i} (triangle {}) is {index}, out of range for {vertex_count} vertices",
+                i / 3
+            )));
+        }
+        for tri in input.indices.chunks_exact(3) {
+            let [a, b, c] = [0, 1, 2].map(|k| input.positions[tri[k] as usize].map(f64::from));
+            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+            let n = [
+                e1[1] * e2[2] - e1[2] * e2[1],
+                e1[2] * e2[0] - e1[0] * e2[2],
+                e1[0] * e2[1] - e1[1] * e2[0],
+            ];
+            stats.area += 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+        }
+        stats.triangles += input.indices.len() / 3;
+    }
+    Ok(stats)
+}
+
+/// With a fixed page: `None` if everything is on one page, inside it and unscaled; else the factor
+/// to multiply the texel density by before packing again.
+fn fixed_page_shrink(
+    meshes: &[xatlas_rs::Mesh<'_>],
+    info: &PackInfo,
+    max_chart_size: u32,
+) -> Option<f32> {
+    if info.atlas_count > 1 {
+        // The charts need about `atlas_count` pages' worth of area; shrink the side to match.
+        return Some((0.97 / (info.atlas_count as f32).sqrt()).min(0.9));
+    }
+    let (w, h) = (info.width as f32, info.height as f32);
+    let misplaced = meshes.iter().flat_map(|m| m.vertices).any(|v| {
+        v.atlas_index != UNCHARTED
+            && (v.atlas_index != 0 || !(0.0..=w).contains(&v.uv[0]) || !(0.0..=h).contains(&v.uv[1]))
+    });
+    // A chart that reached `max_chart_size` may have been scaled down by xatlas on its own.
+    if misplaced || largest_chart(meshes) > max_chart_size as f32 - 0.5 {
+        return Some(0.9);
+    }
+    None
+}
+
+/// The largest side, in texels, of any chart's UV bounding box.
+fn largest_chart(meshes: &[xatlas_rs::Mesh<'_>]) -> f32 {
+    let mut largest = 0.0f32;
+    for mesh in meshes {
+        for chart in &mesh.charts {
+            let mut lo = [f32::INFINITY; 2];
+            let mut hi = [f32::NEG_INFINITY; 2];
+            for &i in chart.indices {
+                if let Some(v) = mesh.vertices.get(i as usize) {
+                    for k in 0..2 {
+                        lo[k] = lo[k].min(v.uv[k]);
+                        hi[k] = hi[k].max(v.uv[k]);
+                    }
+                }
+            }
+            largest = largest.max(hi[0] - lo[0]).max(hi[1] - lo[1]);
+        }
+    }
+    largest
+}
+
+/// Copies xatlas's output meshes into [`AtlasMesh`]es in input order, checking them.
+fn collect_output(
+    inputs: &[AtlasInput<'_>],
+    added: &[usize],
+    meshes: &[xatlas_rs::Mesh<'_>],
+    info: &PackInfo,
+) -> Result<Atlas, AtlasError> {
+    let mut out = vec![AtlasMesh::default(); inputs.len()];
+    for (&m, mesh) in added.iter().zip(meshes) {
+        let input = &inputs[m];
+        let (width, height) = (info.width, info.height);
+        for (vertex, v) in mesh.vertices.iter().enumerate() {
+            if v.atlas_index != 0 && v.atlas_index != UNCHARTED {
+                return Err(AtlasError::NotOnePage {
+                    mesh: m,
+                    vertex,
+                    page: v.atlas_index,
+                });
+            }
+            let [u, vv] = v.uv;
+            if !(0.0..=width as f32).contains(&u) || !(0.0..=height as f32).contains(&vv) {
+                return Err(AtlasError::OutOfBounds {
+                    mesh: m,
+                    vertex,
+                    u,
+                    v: vv,
+                    width,
+                    height,
+                });
+            }
+            if v.xref as usize >= input.positions.len() {
+                return Err(internal(
+                    m,
+                    format!("output vertex {vertex} refers to input vertex {}", v.xref),
+                ));
+            }
+        }
+        if mesh.indices.len() != input.indices.len() {
+            return Err(internal(
+                m,
+                format!(
+                    "{} output indices for {} input indices",
+                    mesh.indices.len(),
+                    input.indices.len()
+                ),
+            ));
+        }
+        for (k, (o, i)) in mesh
+            .indices
+            .chunks_exact(3)
+            .zip(input.indices.chunks_exact(3))
+            .enumerate()
+        {
+            let same = o.iter().zip(i).all(|(&o, &i)| {
+                mesh.vertices
+                    .get(o as usize)
+                    .is_some_and(|v| v.xref == i)
+            });
+            if !same {
+                return Err(internal(
+                    m,
+                    format!("output triangle {k} {o:?} does not come from input triangle {k} {i:?}"),
+                ));
+            }
+        }
+        out[m] = AtlasMesh {
+            xref: mesh.vertices.iter().map(|v| v.xref).collect(),
+            uv: mesh.vertices.iter().map(|v| v.uv).collect(),
+            indices: mesh.indices.to_vec(),
+        };
+    }
+    Ok(Atlas {
+        width: info.width,
+        height: info.height,
+        texels_per_unit: info.texels_per_unit,
+        meshes: out,
+    })
+}
+
+fn internal(mesh: usize, reason: impl Into<String>) -> AtlasError {
+    AtlasError::Internal {
+        mesh,
+        reason: reason.into(),
+    }
+}
+
+/// `atlasIndex` -1 (as xatlas-rs's `u32`): a vertex of a triangle xatlas left out of every chart.
+const UNCHARTED: u32 = u32::MAX;
+
+/// `xatlas::AddMeshError::Success`.
+const ADD_MESH_SUCCESS: c_int = 0;
+
+/// The text of an `xatlas::AddMeshError` code.
+fn add_mesh_error_text(code: c_int) -> String {
+    match code {
+        1 => "IndexOutOfRange: an index is >= the vertex count".to_owned(),
+        2 => "InvalidIndexCount: the index count is not a multiple of 3".to_owned(),
+        other => format!("unknown AddMesh error {other}"),
+    }
+}
+
+fn positions_as_bytes(positions: &[[f32; 3]]) -> &[u8] {
+    // SAFETY: [f32; 3] has no padding and any initialized bytes are valid u8s; same extent.
+    unsafe { std::slice::from_raw_parts(positions.as_ptr().cast(), size_of_val(positions)) }
+}
+
+fn indices_as_bytes(indices: &[u32]) -> &[u8] {
+    // SAFETY: u32 has no padding and any initialized bytes are valid u8s; same extent.
+    unsafe { std::slice::from_raw_parts(indices.as_ptr().cast(), size_of_val(indices)) }
+}
+
+/// Turns off xatlas's `printf` to stdout, once per process, before any atlas is made.
+fn silence_xatlas() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    // SAFETY: SetPrint only stores the function pointer and flag in globals; Once makes this
+    // happen before any xatlas call of this module, on any thread.
+    ONCE.call_once(|| unsafe { ffi::set_print(ptr::null(), false) });
+}
+
+/// What xatlas reports after packing: fields of `xatlas::Atlas` that xatlas-rs hides.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct PackInfo {
+    width: u32,
+    height: u32,
+    atlas_count: u32,
+    chart_count: u32,
+    texels_per_unit: f32,
+}
+
+impl PackInfo {
+    /// Reads the packing results from an atlas.
+    ///
+    /// # Safety
+    /// `atlas` must be a live atlas from `xatlas::Create`.
+    unsafe fn read(atlas: *const ffi::Atlas) -> Self {
+        // SAFETY: by the caller's contract.
+        let a = unsafe { &*atlas };
+        Self {
+            width: a.width,
+            height: a.height,
+            atlas_count: a.atlas_count,
+            chart_count: a.chart_count,
+            texels_per_unit: a.texels_per_unit,
+        }
+    }
+}
+
+thread_local! {
+    /// The atlas the `Create` shim last returned on this thread.
+    static LAST_HANDLE: Cell<*mut ffi::Atlas> = const { Cell::new(ptr::null_mut()) };
+    /// The code the `AddMesh` shim last returned on this thread.
+    static LAST_ADD_MESH: Cell<Option<c_int>> = const { Cell::new(None) };
+    /// What the `Generate` shim last read from its atlas on this thread.
+    static LAST_GENERATE: Cell<Option<PackInfo>> = const { Cell::new(None) };
+}
+
+/// The xatlas C++ API, by its Itanium (gcc/clang) symbol names, and `#[repr(C)]` mirrors of the
+/// structs it takes by value or that we read, in the field order of `vendor/xatlas.h`.
+mod ffi {
+    use std::ffi::{c_int, c_void};
+
+    /// `struct xatlas::Atlas`.
+    #[repr(C)]
+    pub struct Atlas {
+        pub width: u32,
+        pub height: u32,
+        pub atlas_count: u32,
+        pub chart_count: u32,
+        pub mesh_count: u32,
+        pub meshes: *mut c_void,
+        pub utilization: *mut f32,
+        pub texels_per_unit: f32,
+    }
+
+    /// `struct xatlas::ChartOptions`, passed by value. xatlas-rs's bindings have the same field
+    /// order as the header, and its `convert()` fills them by name.
+    #[repr(C)]
+    #[derive(Clone, Copy)]
+    pub struct ChartOptions {
+        pub max_chart_area: f32,
+        pub max_boundary_length: f32,
+        pub proxy_fit_metric_weight: f32,
+        pub roundness_metric_weight: f32,
+        pub straightness_metric_weight: f32,
+        pub normal_seam_metric_weight: f32,
+        pub texture_seam_metric_weight: f32,
+        pub max_threshold: f32,
+        pub grow_face_count: u32,
+        pub max_iterations: u32,
+    }
+
+    /// `struct xatlas::PackOptions`, passed by value. Same field order in xatlas-rs's bindings.
+    #[repr(C)]
+    #[derive(Clone, Copy)]
+    pub struct PackOptions {
+        pub attempts: c_int,
+        pub texels_per_unit: f32,
+        pub resolution: u32,
+        pub max_chart_size: u32,
+        pub block_align: bool,
+        pub conservative: bool,
+        pub padding: u32,
+    }
+
+    impl PackOptions {
+        pub fn to_xatlas_rs(self) -> xatlas_rs::PackOptions {
+            xatlas_rs::PackOptions {
+                attempts: self.attempts,
+                texels_per_unit: self.texels_per_unit,
+                resolution: self.resolution,
+                max_chart_size: self.max_chart_size,
+                block_align: self.block_align,
+                conservative: self.conservative,
+                padding: self.padding,
+            }
+        }
+    }
+
+    /// `xatlas::ParameterizeFunc`.
+    pub type ParameterizeFunc = Option<
+        unsafe extern "C" fn(
+            positions: *const f32,
+            texcoords: *mut f32,
+            vertex_count: u32,
+            indices: *const u32,
+            index_count: u32,
+            is_planar: bool,
+        ),
+    >;
+
+    /// `xatlas::ProgressFunc`.
+    pub type ProgressFunc =
+        Option<unsafe extern "C" fn(category: c_int, progress: c_int, user_data: *mut c_void)>;
+
+    unsafe extern "C" {
+        /// `xatlas::Create()`.
+        #[link_name = "_ZN6xatlas6CreateEv"]
+        pub fn create() -> *mut Atlas;
+        /// `xatlas::Destroy(Atlas*)`.
+        #[link_name = "_ZN6xatlas7DestroyEPNS_5AtlasE"]
+        pub fn destroy(atlas: *mut Atlas);
+        /// `xatlas::AddMesh(Atlas*, const MeshDecl&)`; the `MeshDecl` is xatlas-rs's.
+        #[link_name = "_ZN6xatlas7AddMeshEPNS_5AtlasERKNS_8MeshDeclE"]
+        pub fn add_mesh(atlas: *mut Atlas, mesh_decl: *const c_void) -> c_int;
+        /// `xatlas::Generate(Atlas*, ChartOptions, ParameterizeFunc, PackOptions, ProgressFunc,
+        /// void*)`.
+        #[link_name = "_ZN6xatlas8GenerateEPNS_5AtlasENS_12ChartOptionsEPFvPKfPfjPKjjbENS_11PackOptionsEPFvNS_16ProgressCategory4EnumEiPvESD_"]
+        pub fn generate(
+            atlas: *mut Atlas,
+            chart_options: ChartOptions,
+            param_func: ParameterizeFunc,
+            pack_options: PackOptions,
+            progress_func: ProgressFunc,
+            progress_user_data: *mut c_void,
+        );
+        /// `xatlas::PackCharts(Atlas*, PackOptions, ProgressFunc, void*)`.
+        #[link_name = "_ZN6xatlas10PackChartsEPNS_5AtlasENS_11PackOptionsEPFvNS_16ProgressCategory4EnumEiPvES5_"]
+        pub fn pack_charts(
+            atlas: *mut Atlas,
+            pack_options: PackOptions,
+            progress_func: ProgressFunc,
+            progress_user_data: *mut c_void,
+        );
+        /// `xatlas::SetPrint(PrintFunc, bool)`; `print` is an `int (*)(const char*, ...)` or null.
+        #[link_name = "_ZN6xatlas8SetPrintEPFiPKczEb"]
+        pub fn set_print(print: *const c_void, verbose: bool);
+    }
+}
+
+// The shims: xatlas-rs's bindings import these MSVC names; forward them to the Itanium symbols.
+// `\u{1}` tells LLVM to use the name as is (no platform prefix such as Mach-O's `_`), as the
+// bindings' `link_name`s do.
+
+#[unsafe(export_name = "?Create@xatlas@@YAPEAUAtlas@1@XZ")]
+unsafe extern "C" fn xatlas_create_shim() -> *mut ffi::Atlas {
+    // SAFETY: forwards the call xatlas-rs made, with the same signature.
+    let atlas = unsafe { ffi::create() };
+    let _ = LAST_HANDLE.try_with(|h| h.set(atlas));
+    atlas
+}
+
+#[unsafe(export_name = "?Destroy@xatlas@@YAXPEAUAtlas@1@@Z")]
+unsafe extern "C" fn xatlas_destroy_shim(atlas: *mut ffi::Atlas) {
+    let _ = LAST_HANDLE.try_with(|h| {
+        if h.get() == atlas {
+            h.set(ptr::null_mut());
+        }
+    });
+    // SAFETY: forwards the call xatlas-rs made, with the same signature.
+    unsafe { ffi::destroy(atlas) }
+}
+
+#[unsafe(export_name = "?AddMesh@xatlas@@YA?AW4Enum@AddMeshError@1@PEAUAtlas@1@AEBUMeshDecl@1@@Z")]
+unsafe extern "C" fn xatlas_add_mesh_shim(atlas: *mut ffi::Atlas, mesh_decl: *const c_void) -> c_int {
+    // SAFETY: forwards the call xatlas-rs made, with the same signature.
+    let result = unsafe { ffi::add_mesh(atlas, mesh_decl) };
+    let _ = LAST_ADD_MESH.try_with(|r| r.set(Some(result)));
+    result
+}
+
+#[unsafe(export_name = "?Generate@xatlas@@YAXPEAUAtlas@1@UChartOptions@1@P6AXPEBMPEAMIPEBII_N@ZUPackOptions@1@P6AXW4Enum@ProgressCategory@1@HPEAX@Z9@Z")]
+unsafe extern "C" fn xatlas_generate_shim(
+    atlas: *mut ffi::Atlas,
+    chart_options: ffi::ChartOptions,
+    param_func: ffi::ParameterizeFunc,
+    pack_options: ffi::PackOptions,
+    progress_func: ffi::ProgressFunc,
+    progress_user_data: *mut c_void,
+) {
+    // SAFETY: forwards the call xatlas-rs made, with the same signature; `atlas` is then live.
+    unsafe {
+        ffi::generate(
+            atlas,
+            chart_options,
+            param_func,
+            pack_options,
+            progress_func,
+            progress_user_data,
+        );
+        if !atlas.is_null() {
+            let info = PackInfo::read(atlas);
+            let _ = LAST_GENERATE.try_with(|g| g.set(Some(info)));
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn placeholder() {
+        let quad = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+        let idx = [0, 1, 2, 0, 2, 3];
+        let atlas = pack(
+            &[AtlasInput {
+                positions: &quad,
+                indices: &idx,
+            }],
+            &AtlasOptions {
+                texels_per_unit: Some(32.0),
+                resolution: None,
+                padding: 2,
+            },
+        )
+        .unwrap();
+        println!("{atlas:?}");
+    }
+}

@@ -1,0 +1,242 @@
+//! The pipeline, stage by stage: [`bake`] reads like the table of contents of the crate.
+
+use crate::atlas::{self, Atlas, AtlasInput, AtlasOptions};
+use crate::error::{Error, Result};
+use crate::lightmap::{self, Lightmap};
+use crate::load::{self, Gltf};
+use crate::mesh::{self, Mesher, ReceiverMesh};
+use crate::scene::Scene;
+use crate::solve::{self, Solution, SolveOptions};
+use crate::stats::{Progress, Stats, timed};
+use crate::visibility::Visibility;
+use crate::write::{self, LightmapImage};
+use std::path::Path;
+
+/// Everything a bake can be told.
+#[derive(Clone, Debug)]
+pub struct BakeOptions {
+    pub mesher: Mesher,
+    /// Target number of mesh elements (triangles) over the whole scene.
+    pub budget: usize,
+    pub solve: SolveOptions,
+    /// Lightmap texels per scene unit; `None`: derived from `resolution`.
+    pub texels_per_unit: Option<f32>,
+    /// Lightmap width and height in texels when `texels_per_unit` is not given.
+    pub resolution: Option<u32>,
+    /// Texels of padding between charts.
+    pub padding: u32,
+    /// Sub-samples per texel side (`n x n` per texel), 1..=8.
+    pub supersample: u32,
+}
+
+impl Default for BakeOptions {
+    fn default() -> Self {
+        BakeOptions {
+            mesher: Mesher::Uniform,
+            budget: 20_000,
+            solve: SolveOptions::default(),
+            texels_per_unit: None,
+            resolution: None,
+            padding: 4,
+            supersample: 4,
+        }
+    }
+}
+
+/// The result of a bake, every stage's output kept for inspection and tests.
+pub struct Bake {
+    pub scene: Scene,
+    pub meshes: Vec<ReceiverMesh>,
+    pub solution: Solution,
+    pub atlas: Atlas,
+    pub lightmap: Lightmap,
+    pub stats: Stats,
+}
+
+impl BakeOptions {
+    fn check(&self) -> Result<()> {
+        let bad = |option, reason: &str| {
+            Err(Error::Option {
+                option,
+                reason: reason.into(),
+            })
+        };
+        if self.budget == 0 {
+            return bad("--budget", "must be at least 1");
+        }
+        if !(1..=8).contains(&self.supersample) {
+            return bad("--supersample", "must be between 1 and 8");
+        }
+        if self.padding < 2 {
+            return bad("--padding", "must be at least 2 texels");
+        }
+        if self.solve.shadow_samples == 0 {
+            return bad("--shadow-samples", "must be at least 1");
+        }
+        if let Some(t) = self.texels_per_unit
+            && !(t.is_finite() && t > 0.0)
+        {
+            return bad("--texels-per-unit", "must be a positive number");
+        }
+        if let Some(r) = self.resolution
+            && !(16..=16384).contains(&r)
+        {
+            return bad("--resolution", "must be between 16 and 16384");
+        }
+        match self.mesher {
+            Mesher::Uniform => Ok(()),
+            Mesher::Discontinuity => bad(
+                "--mesher",
+                "the discontinuity mesher is not built yet; use --mesher uniform",
+            ),
+            Mesher::Adaptive => bad(
+                "--mesher",
+                "the adaptive mesher is not built yet; use --mesher uniform",
+            ),
+        }
+    }
+}
+
+/// Runs the pipeline on a loaded glTF: scene, visibility, mesh, solve, atlas, lightmap.
+pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Result<Bake> {
+    options.check()?;
+    let mut stats = Stats {
+        input: gltf.path.display().to_string(),
+        mesher: format!("{:?}", options.mesher).to_lowercase(),
+        threads: rayon::current_num_threads(),
+        ..Default::default()
+    };
+    let t = &mut stats.timings_s;
+    let scene = timed(&mut t.load, || load::scene(gltf))?;
+    let vis = timed(&mut t.visibility, || Visibility::new(&scene));
+    let meshes = timed(&mut t.mesh, || match options.mesher {
+        Mesher::Uniform => mesh::uniform(&scene, options.budget),
+        Mesher::Discontinuity | Mesher::Adaptive => unreachable!("rejected by check()"),
+    });
+    let solution = timed(&mut t.solve, || {
+        solve::radiosity(&scene, &vis, &meshes, &options.solve, progress)
+    });
+    let atlas = timed(&mut t.atlas, || pack_atlas(&scene, options))?;
+    let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
+    for (i, m) in meshes.iter().enumerate() {
+        mesh_of_polygon[m.polygon] = i;
+    }
+    let lightmap = timed(&mut t.lightmap, || {
+        lightmap::rasterize(
+            &scene,
+            &meshes,
+            &solution.irradiance,
+            &mesh_of_polygon,
+            &atlas,
+            options.supersample,
+            options.padding + 2,
+        )
+    });
+    stats.triangles = scene.triangles.len();
+    stats.polygons = scene.polygons.len();
+    stats.instances = scene.instances.len();
+    stats.area_emitters = scene.emitters().count();
+    stats.punctual_lights = scene.lights.len();
+    stats.elements = meshes.iter().map(|m| m.triangles.len()).sum();
+    stats.vertices = meshes.iter().map(|m| m.vertices.len()).sum();
+    stats.solve = solution.stats.clone();
+    stats.lightmap_width = atlas.width;
+    stats.lightmap_height = atlas.height;
+    stats.texels_per_unit = atlas.texels_per_unit;
+    stats.warnings = scene.warnings.clone();
+    if !scene.has_light() {
+        stats
+            .warnings
+            .push("the scene has no emitters (no emissive material, no KHR_lights_punctual light): the lightmap is black".into());
+    }
+    Ok(Bake {
+        scene,
+        meshes,
+        solution,
+        atlas,
+        lightmap,
+        stats,
+    })
+}
+
+fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
+    let positions: Vec<Vec<[f32; 3]>> = scene
+        .instances
+        .iter()
+        .map(|i| i.positions_world.iter().map(|p| p.as_vec3().to_array()).collect())
+        .collect();
+    let inputs: Vec<AtlasInput> = scene
+        .instances
+        .iter()
+        .zip(&positions)
+        .map(|(i, p)| AtlasInput {
+            positions: p,
+            indices: &i.indices,
+        })
+        .collect();
+    Ok(atlas::pack(
+        &inputs,
+        &AtlasOptions {
+            texels_per_unit: options.texels_per_unit,
+            resolution: options.resolution,
+            padding: options.padding,
+        },
+    )?)
+}
+
+/// Reads `input`, bakes, and writes the lightmapped glb to `output` (temporary file + rename).
+/// `exr`: also write the float lightmap there. Returns the bake with write timings filled in.
+pub fn bake_file(
+    input: &Path,
+    output: &Path,
+    exr: Option<&Path>,
+    options: &BakeOptions,
+    progress: &Progress<'_>,
+) -> Result<Bake> {
+    let start = std::time::Instant::now();
+    let mut read_time = 0.0;
+    let gltf = timed(&mut read_time, || load::read(input))?;
+    let mut result = bake(&gltf, options, progress)?;
+    result.stats.timings_s.load += read_time;
+    let mut write_time = 0.0;
+    timed(&mut write_time, || -> Result<()> {
+        let (rgb, intensity) = result.lightmap.to_rgb8();
+        let png = encode_png(&rgb, result.lightmap.width, result.lightmap.height)?;
+        result.stats.lightmap_intensity = intensity;
+        let image = LightmapImage { png, intensity };
+        write::glb(&gltf, &result.scene, &result.atlas, &image, output)?;
+        if let Some(exr) = exr {
+            write_exr(&result.lightmap, exr)?;
+        }
+        Ok(())
+    })?;
+    result.stats.timings_s.write = write_time;
+    result.stats.timings_s.total = start.elapsed().as_secs_f64();
+    Ok(result)
+}
+
+/// Encodes 8-bit RGB as PNG.
+pub fn encode_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
+    use image::ImageEncoder;
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
+        .map_err(|e| Error::Image(format!("PNG encoding failed: {e}")))?;
+    Ok(png)
+}
+
+/// Writes the float lightmap (irradiance H, W/m², linear RGB) as OpenEXR, atomically.
+pub fn write_exr(map: &Lightmap, path: &Path) -> Result<()> {
+    let data: Vec<f32> = map
+        .texels
+        .iter()
+        .flat_map(|t| t.as_vec3().to_array())
+        .collect();
+    let img = image::Rgb32FImage::from_raw(map.width, map.height, data)
+        .ok_or_else(|| Error::Image("lightmap size mismatch".into()))?;
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    image::DynamicImage::ImageRgb32F(img)
+        .write_to(&mut bytes, image::ImageFormat::OpenExr)
+        .map_err(|e| Error::Image(format!("EXR encoding failed: {e}")))?;
+    write::write_atomically(path, bytes.get_ref())
+}

@@ -1,0 +1,367 @@
+//! Lightmap rasterization: for every texel, the irradiance of the receiver mesh at the surface
+//! points its footprint covers, supersampled, then dilated into the padding.
+//!
+//! Texel `(x, y)` covers UV `[x, x+1] x [y, y+1]` in atlas texel units; row 0 is the top row of the
+//! image, as glTF's UV origin is the image's top-left corner.
+
+use crate::atlas::Atlas;
+use crate::mesh::ReceiverMesh;
+use crate::scene::Scene;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+
+/// A float RGB image of irradiance H (W/m², linear, without albedo).
+#[derive(Clone, Debug, PartialEq)]
+pub struct Lightmap {
+    pub width: u32,
+    pub height: u32,
+    /// Row-major, top row first.
+    pub texels: Vec<DVec3>,
+    /// Fraction of each texel's sub-samples covered by geometry (0 for padding).
+    pub coverage: Vec<f32>,
+}
+
+impl Lightmap {
+    /// Largest channel value over all texels (the PNG normalisation factor).
+    pub fn max_value(&self) -> f64 {
+        self.texels.iter().map(|t| t.max_element()).fold(0.0, f64::max)
+    }
+
+    /// 8-bit linear RGB, each channel `round(255 H / scale)`; `scale` is the returned factor
+    /// (the `MOZ_lightmap` intensity): H = value / 255 x scale.
+    pub fn to_rgb8(&self) -> (Vec<u8>, f64) {
+        let max = self.max_value();
+        let scale = if max > 0.0 { max } else { 1.0 };
+        let bytes = self
+            .texels
+            .iter()
+            .flat_map(|t| {
+                t.to_array()
+                    .map(|c| (c / scale * 255.0).round().clamp(0.0, 255.0) as u8)
+            })
+            .collect();
+        (bytes, scale)
+    }
+}
+
+/// Point location and linear interpolation in one receiver mesh: a uniform grid of triangle
+/// buckets over the mesh's bounding box.
+pub struct Locator<'a> {
+    mesh: &'a ReceiverMesh,
+    values: &'a [DVec3],
+    min: DVec2,
+    cell: DVec2,
+    dims: (usize, usize),
+    buckets: Vec<Vec<u32>>,
+}
+
+impl<'a> Locator<'a> {
+    pub fn new(mesh: &'a ReceiverMesh, values: &'a [DVec3]) -> Locator<'a> {
+        let mut min = DVec2::splat(f64::INFINITY);
+        let mut max = DVec2::splat(f64::NEG_INFINITY);
+        for v in &mesh.vertices {
+            min = min.min(*v);
+            max = max.max(*v);
+        }
+        let n = (mesh.triangles.len() as f64).sqrt().ceil().max(1.0) as usize;
+        let size = (max - min).max(DVec2::splat(1e-300));
+        let dims = (n, n);
+        let cell = size / DVec2::new(n as f64, n as f64);
+        let mut buckets = vec![Vec::new(); n * n];
+        for (k, t) in mesh.triangles.iter().enumerate() {
+            let p = t.map(|i| mesh.vertices[i as usize]);
+            let lo = p[0].min(p[1]).min(p[2]);
+            let hi = p[0].max(p[1]).max(p[2]);
+            let (x0, y0) = Self::cell_of(min, cell, dims, lo);
+            let (x1, y1) = Self::cell_of(min, cell, dims, hi);
+            for y in y0..=y1 {
+                for x in x0..=x1 {
+                    buckets[y * n + x].push(k as u32);
+                }
+            }
+        }
+        Locator {
+            mesh,
+            values,
+            min,
+            cell,
+            dims,
+            buckets,
+        }
+    }
+
+    fn cell_of(min: DVec2, cell: DVec2, dims: (usize, usize), q: DVec2) -> (usize, usize) {
+        let c = ((q - min) / cell).floor();
+        (
+            (c.x.max(0.0) as usize).min(dims.0 - 1),
+            (c.y.max(0.0) as usize).min(dims.1 - 1),
+        )
+    }
+
+    fn barycentric(&self, k: u32, q: DVec2) -> [f64; 3] {
+        let t = self.mesh.triangles[k as usize];
+        let [a, b, c] = t.map(|i| self.mesh.vertices[i as usize]);
+        let d = (b - a).perp_dot(c - a);
+        let l1 = (q - a).perp_dot(c - a) / d;
+        let l2 = (b - a).perp_dot(q - a) / d;
+        [1.0 - l1 - l2, l1, l2]
+    }
+
+    /// The interpolated value at plane point `q`. A point outside every triangle (rounding at
+    /// the polygon's edge) takes the value of the nearest point of the nearest candidate.
+    pub fn value(&self, q: DVec2) -> DVec3 {
+        if self.mesh.triangles.is_empty() {
+            return DVec3::ZERO;
+        }
+        let (x, y) = Self::cell_of(self.min, self.cell, self.dims, q);
+        // (distance outside in barycentric units, triangle, barycentrics) of the best candidate.
+        let mut best: Option<(f64, u32, [f64; 3])> = None;
+        let mut search = |candidates: &mut dyn Iterator<Item = u32>| {
+            for k in candidates {
+                let l = self.barycentric(k, q);
+                let outside = -(l[0].min(l[1]).min(l[2]));
+                if best.is_none_or(|b| outside < b.0) {
+                    best = Some((outside, k, l));
+                }
+                if outside <= 0.0 {
+                    return true;
+                }
+            }
+            false
+        };
+        if !search(&mut self.buckets[y * self.dims.0 + x].iter().copied()) {
+            // Rare: points just outside the mesh (rounding at the polygon's edge).
+            search(&mut (0..self.mesh.triangles.len() as u32));
+        }
+        let Some((_, k, l)) = best else {
+            return DVec3::ZERO;
+        };
+        // Clamp to the triangle and renormalise.
+        let l = l.map(|x| x.max(0.0));
+        let s = l[0] + l[1] + l[2];
+        let t = self.mesh.triangles[k as usize];
+        (0..3)
+            .map(|i| self.values[t[i] as usize] * (l[i] / s))
+            .sum()
+    }
+}
+
+/// Rasterizes the solved irradiance into the atlas. `meshes[m]` with `values[m]` at its vertices;
+/// `mesh_of_polygon[p]` gives the mesh of polygon `p`. `supersample` is the number of sub-samples
+/// per texel side (`n x n` per texel). `dilate` is the number of texel rings filled around
+/// covered texels.
+pub fn rasterize(
+    scene: &Scene,
+    meshes: &[ReceiverMesh],
+    values: &[Vec<DVec3>],
+    mesh_of_polygon: &[usize],
+    atlas: &Atlas,
+    supersample: u32,
+    dilate: u32,
+) -> Lightmap {
+    let (w, h) = (atlas.width as usize, atlas.height as usize);
+    let locators: Vec<Locator> = meshes
+        .iter()
+        .zip(values)
+        .map(|(m, v)| Locator::new(m, v))
+        .collect();
+    // Every atlas triangle with its UVs, world corners and mesh, bucketed by bands of rows.
+    struct UvTri {
+        uv: [DVec2; 3],
+        world: [DVec3; 3],
+        mesh: usize,
+    }
+    let mut tris = Vec::new();
+    for (inst_id, am) in atlas.meshes.iter().enumerate() {
+        let inst = &scene.instances[inst_id];
+        for (k, t) in am.indices.chunks_exact(3).enumerate() {
+            let st = &scene.triangles[inst.first_triangle + k];
+            let Some(poly) = st.polygon else { continue };
+            let uv = [0, 1, 2].map(|c| {
+                let u = am.uv[t[c] as usize];
+                DVec2::new(u[0] as f64, u[1] as f64)
+            });
+            let world = [0, 1, 2].map(|c| inst.positions_world[am.xref[t[c] as usize] as usize]);
+            tris.push(UvTri {
+                uv,
+                world,
+                mesh: mesh_of_polygon[poly],
+            });
+        }
+    }
+    const BAND: usize = 8;
+    let bands = h.div_ceil(BAND);
+    let mut by_band: Vec<Vec<u32>> = vec![Vec::new(); bands];
+    for (i, t) in tris.iter().enumerate() {
+        let y0 = t.uv.iter().map(|p| p.y).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
+        let y1 = t.uv.iter().map(|p| p.y).fold(f64::NEG_INFINITY, f64::max).floor().max(0.0) as usize;
+        for b in (y0 / BAND).min(bands - 1)..=(y1 / BAND).min(bands - 1) {
+            by_band[b].push(i as u32);
+        }
+    }
+    let n = supersample.max(1) as usize;
+    let rows: Vec<(Vec<DVec3>, Vec<f32>)> = (0..bands)
+        .into_par_iter()
+        .map(|b| {
+            let y_lo = b * BAND;
+            let y_hi = ((b + 1) * BAND).min(h);
+            let size = (y_hi - y_lo) * w;
+            let mut sum = vec![DVec3::ZERO; size];
+            let mut count = vec![0u32; size];
+            let mut claimed = vec![0u64; size];
+            for &ti in &by_band[b] {
+                let t = &tris[ti as usize];
+                let area = (t.uv[1] - t.uv[0]).perp_dot(t.uv[2] - t.uv[0]);
+                if area == 0.0 || !area.is_finite() {
+                    continue;
+                }
+                let lo = t.uv[0].min(t.uv[1]).min(t.uv[2]);
+                let hi = t.uv[0].max(t.uv[1]).max(t.uv[2]);
+                let x0 = lo.x.floor().max(0.0) as usize;
+                let x1 = (hi.x.floor().max(0.0) as usize).min(w - 1);
+                let ya = (lo.y.floor().max(0.0) as usize).max(y_lo);
+                let yb = (hi.y.floor().max(0.0) as usize).min(y_hi - 1);
+                let poly = &scene.polygons[meshes[t.mesh].polygon];
+                for y in ya..=yb {
+                    for x in x0..=x1 {
+                        let idx = (y - y_lo) * w + x;
+                        for s in 0..n * n {
+                            let bit = 1u64 << (s % 64);
+                            if claimed[idx] & bit != 0 {
+                                continue;
+                            }
+                            let q = DVec2::new(
+                                x as f64 + ((s % n) as f64 + 0.5) / n as f64,
+                                y as f64 + ((s / n) as f64 + 0.5) / n as f64,
+                            );
+                            let l1 = (q - t.uv[0]).perp_dot(t.uv[2] - t.uv[0]) / area;
+                            let l2 = (t.uv[1] - t.uv[0]).perp_dot(q - t.uv[0]) / area;
+                            let l0 = 1.0 - l1 - l2;
+                            if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                                continue;
+                            }
+                            claimed[idx] |= bit;
+                            let p = t.world[0] * l0 + t.world[1] * l1 + t.world[2] * l2;
+                            sum[idx] += locators[t.mesh].value(poly.frame.plane_from_world(p));
+                            count[idx] += 1;
+                        }
+                    }
+                }
+            }
+            let values = sum
+                .iter()
+                .zip(&count)
+                .map(|(s, &c)| if c > 0 { *s / c as f64 } else { DVec3::ZERO })
+                .collect();
+            let cov = count
+                .iter()
+                .map(|&c| c as f32 / (n * n) as f32)
+                .collect();
+            (values, cov)
+        })
+        .collect();
+    let mut texels = Vec::with_capacity(w * h);
+    let mut coverage = Vec::with_capacity(w * h);
+    for (v, c) in rows {
+        texels.extend(v);
+        coverage.extend(c);
+    }
+    let mut map = Lightmap {
+        width: atlas.width,
+        height: atlas.height,
+        texels,
+        coverage,
+    };
+    dilate_into_padding(&mut map, dilate);
+    map
+}
+
+/// Fills uncovered texels, ring by ring, with the mean of their already-filled 8-neighbours, so
+/// bilinear filtering and mipmaps at chart edges do not pull in black. Covered texels are never
+/// changed.
+pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
+    let (w, h) = (map.width as usize, map.height as usize);
+    let mut filled: Vec<bool> = map.coverage.iter().map(|&c| c > 0.0).collect();
+    for _ in 0..rings {
+        let mut updates = Vec::new();
+        for y in 0..h {
+            for x in 0..w {
+                if filled[y * w + x] {
+                    continue;
+                }
+                let mut s = DVec3::ZERO;
+                let mut k = 0;
+                for dy in -1i64..=1 {
+                    for dx in -1i64..=1 {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
+                            continue;
+                        }
+                        let j = ny as usize * w + nx as usize;
+                        if filled[j] {
+                            s += map.texels[j];
+                            k += 1;
+                        }
+                    }
+                }
+                if k > 0 {
+                    updates.push((y * w + x, s / k as f64));
+                }
+            }
+        }
+        if updates.is_empty() {
+            break;
+        }
+        for (i, v) in updates {
+            map.texels[i] = v;
+            filled[i] = true;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locator_interpolates_linear_functions_exactly() {
+        // A 2x2 square split into 8 triangles, value = 1 + 2x + 3y.
+        let mut m = ReceiverMesh::default();
+        for y in 0..3 {
+            for x in 0..3 {
+                m.vertices.push(DVec2::new(x as f64, y as f64));
+            }
+        }
+        for y in 0..2u32 {
+            for x in 0..2u32 {
+                let i = y * 3 + x;
+                m.triangles.push([i, i + 1, i + 4]);
+                m.triangles.push([i, i + 4, i + 3]);
+            }
+        }
+        let f = |p: DVec2| 1.0 + 2.0 * p.x + 3.0 * p.y;
+        let values: Vec<DVec3> = m.vertices.iter().map(|&p| DVec3::splat(f(p))).collect();
+        let loc = Locator::new(&m, &values);
+        for q in [DVec2::new(0.3, 1.7), DVec2::new(1.99, 0.01), DVec2::new(1.0, 1.0)] {
+            assert!((loc.value(q).x - f(q)).abs() < 1e-12);
+        }
+        // Just outside: clamped to the nearest triangle's edge value.
+        let v = loc.value(DVec2::new(2.0 + 1e-9, 1.0)).x;
+        assert!((v - f(DVec2::new(2.0, 1.0))).abs() < 1e-6);
+    }
+
+    #[test]
+    fn dilation_fills_only_uncovered_texels() {
+        let mut map = Lightmap {
+            width: 4,
+            height: 1,
+            texels: vec![DVec3::ONE, DVec3::ZERO, DVec3::ZERO, DVec3::splat(3.0)],
+            coverage: vec![1.0, 0.0, 0.0, 1.0],
+        };
+        dilate_into_padding(&mut map, 2);
+        assert_eq!(map.texels[0], DVec3::ONE);
+        assert_eq!(map.texels[1], DVec3::ONE);
+        assert_eq!(map.texels[2], DVec3::splat(3.0));
+        assert_eq!(map.texels[3], DVec3::splat(3.0));
+    }
+}

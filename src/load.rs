@@ -1,0 +1,589 @@
+//! Reading glTF: the file, its buffers, and the static scene the baker works on.
+//!
+//! Every accessor is bounds-checked here before it is read, so a truncated or inconsistent file
+//! gives an [`Error`] that names the file and the item, never a panic.
+
+use crate::error::{Error, Result};
+use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene};
+use base64::Engine;
+use glam::{DMat3, DMat4, DVec3};
+use gltf::accessor::{DataType, Dimensions};
+use gltf::mesh::Mode;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+/// A parsed glTF file with its buffer data, kept whole so the writer can preserve everything.
+pub struct Gltf {
+    /// The file it came from (for messages and relative URIs).
+    pub path: PathBuf,
+    /// The parsed document.
+    pub document: gltf::Document,
+    /// The data of every buffer, in buffer order (the GLB binary chunk, a data URI, or a file).
+    pub buffers: Vec<Vec<u8>>,
+    /// The JSON as written in the file, key order kept: the writer edits this, so everything it
+    /// does not touch (extensions, extras, unknown properties) survives as it was.
+    pub json: serde_json::Value,
+}
+
+/// Reads and parses a `.glb` or `.gltf` file and all of its buffers.
+pub fn read(path: &Path) -> Result<Gltf> {
+    let bytes = std::fs::read(path).map_err(|source| Error::Read {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let not_gltf = |reason: String| Error::NotGltf {
+        path: path.to_path_buf(),
+        reason,
+    };
+    if bytes.is_empty() {
+        return Err(not_gltf("the file is empty".into()));
+    }
+    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| not_gltf(e.to_string()))?;
+    let json_bytes = if bytes.starts_with(b"glTF") {
+        gltf::binary::Glb::from_slice(&bytes)
+            .map_err(|e| not_gltf(e.to_string()))?
+            .json
+            .into_owned()
+    } else {
+        bytes.clone()
+    };
+    let json: serde_json::Value =
+        serde_json::from_slice(&json_bytes).map_err(|e| not_gltf(e.to_string()))?;
+    let mut blob = gltf.blob;
+    let document = gltf.document;
+    let mut buffers = Vec::new();
+    for buffer in document.buffers() {
+        let item = format!("buffer {}", buffer.index());
+        let data = match buffer.source() {
+            gltf::buffer::Source::Bin => blob.take().ok_or_else(|| Error::BadItem {
+                path: path.to_path_buf(),
+                item: item.clone(),
+                reason: "refers to the GLB binary chunk, which is missing".into(),
+            })?,
+            gltf::buffer::Source::Uri(uri) => read_uri(path, uri, &item)?,
+        };
+        if data.len() < buffer.length() {
+            return Err(Error::BadItem {
+                path: path.to_path_buf(),
+                item,
+                reason: format!(
+                    "is truncated: byteLength is {} but only {} bytes are present",
+                    buffer.length(),
+                    data.len()
+                ),
+            });
+        }
+        buffers.push(data);
+    }
+    Ok(Gltf {
+        path: path.to_path_buf(),
+        document,
+        buffers,
+        json,
+    })
+}
+
+/// Reads the bytes behind a URI: a base64 data URI or a file relative to the glTF file.
+pub fn read_uri(gltf_path: &Path, uri: &str, item: &str) -> Result<Vec<u8>> {
+    if let Some(rest) = uri.strip_prefix("data:") {
+        let (_, payload) = rest.split_once(";base64,").ok_or_else(|| Error::BadItem {
+            path: gltf_path.to_path_buf(),
+            item: item.to_string(),
+            reason: "data URI is not base64".into(),
+        })?;
+        return base64::engine::general_purpose::STANDARD
+            .decode(payload)
+            .map_err(|e| Error::BadItem {
+                path: gltf_path.to_path_buf(),
+                item: item.to_string(),
+                reason: format!("bad base64 in data URI: {e}"),
+            });
+    }
+    let decoded = percent_decode(uri);
+    let file = gltf_path
+        .parent()
+        .unwrap_or_else(|| Path::new("."))
+        .join(decoded);
+    std::fs::read(&file).map_err(|source| Error::BadItem {
+        path: gltf_path.to_path_buf(),
+        item: item.to_string(),
+        reason: format!("cannot read {}: {source}", file.display()),
+    })
+}
+
+fn percent_decode(uri: &str) -> String {
+    let bytes = uri.as_bytes();
+    let mut out = Vec::with_capacity(bytes.len());
+    let mut i = 0;
+    while i < bytes.len() {
+        if bytes[i] == b'%' && i + 2 < bytes.len() {
+            if let Ok(v) = u8::from_str_radix(&uri[i + 1..i + 3], 16) {
+                out.push(v);
+                i += 3;
+                continue;
+            }
+        }
+        out.push(bytes[i]);
+        i += 1;
+    }
+    String::from_utf8_lossy(&out).into_owned()
+}
+
+impl Gltf {
+    fn bad(&self, item: impl Into<String>, reason: impl Into<String>) -> Error {
+        Error::BadItem {
+            path: self.path.clone(),
+            item: item.into(),
+            reason: reason.into(),
+        }
+    }
+
+    /// The bytes of a buffer view, checked against its buffer.
+    pub fn view_bytes(&self, view: &gltf::buffer::View, item: &str) -> Result<&[u8]> {
+        let data = &self.buffers[view.buffer().index()];
+        let end = view.offset().checked_add(view.length());
+        match end {
+            Some(end) if end <= data.len() => Ok(&data[view.offset()..end]),
+            _ => Err(self.bad(
+                format!("{item}, bufferView {}", view.index()),
+                format!(
+                    "range {}..{} is outside buffer {} ({} bytes)",
+                    view.offset(),
+                    view.offset().saturating_add(view.length()),
+                    view.buffer().index(),
+                    data.len()
+                ),
+            )),
+        }
+    }
+
+    /// An accessor's elements, tightly packed (sparse substitution applied), and the size of one
+    /// element in bytes.
+    pub fn accessor_bytes(&self, accessor: &gltf::Accessor) -> Result<(Vec<u8>, usize)> {
+        let item = format!("accessor {}", accessor.index());
+        let elem = accessor.size();
+        let count = accessor.count();
+        let total = count
+            .checked_mul(elem)
+            .ok_or_else(|| self.bad(&item, "element count overflows"))?;
+        let mut out = vec![0u8; total];
+        if let Some(view) = accessor.view() {
+            let bytes = self.view_bytes(&view, &item)?;
+            let stride = view.stride().unwrap_or(elem);
+            copy_strided(bytes, accessor.offset(), stride, elem, count, &mut out)
+                .ok_or_else(|| self.bad(&item, "elements run past the end of its bufferView"))?;
+        }
+        if let Some(sparse) = accessor.sparse() {
+            let n = sparse.count();
+            let iv = sparse.indices();
+            let isz = iv.index_type().size();
+            let ibytes = self.view_bytes(&iv.view(), &format!("{item} sparse indices"))?;
+            let mut idx = vec![0u8; n * isz];
+            copy_strided(ibytes, iv.offset(), isz, isz, n, &mut idx)
+                .ok_or_else(|| self.bad(&item, "sparse indices run past their bufferView"))?;
+            let vv = sparse.values();
+            let vbytes = self.view_bytes(&vv.view(), &format!("{item} sparse values"))?;
+            let mut vals = vec![0u8; n * elem];
+            copy_strided(vbytes, vv.offset(), elem, elem, n, &mut vals)
+                .ok_or_else(|| self.bad(&item, "sparse values run past their bufferView"))?;
+            for k in 0..n {
+                let i = read_uint(&idx[k * isz..(k + 1) * isz]) as usize;
+                if i >= count {
+                    return Err(self.bad(&item, format!("sparse index {i} >= count {count}")));
+                }
+                out[i * elem..(i + 1) * elem].copy_from_slice(&vals[k * elem..(k + 1) * elem]);
+            }
+        }
+        Ok((out, elem))
+    }
+
+    /// An accessor of `dims` components as f64, with normalized integers mapped to [0,1]/[-1,1].
+    pub fn read_floats(&self, accessor: &gltf::Accessor, dims: Dimensions) -> Result<Vec<f64>> {
+        let item = format!("accessor {}", accessor.index());
+        if accessor.dimensions() != dims {
+            return Err(self.bad(
+                item,
+                format!("expected {dims:?} elements, found {:?}", accessor.dimensions()),
+            ));
+        }
+        let dt = accessor.data_type();
+        if dt != DataType::F32 && !accessor.normalized() {
+            return Err(self.bad(
+                item,
+                format!("expected float or normalized components, found {dt:?}"),
+            ));
+        }
+        let (bytes, _) = self.accessor_bytes(accessor)?;
+        let size = dt.size();
+        // Components are not padded within an element for any of the types read here (VEC2/3/4).
+        Ok(bytes
+            .chunks_exact(size)
+            .map(|c| match dt {
+                DataType::F32 => f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
+                DataType::U8 => c[0] as f64 / 255.0,
+                DataType::I8 => (c[0] as i8 as f64 / 127.0).max(-1.0),
+                DataType::U16 => u16::from_le_bytes([c[0], c[1]]) as f64 / 65535.0,
+                DataType::I16 => (i16::from_le_bytes([c[0], c[1]]) as f64 / 32767.0).max(-1.0),
+                DataType::U32 => u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
+            })
+            .collect())
+    }
+
+    /// An index accessor as u32 values.
+    pub fn read_indices(&self, accessor: &gltf::Accessor) -> Result<Vec<u32>> {
+        let item = format!("accessor {}", accessor.index());
+        if accessor.dimensions() != Dimensions::Scalar
+            || !matches!(
+                accessor.data_type(),
+                DataType::U8 | DataType::U16 | DataType::U32
+            )
+        {
+            return Err(self.bad(item, "indices must be unsigned byte, short or int scalars"));
+        }
+        let (bytes, elem) = self.accessor_bytes(accessor)?;
+        Ok(bytes.chunks_exact(elem).map(read_uint).collect())
+    }
+}
+
+fn read_uint(c: &[u8]) -> u32 {
+    match c.len() {
+        1 => c[0] as u32,
+        2 => u16::from_le_bytes([c[0], c[1]]) as u32,
+        _ => u32::from_le_bytes([c[0], c[1], c[2], c[3]]),
+    }
+}
+
+/// Copies `count` elements of `elem` bytes at `offset + k * stride` into `out`; `None` when the
+/// source is too short.
+fn copy_strided(
+    src: &[u8],
+    offset: usize,
+    stride: usize,
+    elem: usize,
+    count: usize,
+    out: &mut [u8],
+) -> Option<()> {
+    if count == 0 {
+        return Some(());
+    }
+    let last = offset.checked_add(stride.checked_mul(count - 1)?)?;
+    if last.checked_add(elem)? > src.len() {
+        return None;
+    }
+    for k in 0..count {
+        let s = offset + k * stride;
+        out[k * elem..(k + 1) * elem].copy_from_slice(&src[s..s + elem]);
+    }
+    Some(())
+}
+
+/// Loads the static scene: every node of the default scene (or the first scene), with world
+/// transforms, materials, area emitters and punctual lights.
+pub fn scene(gltf: &Gltf) -> Result<Scene> {
+    let doc = &gltf.document;
+    let mut scene = Scene::default();
+    let mut textures = TextureMeans::default();
+    // One baker material per glTF material, plus the glTF default material at the end.
+    for m in doc.materials() {
+        scene.materials.push(material(gltf, &m, &mut textures)?);
+    }
+    let default_material = scene.materials.len();
+    scene.materials.push(Material {
+        name: "default material".into(),
+        rho: DVec3::ONE,
+        radiance: DVec3::ZERO,
+    });
+    scene.warnings.append(&mut textures.warnings);
+
+    let gscene = match doc.default_scene().or_else(|| doc.scenes().next()) {
+        Some(s) => s,
+        None => {
+            return Err(Error::EmptyScene {
+                path: gltf.path.clone(),
+            });
+        }
+    };
+    let mut stack: Vec<(gltf::Node, DMat4, usize)> = gscene
+        .nodes()
+        .map(|n| (n, DMat4::IDENTITY, 0))
+        .collect();
+    stack.reverse();
+    let mut lights_seen = 0;
+    while let Some((node, parent, depth)) = stack.pop() {
+        if depth > 256 {
+            return Err(gltf.bad(
+                format!("node {}", node.index()),
+                "node hierarchy is deeper than 256 levels (a cycle?)",
+            ));
+        }
+        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|x| x as f64)));
+        let world = parent * local;
+        if !world.is_finite() {
+            return Err(gltf.bad(format!("node {}", node.index()), "transform is not finite"));
+        }
+        if let Some(light) = node.light() {
+            scene.lights.push(punctual(&light, &world, lights_seen));
+            lights_seen += 1;
+        }
+        if let Some(mesh) = node.mesh() {
+            let morph = mesh.primitives().any(|p| p.morph_targets().len() > 0);
+            if node.skin().is_some() || morph {
+                scene.warnings.push(format!(
+                    "node {} (mesh {}{}) is skinned or morphing: not static, it neither occludes nor receives a lightmap",
+                    node.index(),
+                    mesh.index(),
+                    name_suffix(mesh.name())
+                ));
+            } else {
+                for prim in mesh.primitives() {
+                    add_primitive(gltf, &mut scene, &node, &mesh, &prim, &world, default_material)?;
+                }
+            }
+        }
+        let mut children: Vec<_> = node.children().map(|c| (c, world, depth + 1)).collect();
+        children.reverse();
+        stack.extend(children);
+    }
+    if scene.triangles.is_empty() {
+        return Err(Error::EmptyScene {
+            path: gltf.path.clone(),
+        });
+    }
+    let degenerate = scene.triangles.iter().filter(|t| t.polygon.is_none()).count();
+    if degenerate > 0 {
+        scene.warnings.push(format!(
+            "{degenerate} zero-area triangle(s) skipped as receivers and occluders"
+        ));
+    }
+    Ok(scene)
+}
+
+fn name_suffix(name: Option<&str>) -> String {
+    name.map(|n| format!(" \"{n}\"")).unwrap_or_default()
+}
+
+fn add_primitive(
+    gltf: &Gltf,
+    scene: &mut Scene,
+    node: &gltf::Node,
+    mesh: &gltf::Mesh,
+    prim: &gltf::Primitive,
+    world: &DMat4,
+    default_material: usize,
+) -> Result<()> {
+    let item = format!(
+        "mesh {}{} primitive {}",
+        mesh.index(),
+        name_suffix(mesh.name()),
+        prim.index()
+    );
+    let mode = prim.mode();
+    if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+        scene
+            .warnings
+            .push(format!("{item}: {mode:?} primitives are skipped"));
+        return Ok(());
+    }
+    let pos_acc = prim
+        .get(&gltf::Semantic::Positions)
+        .ok_or_else(|| gltf.bad(&item, "has no POSITION attribute"))?;
+    let flat = gltf
+        .read_floats(&pos_acc, Dimensions::Vec3)
+        .map_err(|e| gltf.bad(&item, format!("POSITION: {e}")))?;
+    let vertex_count = flat.len() / 3;
+    let normal_from_local = DMat3::from_mat4(*world);
+    let mirrored = normal_from_local.determinant() < 0.0;
+    let mut positions_world = Vec::with_capacity(vertex_count);
+    for (i, c) in flat.chunks_exact(3).enumerate() {
+        let p = DVec3::new(c[0], c[1], c[2]);
+        if !p.is_finite() {
+            return Err(gltf.bad(
+                &item,
+                format!("POSITION (accessor {}) vertex {i} is not finite: {p}", pos_acc.index()),
+            ));
+        }
+        let w = world.transform_point3(p);
+        if !w.is_finite() {
+            return Err(gltf.bad(&item, format!("vertex {i} overflows in world space")));
+        }
+        positions_world.push(w);
+    }
+    let raw: Vec<u32> = match prim.indices() {
+        Some(acc) => gltf
+            .read_indices(&acc)
+            .map_err(|e| gltf.bad(&item, format!("indices: {e}")))?,
+        None => (0..vertex_count as u32).collect(),
+    };
+    if let Some(&bad) = raw.iter().find(|&&i| i as usize >= vertex_count) {
+        return Err(gltf.bad(
+            &item,
+            format!("index {bad} is out of range ({vertex_count} vertices)"),
+        ));
+    }
+    let mut indices = triangle_list(mode, &raw);
+    if mirrored {
+        for t in indices.chunks_exact_mut(3) {
+            t.swap(1, 2);
+        }
+    }
+    if indices.is_empty() {
+        scene.warnings.push(format!("{item}: no triangles"));
+        return Ok(());
+    }
+    let material = prim.material().index().unwrap_or(default_material);
+    scene.add_instance(
+        Instance {
+            node: node.index(),
+            mesh: mesh.index(),
+            primitive: prim.index(),
+            gltf_material: prim.material().index(),
+            positions_world,
+            indices,
+            mirrored,
+            first_triangle: 0,
+        },
+        material,
+    );
+    Ok(())
+}
+
+/// Expands strips and fans into a triangle list (glTF winding rules).
+fn triangle_list(mode: Mode, raw: &[u32]) -> Vec<u32> {
+    let mut out = Vec::new();
+    match mode {
+        Mode::Triangles => {
+            for t in raw.chunks_exact(3) {
+                out.extend_from_slice(t);
+            }
+        }
+        Mode::TriangleStrip => {
+            for i in 0..raw.len().saturating_sub(2) {
+                if i % 2 == 0 {
+                    out.extend_from_slice(&[raw[i], raw[i + 1], raw[i + 2]]);
+                } else {
+                    out.extend_from_slice(&[raw[i + 1], raw[i], raw[i + 2]]);
+                }
+            }
+        }
+        Mode::TriangleFan => {
+            for i in 1..raw.len().saturating_sub(1) {
+                out.extend_from_slice(&[raw[0], raw[i], raw[i + 1]]);
+            }
+        }
+        _ => {}
+    }
+    out
+}
+
+fn punctual(light: &gltf::khr_lights_punctual::Light, world: &DMat4, n: usize) -> PunctualLight {
+    use gltf::khr_lights_punctual::Kind;
+    let color = DVec3::from_array(light.color().map(|c| c as f64));
+    let intensity = color * light.intensity() as f64;
+    let kind = match light.kind() {
+        Kind::Point => LightKind::Point,
+        Kind::Directional => LightKind::Directional,
+        Kind::Spot {
+            inner_cone_angle,
+            outer_cone_angle,
+        } => LightKind::Spot {
+            inner_cone: inner_cone_angle as f64,
+            outer_cone: outer_cone_angle as f64,
+        },
+    };
+    PunctualLight {
+        kind,
+        name: light
+            .name()
+            .map(str::to_string)
+            .unwrap_or_else(|| format!("light {n}")),
+        position: world.transform_point3(DVec3::ZERO),
+        direction: world
+            .transform_vector3(DVec3::NEG_Z)
+            .try_normalize()
+            .unwrap_or(DVec3::NEG_Y),
+        intensity,
+        range: light.range().map(|r| r as f64),
+    }
+}
+
+fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Result<Material> {
+    let pbr = m.pbr_metallic_roughness();
+    let base = pbr.base_color_factor();
+    let mut rho = DVec3::new(base[0] as f64, base[1] as f64, base[2] as f64);
+    if let Some(info) = pbr.base_color_texture() {
+        rho *= textures.mean(gltf, &info.texture())?;
+    }
+    let mut radiance = DVec3::from_array(m.emissive_factor().map(|c| c as f64))
+        * m.emissive_strength().unwrap_or(1.0) as f64;
+    if radiance.max_element() > 0.0 {
+        if let Some(info) = m.emissive_texture() {
+            radiance *= textures.mean(gltf, &info.texture())?;
+        }
+    }
+    let name = m
+        .name()
+        .map(str::to_string)
+        .unwrap_or_else(|| format!("material {}", m.index().unwrap_or(0)));
+    if !rho.is_finite() || !radiance.is_finite() || radiance.min_element() < 0.0 {
+        return Err(gltf.bad(format!("material {name}"), "colour factors are not finite"));
+    }
+    Ok(Material {
+        name,
+        rho: rho.clamp(DVec3::ZERO, DVec3::ONE),
+        radiance,
+    })
+}
+
+/// Mean linear colour of each decoded texture image, cached by image index.
+#[derive(Default)]
+struct TextureMeans {
+    cache: BTreeMap<usize, DVec3>,
+    warnings: Vec<String>,
+}
+
+impl TextureMeans {
+    fn mean(&mut self, gltf: &Gltf, texture: &gltf::Texture) -> Result<DVec3> {
+        let image = texture.source();
+        let index = image.index();
+        if let Some(m) = self.cache.get(&index) {
+            return Ok(*m);
+        }
+        let item = format!("image {index}{}", name_suffix(image.name()));
+        let bytes = match image.source() {
+            gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, &item)?.to_vec(),
+            gltf::image::Source::Uri { uri, .. } => read_uri(&gltf.path, uri, &item)?,
+        };
+        let mean = match image::load_from_memory(&bytes) {
+            Ok(img) => {
+                let rgb = img.to_rgb32f();
+                let mut sum = DVec3::ZERO;
+                for p in rgb.pixels() {
+                    sum += DVec3::new(
+                        srgb_to_linear(p[0] as f64),
+                        srgb_to_linear(p[1] as f64),
+                        srgb_to_linear(p[2] as f64),
+                    );
+                }
+                let n = (rgb.width() as f64 * rgb.height() as f64).max(1.0);
+                sum / n
+            }
+            Err(e) => {
+                self.warnings.push(format!(
+                    "{item}: cannot decode ({e}); its mean colour is taken as white"
+                ));
+                DVec3::ONE
+            }
+        };
+        self.cache.insert(index, mean);
+        Ok(mean)
+    }
+}
+
+/// The sRGB electro-optical transfer function (IEC 61966-2-1), value in [0,1].
+pub fn srgb_to_linear(c: f64) -> f64 {
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
+}

@@ -1,0 +1,188 @@
+//! The `penumbra` command line: a thin layer over the library.
+
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand};
+use penumbra::mesh::Mesher;
+use penumbra::solve::SolveOptions;
+use penumbra::{BakeOptions, bake_file};
+use std::path::PathBuf;
+use std::sync::Mutex;
+
+/// Discontinuity-meshing radiosity preprocessor and lightmap baker for glTF scenes.
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Bake a lightmap: read IN (.glb or .gltf), write OUT (.glb) with the lightmap inside.
+    Bake(BakeArgs),
+}
+
+#[derive(Args)]
+struct BakeArgs {
+    /// Input glTF scene (.glb, or .gltf with its buffers). Never modified.
+    input: PathBuf,
+    /// Output .glb: the input plus TEXCOORD_1, the lightmap PNG and MOZ_lightmap.
+    output: PathBuf,
+    /// Which mesher builds the receiver meshes.
+    #[arg(long, value_enum, default_value_t = Mesher::Uniform)]
+    mesher: Mesher,
+    /// Target number of mesh elements (triangles) over the whole scene.
+    #[arg(long, default_value_t = 20_000)]
+    budget: usize,
+    /// Shadow rays per vertex and area emitter (visibility fraction of the exact form factor).
+    #[arg(long, default_value_t = 64)]
+    shadow_samples: usize,
+    /// Light bounces after the direct light (0: direct light only). Default: until the unshot
+    /// power is below 0.1% of the power first received.
+    #[arg(long)]
+    bounces: Option<u32>,
+    /// Target number of coarse patches for the indirect solve.
+    #[arg(long, default_value_t = 1024)]
+    patches: usize,
+    /// Lightmap density in texels per scene unit (metre). Default: derived from --resolution.
+    #[arg(long, conflicts_with = "resolution")]
+    texels_per_unit: Option<f32>,
+    /// Lightmap width and height in texels [default: 1024 when --texels-per-unit is not given].
+    #[arg(long)]
+    resolution: Option<u32>,
+    /// Padding between charts, texels (at least 2).
+    #[arg(long, default_value_t = 4)]
+    padding: u32,
+    /// Sub-samples per texel side (n x n per texel, 1 to 8): antialiases sharp shadows.
+    #[arg(long, default_value_t = 4)]
+    supersample: u32,
+    /// Also write the float lightmap (irradiance, W/m², linear) as OpenEXR.
+    #[arg(long, value_name = "FILE")]
+    exr: Option<PathBuf>,
+    /// Write run statistics (stage times, counts) as JSON.
+    #[arg(long, value_name = "FILE")]
+    stats: Option<PathBuf>,
+    /// Worker threads [default: all cores]. The output does not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// No progress bars or warnings on stderr.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+fn main() {
+    let cli = Cli::parse();
+    if let Err(e) = run(cli) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}
+
+fn run(cli: Cli) -> anyhow::Result<()> {
+    match cli.command {
+        Command::Bake(args) => bake(args),
+    }
+}
+
+fn bake(args: BakeArgs) -> anyhow::Result<()> {
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = args.threads {
+        anyhow::ensure!(n > 0, "--threads must be at least 1");
+        pool = pool.num_threads(n);
+    }
+    let pool = pool.build().context("cannot start worker threads")?;
+    let options = BakeOptions {
+        mesher: args.mesher,
+        budget: args.budget,
+        solve: SolveOptions {
+            shadow_samples: args.shadow_samples,
+            bounces: args.bounces,
+            patches: args.patches,
+            ..SolveOptions::default()
+        },
+        texels_per_unit: args.texels_per_unit,
+        resolution: args.resolution,
+        padding: args.padding,
+        supersample: args.supersample,
+    };
+    let bars = Bars::new(args.quiet);
+    let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
+    let result = pool.install(|| {
+        bake_file(
+            &args.input,
+            &args.output,
+            args.exr.as_deref(),
+            &options,
+            &progress,
+        )
+    });
+    bars.finish();
+    let result = result?;
+    if !args.quiet {
+        for w in &result.stats.warnings {
+            eprintln!("warning: {}: {w}", args.input.display());
+        }
+        eprintln!(
+            "baked {} -> {}: {} elements, {}x{} lightmap, {:.2} s",
+            args.input.display(),
+            args.output.display(),
+            result.stats.elements,
+            result.stats.lightmap_width,
+            result.stats.lightmap_height,
+            result.stats.timings_s.total
+        );
+    }
+    if let Some(path) = &args.stats {
+        let json = serde_json::to_vec_pretty(&result.stats)?;
+        penumbra::write::write_atomically(path, &json)?;
+    }
+    Ok(())
+}
+
+/// One progress bar per stage, on stderr when it is a terminal.
+struct Bars {
+    quiet: bool,
+    current: Mutex<Option<(String, indicatif::ProgressBar)>>,
+}
+
+impl Bars {
+    fn new(quiet: bool) -> Bars {
+        Bars {
+            quiet,
+            current: Mutex::new(None),
+        }
+    }
+
+    fn update(&self, stage: &str, done: u64, total: u64) {
+        if self.quiet {
+            return;
+        }
+        let Ok(mut cur) = self.current.lock() else {
+            return;
+        };
+        if cur.as_ref().is_none_or(|(s, _)| s != stage) {
+            if let Some((_, bar)) = cur.take() {
+                bar.finish();
+            }
+            let bar = indicatif::ProgressBar::new(total);
+            bar.set_style(
+                indicatif::ProgressStyle::with_template("{msg:>16} [{bar:40}] {pos}/{len} {eta}")
+                    .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            );
+            bar.set_message(stage.to_string());
+            *cur = Some((stage.to_string(), bar));
+        }
+        if let Some((_, bar)) = cur.as_ref() {
+            bar.set_length(total);
+            bar.set_position(done.max(bar.position()));
+        }
+    }
+
+    fn finish(&self) {
+        if let Ok(mut cur) = self.current.lock()
+            && let Some((_, bar)) = cur.take()
+        {
+            bar.finish();
+        }
+    }
+}

@@ -1,0 +1,487 @@
+//! The scene as the baker sees it: world-space triangles grouped into planar receiver polygons,
+//! Lambertian materials, area emitters and punctual lights.
+//!
+//! Built by [`crate::load`]; everything downstream reads it. Lengths are in scene units (glTF:
+//! metres), colours are linear RGB triples (`DVec3`).
+
+use glam::{DVec2, DVec3};
+use std::collections::BTreeMap;
+
+/// A Lambertian surface material.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Material {
+    /// Name from the glTF file (for messages).
+    pub name: String,
+    /// Diffuse reflectance `rho` in [0,1] per channel: baseColorFactor x mean of baseColorTexture.
+    pub rho: DVec3,
+    /// Emitted radiance `L_e` in W/(m² sr) per channel (front face only); exitance is `pi L_e`.
+    pub radiance: DVec3,
+}
+
+impl Material {
+    /// True when the material emits light.
+    pub fn is_emitter(&self) -> bool {
+        self.radiance.max_element() > 0.0
+    }
+}
+
+/// One world-space triangle of a static mesh instance.
+#[derive(Clone, Debug)]
+pub struct Triangle {
+    /// Corners in world space, counter-clockwise seen from the front.
+    pub p: [DVec3; 3],
+    /// Unit geometric normal (front side).
+    pub normal: DVec3,
+    /// Index into [`Scene::materials`].
+    pub material: usize,
+    /// Index into [`Scene::instances`].
+    pub instance: usize,
+    /// Index of the triangle within its instance's index list (`indices[3k..3k+3]`).
+    pub local_index: usize,
+    /// Index into [`Scene::polygons`], or `None` for degenerate triangles, which receive nothing.
+    pub polygon: Option<usize>,
+}
+
+impl Triangle {
+    /// Area in square scene units.
+    pub fn area(&self) -> f64 {
+        0.5 * (self.p[1] - self.p[0]).cross(self.p[2] - self.p[0]).length()
+    }
+}
+
+/// An orthonormal frame of a plane: `p_world = origin + x u + y v`, normal `n = u x v`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Frame {
+    pub origin: DVec3,
+    pub u: DVec3,
+    pub v: DVec3,
+    pub n: DVec3,
+}
+
+impl Frame {
+    /// A frame through `origin` with normal `n` and first axis along `u_hint` projected into the
+    /// plane (any perpendicular axis when `u_hint` is parallel to `n`).
+    pub fn new(origin: DVec3, n: DVec3, u_hint: DVec3) -> Frame {
+        let n = n.normalize();
+        let mut u = u_hint - n * n.dot(u_hint);
+        if u.length_squared() < 1e-20 {
+            u = n.any_orthonormal_vector();
+        }
+        let u = u.normalize();
+        let v = n.cross(u);
+        Frame { origin, u, v, n }
+    }
+
+    /// World point to plane coordinates (orthogonal projection).
+    pub fn plane_from_world(&self, p_world: DVec3) -> DVec2 {
+        let d = p_world - self.origin;
+        DVec2::new(d.dot(self.u), d.dot(self.v))
+    }
+
+    /// Plane coordinates to the world point on the plane.
+    pub fn world_from_plane(&self, q_plane: DVec2) -> DVec3 {
+        self.origin + self.u * q_plane.x + self.v * q_plane.y
+    }
+}
+
+/// A planar receiver: coplanar, edge-connected triangles of one material and one instance.
+#[derive(Clone, Debug)]
+pub struct Polygon {
+    /// Index into [`Scene::materials`].
+    pub material: usize,
+    /// Index into [`Scene::instances`].
+    pub instance: usize,
+    /// Indices into [`Scene::triangles`].
+    pub triangles: Vec<usize>,
+    /// The plane's frame: `world_from_plane` maps 2D outline coordinates to the world.
+    pub frame: Frame,
+    /// The triangles in plane coordinates (same order as `triangles`).
+    pub triangles_plane: Vec<[DVec2; 3]>,
+    /// Boundary edges (edges used by one triangle only) in plane coordinates, oriented with the
+    /// polygon on their left.
+    pub boundary: Vec<[DVec2; 2]>,
+    /// Area in square scene units.
+    pub area: f64,
+}
+
+impl Polygon {
+    /// True when the plane point lies inside one of the polygon's triangles (edges included,
+    /// with a tolerance relative to the triangle size).
+    pub fn contains(&self, q: DVec2) -> bool {
+        self.triangles_plane.iter().any(|t| point_in_triangle(q, t))
+    }
+}
+
+/// Inside-or-on test of a 2D point against a triangle, with a small relative tolerance.
+pub fn point_in_triangle(q: DVec2, t: &[DVec2; 3]) -> bool {
+    let area2 = (t[1] - t[0]).perp_dot(t[2] - t[0]);
+    if area2 == 0.0 {
+        return false;
+    }
+    let s = area2.signum();
+    let tol = -1e-9 * area2.abs();
+    (0..3).all(|i| s * (t[(i + 1) % 3] - t[i]).perp_dot(q - t[i]) >= tol)
+}
+
+/// The kind of a punctual light (KHR_lights_punctual).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum LightKind {
+    /// Omnidirectional point light; intensity in W/sr (glTF: candela).
+    Point,
+    /// Spot light with cone angles in radians (glTF defaults: inner 0, outer pi/4).
+    Spot { inner_cone: f64, outer_cone: f64 },
+    /// Directional light; intensity is irradiance in W/m² (glTF: lux) on a surface facing it.
+    Directional,
+}
+
+/// A punctual light in world space.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PunctualLight {
+    pub kind: LightKind,
+    /// Name (or `light N`), for messages.
+    pub name: String,
+    /// Position in world space (unused for directional lights).
+    pub position: DVec3,
+    /// Unit direction the light points to (spot and directional; the node's -z axis).
+    pub direction: DVec3,
+    /// colour x intensity: W/sr per channel for point and spot, W/m² for directional.
+    pub intensity: DVec3,
+    /// Range in scene units beyond which the light has no effect (glTF `range`), if any.
+    pub range: Option<f64>,
+}
+
+/// A static mesh primitive placed by one node: the unit that gets its own lightmap space.
+#[derive(Clone, Debug)]
+pub struct Instance {
+    /// glTF node index.
+    pub node: usize,
+    /// glTF mesh index.
+    pub mesh: usize,
+    /// Primitive index within the mesh.
+    pub primitive: usize,
+    /// glTF material index, if the primitive has one.
+    pub gltf_material: Option<usize>,
+    /// Vertex positions in world space (the primitive's vertices, one per glTF vertex).
+    pub positions_world: Vec<DVec3>,
+    /// Triangle list over `positions_world` (strips and fans expanded, winding fixed for mirrors).
+    pub indices: Vec<u32>,
+    /// True when the node's transform mirrors (negative determinant): `indices` then has the
+    /// second and third corner of every glTF triangle swapped so fronts face the right way.
+    pub mirrored: bool,
+    /// Index of this instance's first triangle in [`Scene::triangles`]; its triangles are
+    /// consecutive, one per `indices` triple.
+    pub first_triangle: usize,
+}
+
+/// A warning that does not stop the bake (skipped items, degenerate triangles).
+pub type Warning = String;
+
+/// The whole scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub materials: Vec<Material>,
+    pub triangles: Vec<Triangle>,
+    pub polygons: Vec<Polygon>,
+    pub instances: Vec<Instance>,
+    pub lights: Vec<PunctualLight>,
+    /// Axis-aligned bounds of all triangles, world space.
+    pub bounds_min: DVec3,
+    pub bounds_max: DVec3,
+    /// What the loader skipped or repaired.
+    pub warnings: Vec<Warning>,
+}
+
+impl Default for Scene {
+    fn default() -> Scene {
+        Scene {
+            materials: Vec::new(),
+            triangles: Vec::new(),
+            polygons: Vec::new(),
+            instances: Vec::new(),
+            lights: Vec::new(),
+            bounds_min: DVec3::INFINITY,
+            bounds_max: DVec3::NEG_INFINITY,
+            warnings: Vec::new(),
+        }
+    }
+}
+
+impl Scene {
+    /// Length of the bounding box diagonal: the scale for every geometric tolerance.
+    pub fn extent(&self) -> f64 {
+        let d = (self.bounds_max - self.bounds_min).length();
+        if d.is_finite() { d.max(1e-30) } else { 1.0 }
+    }
+
+    /// Indices of the polygons whose material emits light (area emitters).
+    pub fn emitters(&self) -> impl Iterator<Item = usize> + '_ {
+        self.polygons
+            .iter()
+            .enumerate()
+            .filter(|(_, p)| self.materials[p.material].is_emitter())
+            .map(|(i, _)| i)
+    }
+
+    /// True when the scene has at least one area emitter or punctual light.
+    pub fn has_light(&self) -> bool {
+        !self.lights.is_empty() || self.emitters().next().is_some()
+    }
+
+    /// Appends an instance's triangles and groups them into polygons. `positions_world` and
+    /// `indices` describe a triangle list; `material` indexes [`Scene::materials`].
+    pub fn add_instance(&mut self, mut instance: Instance, material: usize) {
+        let id = self.instances.len();
+        instance.first_triangle = self.triangles.len();
+        let first = self.triangles.len();
+        for (k, tri) in instance.indices.chunks_exact(3).enumerate() {
+            let p = [
+                instance.positions_world[tri[0] as usize],
+                instance.positions_world[tri[1] as usize],
+                instance.positions_world[tri[2] as usize],
+            ];
+            let cross = (p[1] - p[0]).cross(p[2] - p[0]);
+            let len = cross.length();
+            let normal = if len > 0.0 { cross / len } else { DVec3::ZERO };
+            for q in p {
+                self.bounds_min = self.bounds_min.min(q);
+                self.bounds_max = self.bounds_max.max(q);
+            }
+            self.triangles.push(Triangle {
+                p,
+                normal,
+                material,
+                instance: id,
+                local_index: k,
+                polygon: None,
+            });
+        }
+        self.instances.push(instance);
+        let last = self.triangles.len();
+        self.merge_polygons(first..last, material, id);
+    }
+
+    /// Groups the triangles in `range` into planar polygons: flood fill over shared edges
+    /// (vertices welded by position) between triangles whose planes agree.
+    fn merge_polygons(&mut self, range: std::ops::Range<usize>, material: usize, instance: usize) {
+        // Weld vertices by exact world position so split vertices (different normals or UVs) still
+        // connect their triangles.
+        let mut weld: BTreeMap<[u64; 3], u32> = BTreeMap::new();
+        let welded: Vec<u32> = self.instances[instance]
+            .positions_world
+            .iter()
+            .map(|p| {
+                let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+                let n = weld.len() as u32;
+                *weld.entry(key).or_insert(n)
+            })
+            .collect();
+        let tri_vertices = tri_vertices_of(self, &welded, instance);
+        let mut edges: BTreeMap<(u32, u32), Vec<usize>> = BTreeMap::new();
+        for t in range.clone() {
+            if self.triangles[t].normal == DVec3::ZERO {
+                continue;
+            }
+            let v = tri_vertices(t);
+            for e in 0..3 {
+                let (a, b) = (v[e], v[(e + 1) % 3]);
+                edges.entry((a.min(b), a.max(b))).or_default().push(t);
+            }
+        }
+        let tol = 1e-6 * self.extent().max(1e-12);
+        let mut assigned = vec![false; range.len()];
+        let mut new_polygons = Vec::new();
+        for seed in range.clone() {
+            if assigned[seed - range.start] || self.triangles[seed].normal == DVec3::ZERO {
+                continue;
+            }
+            assigned[seed - range.start] = true;
+            let n0 = self.triangles[seed].normal;
+            let o0 = self.triangles[seed].p[0];
+            let mut members = vec![seed];
+            let mut stack = vec![seed];
+            while let Some(t) = stack.pop() {
+                let v = tri_vertices(t);
+                for e in 0..3 {
+                    let (a, b) = (v[e], v[(e + 1) % 3]);
+                    for &nb in &edges[&(a.min(b), a.max(b))] {
+                        let i = nb - range.start;
+                        if assigned[i] {
+                            continue;
+                        }
+                        let tn = &self.triangles[nb];
+                        let coplanar = tn.normal.dot(n0) > 1.0 - 1e-9
+                            && tn.p.iter().all(|q| (q - o0).dot(n0).abs() <= tol);
+                        if coplanar {
+                            assigned[i] = true;
+                            members.push(nb);
+                            stack.push(nb);
+                        }
+                    }
+                }
+            }
+            members.sort_unstable();
+            new_polygons.push(members);
+        }
+        let polygons: Vec<Polygon> = new_polygons
+            .iter()
+            .map(|members| self.make_polygon(members, material, instance, &tri_vertices))
+            .collect();
+        drop(tri_vertices);
+        for polygon in polygons {
+            let id = self.polygons.len();
+            for &t in &polygon.triangles {
+                self.triangles[t].polygon = Some(id);
+            }
+            self.polygons.push(polygon);
+        }
+    }
+
+    fn make_polygon(
+        &self,
+        members: &[usize],
+        material: usize,
+        instance: usize,
+        welded_tris: &dyn Fn(usize) -> [u32; 3],
+    ) -> Polygon {
+        // Area-weighted normal, origin at the first vertex, u along the longest edge of the
+        // largest triangle (a stable, deterministic choice).
+        let mut normal = DVec3::ZERO;
+        let mut area = 0.0;
+        let mut largest = members[0];
+        for &t in members {
+            let tri = &self.triangles[t];
+            let a = tri.area();
+            normal += tri.normal * a;
+            area += a;
+            if a > self.triangles[largest].area() {
+                largest = t;
+            }
+        }
+        let lt = &self.triangles[largest];
+        let mut u_hint = lt.p[1] - lt.p[0];
+        for e in 1..3 {
+            let d = lt.p[(e + 1) % 3] - lt.p[e];
+            if d.length_squared() > u_hint.length_squared() {
+                u_hint = d;
+            }
+        }
+        let frame = Frame::new(self.triangles[members[0]].p[0], normal, u_hint);
+        let triangles_plane: Vec<[DVec2; 3]> = members
+            .iter()
+            .map(|&t| self.triangles[t].p.map(|q| frame.plane_from_world(q)))
+            .collect();
+        // Boundary edges: welded edges used by exactly one member triangle.
+        let mut count: BTreeMap<(u32, u32), (usize, usize)> = BTreeMap::new();
+        for (m, &t) in members.iter().enumerate() {
+            let v = welded_tris(t);
+            for e in 0..3 {
+                let (a, b) = (v[e], v[(e + 1) % 3]);
+                let entry = count.entry((a.min(b), a.max(b))).or_insert((0, 0));
+                entry.0 += 1;
+                entry.1 = m * 3 + e;
+            }
+        }
+        let mut boundary = Vec::new();
+        for (_, (c, me)) in count {
+            if c == 1 {
+                let t = &triangles_plane[me / 3];
+                let e = me % 3;
+                boundary.push([t[e], t[(e + 1) % 3]]);
+            }
+        }
+        Polygon {
+            material,
+            instance,
+            triangles: members.to_vec(),
+            frame,
+            triangles_plane,
+            boundary,
+            area,
+        }
+    }
+}
+
+fn tri_vertices_of<'a>(
+    scene: &'a Scene,
+    welded: &'a [u32],
+    instance: usize,
+) -> impl Fn(usize) -> [u32; 3] + 'a {
+    move |t: usize| {
+        let inst = &scene.instances[instance];
+        let k = scene.triangles[t].local_index;
+        let i = &inst.indices[3 * k..3 * k + 3];
+        [
+            welded[i[0] as usize],
+            welded[i[1] as usize],
+            welded[i[2] as usize],
+        ]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn quad_instance(corners: [DVec3; 4]) -> Instance {
+        Instance {
+            node: 0,
+            mesh: 0,
+            primitive: 0,
+            gltf_material: None,
+            positions_world: corners.to_vec(),
+            indices: vec![0, 1, 2, 0, 2, 3],
+            mirrored: false,
+            first_triangle: 0,
+        }
+    }
+
+    fn grey() -> Material {
+        Material {
+            name: "grey".into(),
+            rho: DVec3::splat(0.5),
+            radiance: DVec3::ZERO,
+        }
+    }
+
+    #[test]
+    fn coplanar_quad_merges_into_one_polygon_with_four_boundary_edges() {
+        let mut scene = Scene::default();
+        scene.materials.push(grey());
+        let inst = quad_instance([
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, -1.0),
+            DVec3::new(0.0, 0.0, -1.0),
+        ]);
+        scene.add_instance(inst, 0);
+        assert_eq!(scene.polygons.len(), 1);
+        let poly = &scene.polygons[0];
+        assert_eq!(poly.boundary.len(), 4);
+        assert!((poly.area - 1.0).abs() < 1e-12);
+        assert!((poly.frame.n - DVec3::Y).length() < 1e-12);
+        assert!(poly.contains(poly.frame.plane_from_world(DVec3::new(0.5, 0.0, -0.5))));
+        assert!(!poly.contains(poly.frame.plane_from_world(DVec3::new(1.5, 0.0, -0.5))));
+    }
+
+    #[test]
+    fn folded_quad_gives_two_polygons() {
+        let mut scene = Scene::default();
+        scene.materials.push(grey());
+        let inst = quad_instance([
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.5, -1.0),
+            DVec3::new(0.0, 0.0, -1.0),
+        ]);
+        scene.add_instance(inst, 0);
+        assert_eq!(scene.polygons.len(), 2);
+    }
+
+    #[test]
+    fn frame_round_trips() {
+        let f = Frame::new(DVec3::new(1.0, 2.0, 3.0), DVec3::new(0.3, 0.9, -0.1), DVec3::X);
+        let p = f.world_from_plane(DVec2::new(0.25, -4.0));
+        assert!((f.plane_from_world(p) - DVec2::new(0.25, -4.0)).length() < 1e-12);
+        assert!(f.n.dot(f.u).abs() < 1e-12 && f.n.dot(f.v).abs() < 1e-12);
+    }
+}

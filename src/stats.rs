@@ -1,0 +1,52 @@
+//! Run statistics (`--stats FILE`): per-stage wall times and the counts of every stage.
+//! Field names are stable; later stages add fields.
+
+use serde::Serialize;
+use std::time::Instant;
+
+/// Progress callback: `(stage, done, total)`. Called from worker threads.
+pub type Progress<'a> = dyn Fn(&str, u64, u64) + Sync + 'a;
+
+/// Wall time of each stage, seconds, in pipeline order.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Timings {
+    pub load: f64,
+    pub visibility: f64,
+    pub mesh: f64,
+    pub solve: f64,
+    pub atlas: f64,
+    pub lightmap: f64,
+    pub write: f64,
+    pub total: f64,
+}
+
+/// Everything `--stats` reports.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct Stats {
+    pub input: String,
+    pub mesher: String,
+    pub threads: usize,
+    pub triangles: usize,
+    pub polygons: usize,
+    pub instances: usize,
+    pub area_emitters: usize,
+    pub punctual_lights: usize,
+    pub elements: usize,
+    pub vertices: usize,
+    pub solve: crate::solve::SolveStats,
+    pub lightmap_width: u32,
+    pub lightmap_height: u32,
+    pub texels_per_unit: f32,
+    /// `MOZ_lightmap` intensity: H (W/m²) of a full-scale texel.
+    pub lightmap_intensity: f64,
+    pub timings_s: Timings,
+    pub warnings: Vec<String>,
+}
+
+/// Measures the wall time of one stage.
+pub fn timed<T>(slot: &mut f64, f: impl FnOnce() -> T) -> T {
+    let start = Instant::now();
+    let out = f();
+    *slot = start.elapsed().as_secs_f64();
+    out
+}

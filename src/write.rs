@@ -1,0 +1,446 @@
+//! Writing the lightmapped glb: the input with everything preserved, plus per lightmapped
+//! primitive a second UV set (`TEXCOORD_1`, and `TEXCOORD_0` where the input has none), the
+//! lightmap PNG in the binary chunk, and `MOZ_lightmap` on every lightmapped material.
+//!
+//! The writer edits the file's own JSON, so whatever it does not touch (extensions, extras,
+//! animations, unknown properties) is kept as it was. All buffers are merged into the one GLB
+//! binary chunk and external images are embedded, so the output stands alone. xatlas splits
+//! vertices at chart seams, so each lightmapped primitive gets new accessors for all of its
+//! attributes, remapped through the atlas's vertex cross-reference. A mesh placed by several
+//! nodes is copied so that each placement has its own lightmap space. The file is written to a
+//! temporary file beside the output and renamed into place, so a failure never leaves a half file.
+
+use crate::atlas::Atlas;
+use crate::error::{Error, Result};
+use crate::load::Gltf;
+use crate::scene::Scene;
+use serde_json::{Value, json};
+use std::collections::BTreeMap;
+use std::path::Path;
+
+/// The lightmap as it goes into the file.
+pub struct LightmapImage {
+    /// PNG bytes (8-bit linear RGB).
+    pub png: Vec<u8>,
+    /// `MOZ_lightmap` intensity: irradiance H = texel value (0..1) x intensity.
+    pub intensity: f64,
+}
+
+const ARRAY_BUFFER: u64 = 34962;
+const ELEMENT_ARRAY_BUFFER: u64 = 34963;
+
+/// Accumulates the output binary chunk.
+struct Bin {
+    data: Vec<u8>,
+}
+
+impl Bin {
+    /// Appends bytes at an 8-byte aligned offset; returns the offset.
+    fn push(&mut self, bytes: &[u8]) -> usize {
+        while self.data.len() % 8 != 0 {
+            self.data.push(0);
+        }
+        let at = self.data.len();
+        self.data.extend_from_slice(bytes);
+        at
+    }
+}
+
+fn array_mut<'a>(root: &'a mut Value, key: &str) -> &'a mut Vec<Value> {
+    let obj = root.as_object_mut().expect("glTF root is an object");
+    let v = obj.entry(key).or_insert_with(|| json!([]));
+    if !v.is_array() {
+        *v = json!([]);
+    }
+    v.as_array_mut().expect("just made an array")
+}
+
+fn push_view(root: &mut Value, bin: &mut Bin, bytes: &[u8], stride: Option<usize>, target: Option<u64>) -> usize {
+    let offset = bin.push(bytes);
+    let mut view = json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()});
+    if let Some(s) = stride {
+        view["byteStride"] = json!(s);
+    }
+    if let Some(t) = target {
+        view["target"] = json!(t);
+    }
+    let views = array_mut(root, "bufferViews");
+    views.push(view);
+    views.len() - 1
+}
+
+fn push_accessor(root: &mut Value, accessor: Value) -> usize {
+    let accessors = array_mut(root, "accessors");
+    accessors.push(accessor);
+    accessors.len() - 1
+}
+
+/// Number of components of a glTF accessor type.
+fn components(ty: &str) -> usize {
+    match ty {
+        "SCALAR" => 1,
+        "VEC2" => 2,
+        "VEC3" => 3,
+        "VEC4" | "MAT2" => 4,
+        "MAT3" => 9,
+        "MAT4" => 16,
+        _ => 1,
+    }
+}
+
+fn component_value(ct: u64, c: &[u8]) -> f64 {
+    match ct {
+        5120 => c[0] as i8 as f64,
+        5121 => c[0] as f64,
+        5122 => i16::from_le_bytes([c[0], c[1]]) as f64,
+        5123 => u16::from_le_bytes([c[0], c[1]]) as f64,
+        5125 => u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
+        _ => f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
+    }
+}
+
+fn number(ct: u64, x: f64) -> Value {
+    if ct == 5126 {
+        json!(x as f32)
+    } else {
+        json!(x as i64)
+    }
+}
+
+/// Writes the lightmapped glb to `out` (temporary file + rename).
+pub fn glb(
+    gltf: &Gltf,
+    scene: &Scene,
+    atlas: &Atlas,
+    image: &LightmapImage,
+    out: &Path,
+) -> Result<()> {
+    let bytes = build(gltf, scene, atlas, image)?;
+    write_atomically(out, &bytes)
+}
+
+/// Builds the output glb bytes.
+pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -> Result<Vec<u8>> {
+    let mut root = gltf.json.clone();
+    if !root.is_object() {
+        return Err(Error::NotGltf {
+            path: gltf.path.clone(),
+            reason: "the JSON root is not an object".into(),
+        });
+    }
+    let mut bin = Bin { data: Vec::new() };
+
+    // 1. Merge every buffer into the binary chunk and repoint the buffer views.
+    let mut base = Vec::new();
+    for data in &gltf.buffers {
+        base.push(bin.push(data));
+    }
+    for view in array_mut(&mut root, "bufferViews").iter_mut() {
+        let b = view["buffer"].as_u64().unwrap_or(0) as usize;
+        let off = view["byteOffset"].as_u64().unwrap_or(0) as usize;
+        view["buffer"] = json!(0);
+        view["byteOffset"] = json!(off + base.get(b).copied().unwrap_or(0));
+    }
+    // 2. Embed images that live in files or data URIs.
+    let n_images = array_mut(&mut root, "images").len();
+    for i in 0..n_images {
+        let uri = root["images"][i]["uri"].as_str().map(str::to_string);
+        if let Some(uri) = uri {
+            let item = format!("image {i}");
+            let data = crate::load::read_uri(&gltf.path, &uri, &item)?;
+            let mime = if data.starts_with(&[0x89, b'P', b'N', b'G']) {
+                "image/png"
+            } else if data.starts_with(&[0xFF, 0xD8]) {
+                "image/jpeg"
+            } else if uri.ends_with(".ktx2") {
+                "image/ktx2"
+            } else if uri.ends_with(".webp") {
+                "image/webp"
+            } else {
+                "application/octet-stream"
+            };
+            let view = push_view(&mut root, &mut bin, &data, None, None);
+            let img = root["images"][i].as_object_mut().expect("image is an object");
+            img.remove("uri");
+            img.insert("bufferView".into(), json!(view));
+            img.insert("mimeType".into(), json!(mime));
+        }
+    }
+
+    // 3. The lightmap texture.
+    let png_view = push_view(&mut root, &mut bin, &image.png, None, None);
+    let images = array_mut(&mut root, "images");
+    images.push(json!({"name": "penumbra lightmap", "bufferView": png_view, "mimeType": "image/png"}));
+    let image_index = images.len() - 1;
+    let samplers = array_mut(&mut root, "samplers");
+    samplers.push(json!({"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}));
+    let sampler_index = samplers.len() - 1;
+    let textures = array_mut(&mut root, "textures");
+    textures.push(json!({"name": "penumbra lightmap", "sampler": sampler_index, "source": image_index}));
+    let texture_index = textures.len() - 1;
+    let moz = json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity});
+
+    // 4. Which nodes use each mesh, and which of those placements are lightmapped.
+    let mut lit_nodes: BTreeMap<usize, BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
+    for (i, inst) in scene.instances.iter().enumerate() {
+        lit_nodes
+            .entry(inst.mesh)
+            .or_default()
+            .entry(inst.node)
+            .or_default()
+            .push(i);
+    }
+    let mut mesh_users: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
+    for (n, node) in root["nodes"].as_array().cloned().unwrap_or_default().iter().enumerate() {
+        if let Some(m) = node["mesh"].as_u64() {
+            mesh_users.entry(m as usize).or_default().push(n);
+        }
+    }
+
+    // 5. Materials used by lightmapped primitives get MOZ_lightmap; a material also used by an
+    //    unlit primitive is cloned first.
+    let mut lit_material_uses: BTreeMap<Option<usize>, usize> = BTreeMap::new();
+    let mut all_material_uses: BTreeMap<Option<usize>, usize> = BTreeMap::new();
+    for (m, users) in &mesh_users {
+        let prims = root["meshes"][*m]["primitives"].as_array().cloned().unwrap_or_default();
+        for node in users {
+            for (p, prim) in prims.iter().enumerate() {
+                let mat = prim["material"].as_u64().map(|x| x as usize);
+                *all_material_uses.entry(mat).or_default() += 1;
+                let lit = lit_nodes
+                    .get(m)
+                    .and_then(|n| n.get(node))
+                    .is_some_and(|insts| insts.iter().any(|&i| scene.instances[i].primitive == p));
+                if lit {
+                    *lit_material_uses.entry(mat).or_default() += 1;
+                }
+            }
+        }
+    }
+    let mut material_map: BTreeMap<Option<usize>, usize> = BTreeMap::new();
+    for (mat, lit) in &lit_material_uses {
+        let shared = all_material_uses.get(mat).copied().unwrap_or(0) > *lit;
+        let index = match mat {
+            Some(i) if !shared => *i,
+            Some(i) => {
+                let mut copy = root["materials"][*i].clone();
+                if let Some(name) = copy["name"].as_str() {
+                    copy["name"] = json!(format!("{name} (lightmapped)"));
+                }
+                let mats = array_mut(&mut root, "materials");
+                mats.push(copy);
+                mats.len() - 1
+            }
+            None => {
+                let mats = array_mut(&mut root, "materials");
+                mats.push(json!({"name": "default (lightmapped)"}));
+                mats.len() - 1
+            }
+        };
+        let m = &mut root["materials"][index];
+        if !m["extensions"].is_object() {
+            m["extensions"] = json!({});
+        }
+        m["extensions"]["MOZ_lightmap"] = moz.clone();
+        material_map.insert(*mat, index);
+    }
+
+    // 6. New primitive data for every lightmapped placement; copies of shared meshes.
+    for (mesh, nodes) in &lit_nodes {
+        let users = mesh_users.get(mesh).cloned().unwrap_or_default();
+        // The original mesh entry is edited in place for the first lightmapped placement when
+        // every node using the mesh is lightmapped; every other placement gets a copy.
+        let mut in_place_taken = !users.iter().all(|n| nodes.contains_key(n));
+        for (node, insts) in nodes {
+            let mut mesh_json = gltf.json["meshes"][*mesh].clone();
+            for &i in insts {
+                let inst = &scene.instances[i];
+                let prim = &mut mesh_json["primitives"][inst.primitive];
+                rewrite_primitive(gltf, &mut root, &mut bin, prim, inst, &atlas.meshes[i], atlas)?;
+                let mat = prim["material"].as_u64().map(|x| x as usize);
+                if let Some(&mi) = material_map.get(&mat) {
+                    prim["material"] = json!(mi);
+                }
+            }
+            if !in_place_taken {
+                root["meshes"][*mesh] = mesh_json;
+                in_place_taken = true;
+            } else {
+                let meshes = array_mut(&mut root, "meshes");
+                meshes.push(mesh_json);
+                let new = meshes.len() - 1;
+                root["nodes"][*node]["mesh"] = json!(new);
+            }
+        }
+    }
+
+    // 7. One buffer, extension declared as used (not required: the scene renders without it).
+    root["buffers"] = json!([{"byteLength": bin.data.len()}]);
+    let used = array_mut(&mut root, "extensionsUsed");
+    if !used.iter().any(|e| e == "MOZ_lightmap") {
+        used.push(json!("MOZ_lightmap"));
+    }
+    Ok(to_glb(&root, bin.data))
+}
+
+/// Replaces one primitive's attributes by atlas-split copies plus the lightmap UVs.
+fn rewrite_primitive(
+    gltf: &Gltf,
+    root: &mut Value,
+    bin: &mut Bin,
+    prim: &mut Value,
+    inst: &crate::scene::Instance,
+    am: &crate::atlas::AtlasMesh,
+    atlas: &Atlas,
+) -> Result<()> {
+    let attributes = prim["attributes"].as_object().cloned().unwrap_or_default();
+    let mut new_attributes = serde_json::Map::new();
+    for (name, acc) in &attributes {
+        if name == "TEXCOORD_1" {
+            continue; // replaced by the lightmap UVs
+        }
+        let Some(acc_index) = acc.as_u64() else { continue };
+        let accessor = gltf
+            .document
+            .accessors()
+            .nth(acc_index as usize)
+            .ok_or_else(|| Error::BadItem {
+                path: gltf.path.clone(),
+                item: format!("attribute {name}"),
+                reason: format!("accessor {acc_index} does not exist"),
+            })?;
+        let (bytes, elem) = gltf.accessor_bytes(&accessor)?;
+        let stride = elem.div_ceil(4) * 4;
+        let mut data = vec![0u8; stride * am.xref.len()];
+        for (k, &x) in am.xref.iter().enumerate() {
+            let src = &bytes[x as usize * elem..(x as usize + 1) * elem];
+            data[k * stride..k * stride + elem].copy_from_slice(src);
+        }
+        let view = push_view(root, bin, &data, (stride != elem).then_some(stride), Some(ARRAY_BUFFER));
+        let original = &gltf.json["accessors"][acc_index as usize];
+        let ct = original["componentType"].as_u64().unwrap_or(5126);
+        let ty = original["type"].as_str().unwrap_or("SCALAR").to_string();
+        let mut new = json!({
+            "bufferView": view,
+            "componentType": ct,
+            "count": am.xref.len(),
+            "type": ty,
+        });
+        if original["normalized"].as_bool() == Some(true) {
+            new["normalized"] = json!(true);
+        }
+        if let Some(n) = original.get("name") {
+            new["name"] = n.clone();
+        }
+        if original.get("min").is_some() || name == "POSITION" {
+            let nc = components(&ty);
+            let cs = elem / nc;
+            let mut lo = vec![f64::INFINITY; nc];
+            let mut hi = vec![f64::NEG_INFINITY; nc];
+            for k in 0..am.xref.len() {
+                for c in 0..nc {
+                    let at = k * stride + c * cs;
+                    let v = component_value(ct, &data[at..at + cs]);
+                    lo[c] = lo[c].min(v);
+                    hi[c] = hi[c].max(v);
+                }
+            }
+            new["min"] = Value::Array(lo.iter().map(|&x| number(ct, x)).collect());
+            new["max"] = Value::Array(hi.iter().map(|&x| number(ct, x)).collect());
+        }
+        new_attributes.insert(name.clone(), json!(push_accessor(root, new)));
+    }
+    // Lightmap UVs, normalised to [0,1].
+    let (w, h) = (atlas.width as f32, atlas.height as f32);
+    let mut uv_bytes = Vec::with_capacity(am.uv.len() * 8);
+    let (mut lo, mut hi) = ([f32::INFINITY; 2], [f32::NEG_INFINITY; 2]);
+    for uv in &am.uv {
+        let n = [uv[0] / w, uv[1] / h];
+        for c in 0..2 {
+            lo[c] = lo[c].min(n[c]);
+            hi[c] = hi[c].max(n[c]);
+            uv_bytes.extend_from_slice(&n[c].to_le_bytes());
+        }
+    }
+    let view = push_view(root, bin, &uv_bytes, None, Some(ARRAY_BUFFER));
+    let uv_acc = push_accessor(
+        root,
+        json!({"bufferView": view, "componentType": 5126, "count": am.uv.len(), "type": "VEC2",
+               "min": lo, "max": hi, "name": "lightmap UV"}),
+    );
+    new_attributes.insert("TEXCOORD_1".into(), json!(uv_acc));
+    if !new_attributes.contains_key("TEXCOORD_0") {
+        // glTF requires TEXCOORD_0 when TEXCOORD_1 is present; the lightmap UVs serve.
+        new_attributes.insert("TEXCOORD_0".into(), json!(uv_acc));
+    }
+    // Indices: the atlas triangles, in the original glTF winding.
+    let mut indices = am.indices.clone();
+    if inst.mirrored {
+        for t in indices.chunks_exact_mut(3) {
+            t.swap(1, 2);
+        }
+    }
+    let (ct, bytes): (u64, Vec<u8>) = if am.xref.len() <= u16::MAX as usize {
+        (5123, indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect())
+    } else {
+        (5125, indices.iter().flat_map(|&i| i.to_le_bytes()).collect())
+    };
+    let view = push_view(root, bin, &bytes, None, Some(ELEMENT_ARRAY_BUFFER));
+    let idx_acc = push_accessor(
+        root,
+        json!({"bufferView": view, "componentType": ct, "count": indices.len(), "type": "SCALAR"}),
+    );
+    prim["attributes"] = Value::Object(new_attributes);
+    prim["indices"] = json!(idx_acc);
+    if let Some(obj) = prim.as_object_mut() {
+        obj.remove("mode"); // strips and fans are now a triangle list (the default mode)
+    }
+    Ok(())
+}
+
+/// Assembles a GLB container: JSON chunk padded with spaces, BIN chunk padded with zeros.
+pub fn to_glb(root: &Value, mut bin: Vec<u8>) -> Vec<u8> {
+    let mut json = serde_json::to_vec(root).expect("a serde_json::Value always serializes");
+    while json.len() % 4 != 0 {
+        json.push(b' ');
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    let total = 12 + 8 + json.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
+    let mut out = Vec::with_capacity(total);
+    out.extend_from_slice(b"glTF");
+    out.extend_from_slice(&2u32.to_le_bytes());
+    out.extend_from_slice(&(total as u32).to_le_bytes());
+    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
+    out.extend_from_slice(b"JSON");
+    out.extend_from_slice(&json);
+    if !bin.is_empty() {
+        out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
+        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&bin);
+    }
+    out
+}
+
+/// Writes `bytes` to a temporary file beside `path`, then renames it into place.
+pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
+    let err = |source| Error::Write {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => std::path::PathBuf::from("."),
+    };
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".into());
+    let tmp = dir.join(format!(".{name}.penumbra-{}.tmp", std::process::id()));
+    let result = std::fs::write(&tmp, bytes).and_then(|_| std::fs::rename(&tmp, path));
+    if result.is_err() {
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result.map_err(err)
+}
