@@ -16,8 +16,10 @@
 //!   shim functions that forward to the Itanium symbols of the same functions. Only the four that
 //!   xatlas-rs's safe API calls are shimmed (`Create`, `Destroy`, `AddMesh`, `Generate`); its other
 //!   bindings (`ComputeCharts`, `PackCharts`, `SetPrint`, ...) are never called by it, so the
-//!   linker never asks for them. The shims only exist on non-MSVC targets: on MSVC, xatlas's own
-//!   symbols would collide with them (and the module refuses to compile there).
+//!   linker never asks for them. This is for ELF targets (Linux): on MSVC xatlas's own symbols
+//!   would collide with the shims (the module refuses to compile there), and on Mach-O the
+//!   exported names would get a leading `_` that the bindings' `\u{1}`-prefixed imports lack
+//!   (a `\u{1}` in `export_name` does not help: rustc then drops the symbol from executables).
 //! - **`AddMesh`'s error code is dropped** by `Xatlas::add_mesh`. The `AddMesh` shim keeps the last
 //!   result in a thread-local; [`pack`] checks it after each mesh. (Inputs are checked before they
 //!   reach xatlas anyway: non-finite positions, indices out of range, an index count that is not a
@@ -37,9 +39,12 @@
 //!   [`pack`] wants one page: it re-packs (xatlas `PackCharts` on the same atlas, charts are not
 //!   recomputed) with a smaller `texels_per_unit` until everything fits, and then checks that every
 //!   UV lies in `[0, width] x [0, height]` and every charted vertex is on page 0.
-//! - **One large connected chart is very slow** (a 20k-triangle grid: over a minute) unless
-//!   `ChartOptions::maxChartArea` is set. [`pack`] sets it so that a chart of average triangles has
-//!   at most [`TRIANGLES_PER_CHART`] triangles.
+//! - **One large connected chart is very slow**: xatlas's chart growing and its parameterization
+//!   are both superlinear in the triangles of a chart (a flat 20k-triangle grid: 47 s; a bumpy one:
+//!   157 s) unless `ChartOptions::maxChartArea` is set. [`pack`] sets it so that a chart of
+//!   average-sized triangles has at most [`TRIANGLES_PER_CHART`] triangles (the flat grid then
+//!   charts and packs in about 2 s). The price: a mesh whose triangles are much larger than the
+//!   scene's average can be split into more charts than it needs (at worst one per triangle).
 //! - **xatlas prints warnings with `printf` to stdout** (e.g. "Chart 3: doesn't have disk
 //!   topology"). The module turns xatlas's printing off once (xatlas `SetPrint(nullptr, false)`),
 //!   so stdout stays the program's own.
@@ -64,10 +69,12 @@ compile_error!(
      collide"
 );
 
-/// A chart made of average-sized triangles has at most about this many triangles: `pack` sets
-/// xatlas's `maxChartArea` to `total area / total triangles * TRIANGLES_PER_CHART`. Without a limit,
-/// xatlas takes over a minute on one 20k-triangle connected chart.
-pub const TRIANGLES_PER_CHART: f64 = 2000.0;
+/// A chart made of average-sized triangles has at most about this many triangles: [`pack`] sets
+/// xatlas's `maxChartArea` to `total area / total triangles * TRIANGLES_PER_CHART`.
+///
+/// Measured on one connected 20k-triangle grid (charting + parameterization, 2 cores): no limit
+/// 47 s flat / 157 s bumpy; 2000: 3.0 s / 9.5 s; 1000: 1.0 s / 4.5 s; 500: 0.6 s / 2.5 s.
+pub const TRIANGLES_PER_CHART: f64 = 1000.0;
 
 /// Largest atlas side, in texels, that [`pack`] accepts or produces.
 pub const MAX_RESOLUTION: u32 = 16384;
@@ -77,6 +84,10 @@ pub const DEFAULT_RESOLUTION: u32 = 1024;
 
 /// How many times [`pack`] re-packs with a smaller texel density before giving up.
 const MAX_PACK_ATTEMPTS: u32 = 40;
+
+/// With a fixed page, how many extra packings [`pack`] spends bisecting towards the densest
+/// packing that fits, once a density had to be lowered.
+const REFINEMENTS: u32 = 4;
 
 /// xatlas's `PackOptions::attempts` (its default): random placements tried per chart.
 const PACK_ATTEMPTS_PER_CHART: i32 = 4096;
@@ -89,7 +100,10 @@ pub enum AtlasError {
     InvalidInput { mesh: usize, reason: String },
     /// An [`AtlasOptions`] value is out of range.
     #[error("invalid atlas option {option}: {reason}")]
-    InvalidOptions { option: &'static str, reason: String },
+    InvalidOptions {
+        option: &'static str,
+        reason: String,
+    },
     /// xatlas's `AddMesh` rejected a mesh (its error code, which xatlas-rs drops).
     #[error("mesh {mesh}: xatlas rejected it: {reason}")]
     AddMesh { mesh: usize, reason: String },
@@ -132,7 +146,11 @@ pub enum AtlasError {
     },
     /// An output vertex is on an atlas page other than the first (checked after packing).
     #[error("mesh {mesh}: output vertex {vertex} is on atlas page {page}, not on the single page")]
-    NotOnePage { mesh: usize, vertex: usize, page: u32 },
+    NotOnePage {
+        mesh: usize,
+        vertex: usize,
+        page: u32,
+    },
     /// xatlas's output does not match its input as documented (a bug in xatlas or this module).
     #[error("mesh {mesh}: unexpected xatlas output: {reason}")]
     Internal { mesh: usize, reason: String },
@@ -317,42 +335,76 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
         return Err(AtlasError::Empty);
     }
 
-    let mut attempt = 1;
-    loop {
-        let meshes = xatlas.meshes();
-        if meshes.len() != added.len() {
-            return Err(internal(
-                0,
-                format!("{} output meshes for {} inputs", meshes.len(), added.len()),
-            ));
-        }
-        let shrink = match sizing {
-            Sizing::Grow { texels_per_unit } => {
-                if largest_chart(&meshes) > max_chart_size as f32 - 0.5 {
-                    return Err(AtlasError::TooLarge {
-                        texels_per_unit,
-                        texels: u64::from(max_chart_size) + 1,
-                        max: MAX_RESOLUTION,
-                    });
-                }
-                None
+    let resolution = match sizing {
+        Sizing::Grow { texels_per_unit } => {
+            let meshes = output_meshes(&mut xatlas, added.len())?;
+            // A chart that reached `max_chart_size` may have been scaled down by xatlas.
+            let side = info.width.max(info.height);
+            if side > MAX_RESOLUTION || largest_chart(&meshes) > max_chart_size as f32 - 0.5 {
+                return Err(AtlasError::TooLarge {
+                    texels_per_unit,
+                    texels: u64::from(side.max(max_chart_size + 1)),
+                    max: MAX_RESOLUTION,
+                });
             }
-            Sizing::Fixed { resolution, .. } => fixed_page_shrink(&meshes, &info, max_chart_size)
-                .map(|factor| (resolution, factor)),
-        };
-        let Some((resolution, factor)) = shrink else {
             return collect_output(inputs, &added, &meshes, &info);
-        };
-        if attempt >= MAX_PACK_ATTEMPTS {
-            return Err(AtlasError::DoesNotFit {
-                resolution,
-                texels_per_unit: info.texels_per_unit,
-                attempts: attempt,
-            });
         }
-        drop(meshes);
-        attempt += 1;
-        pack_options.texels_per_unit = info.texels_per_unit * factor;
+        Sizing::Fixed { resolution, .. } => resolution,
+    };
+
+    // Fixed page: lower the density until everything fits on one page, then, if it had to be
+    // lowered, bisect between the densest packing that fit and the sparsest that did not.
+    let mut attempts = 1;
+    let mut fitting: Option<f32> = None;
+    let mut failing: Option<f32> = None;
+    let mut refinements = 0;
+    loop {
+        let tried = info.texels_per_unit;
+        let shrink = {
+            let meshes = output_meshes(&mut xatlas, added.len())?;
+            fixed_page_shrink(&meshes, &info, max_chart_size)
+        };
+        let next = match shrink {
+            None => {
+                fitting = Some(fitting.map_or(tried, |f| f.max(tried)));
+                match failing {
+                    Some(hi) if refinements < REFINEMENTS && hi > tried * 1.05 => {
+                        refinements += 1;
+                        Some(0.5 * (tried + hi))
+                    }
+                    _ => None,
+                }
+            }
+            Some(factor) => {
+                failing = Some(failing.map_or(tried, |f| f.min(tried)));
+                match fitting {
+                    None => Some(tried * factor),
+                    Some(lo) if refinements < REFINEMENTS && tried > lo * 1.05 => {
+                        refinements += 1;
+                        Some(0.5 * (lo + tried))
+                    }
+                    Some(_) => None,
+                }
+            }
+        };
+        let next = match (next, fitting) {
+            (Some(next), _) if attempts < MAX_PACK_ATTEMPTS => next,
+            // Done: re-pack at the best density that fit, unless that was the last packing.
+            (_, Some(best)) if best == tried => {
+                let meshes = output_meshes(&mut xatlas, added.len())?;
+                return collect_output(inputs, &added, &meshes, &info);
+            }
+            (_, Some(best)) => best,
+            (_, None) => {
+                return Err(AtlasError::DoesNotFit {
+                    resolution,
+                    texels_per_unit: tried,
+                    attempts,
+                });
+            }
+        };
+        attempts += 1;
+        pack_options.texels_per_unit = next;
         // SAFETY: `handle` is the atlas owned by `xatlas`, alive until it drops; charts were
         // computed and parameterized by Generate, and PackCharts may be called again (it restores
         // the original chart UVs first). It frees the output meshes, whose views were dropped.
@@ -361,6 +413,22 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             info = PackInfo::read(handle);
         }
     }
+}
+
+/// xatlas-rs's views of the output meshes, checked to be one per added mesh. The views borrow
+/// memory that the next `PackCharts` or the drop of `xatlas` frees.
+fn output_meshes<'a>(
+    xatlas: &mut xatlas_rs::Xatlas,
+    expected: usize,
+) -> Result<Vec<xatlas_rs::Mesh<'a>>, AtlasError> {
+    let meshes = xatlas.meshes();
+    if meshes.len() != expected {
+        return Err(internal(
+            0,
+            format!("{} output meshes for {expected} inputs", meshes.len()),
+        ));
+    }
+    Ok(meshes)
 }
 
 /// How the page is sized, from [`AtlasOptions`].
@@ -455,7 +523,9 @@ fn check_inputs(inputs: &[AtlasInput<'_>]) -> Result<InputStats, AtlasError> {
             .enumerate()
             .find(|(_, p)| !p.iter().all(|c| c.is_finite()))
         {
-            return Err(invalid(format!("vertex {v} has a non-finite position {p:?}")));
+            return Err(invalid(format!(
+                "vertex {v} has a non-finite position {p:?}"
+            )));
         }
         let vertex_count = input.positions.len();
         if let Some((i, &index)) = input
@@ -499,7 +569,9 @@ fn fixed_page_shrink(
     let (w, h) = (info.width as f32, info.height as f32);
     let misplaced = meshes.iter().flat_map(|m| m.vertices).any(|v| {
         v.atlas_index != UNCHARTED
-            && (v.atlas_index != 0 || !(0.0..=w).contains(&v.uv[0]) || !(0.0..=h).contains(&v.uv[1]))
+            && (v.atlas_index != 0
+                || !(0.0..=w).contains(&v.uv[0])
+                || !(0.0..=h).contains(&v.uv[1]))
     });
     // A chart that reached `max_chart_size` may have been scaled down by xatlas on its own.
     if misplaced || largest_chart(meshes) > max_chart_size as f32 - 0.5 {
@@ -582,15 +654,16 @@ fn collect_output(
             .zip(input.indices.chunks_exact(3))
             .enumerate()
         {
-            let same = o.iter().zip(i).all(|(&o, &i)| {
-                mesh.vertices
-                    .get(o as usize)
-                    .is_some_and(|v| v.xref == i)
-            });
+            let same = o
+                .iter()
+                .zip(i)
+                .all(|(&o, &i)| mesh.vertices.get(o as usize).is_some_and(|v| v.xref == i));
             if !same {
                 return Err(internal(
                     m,
-                    format!("output triangle {k} {o:?} does not come from input triangle {k} {i:?}"),
+                    format!(
+                        "output triangle {k} {o:?} does not come from input triangle {k} {i:?}"
+                    ),
                 ));
             }
         }
@@ -798,9 +871,9 @@ mod ffi {
     }
 }
 
-// The shims: xatlas-rs's bindings import these MSVC names; forward them to the Itanium symbols.
-// `\u{1}` tells LLVM to use the name as is (no platform prefix such as Mach-O's `_`), as the
-// bindings' `link_name`s do.
+// The shims: xatlas-rs's bindings import these MSVC names (as `\u{1}?Create@...`: the name as is,
+// which on ELF is the same symbol as `?Create@...`); each forwards to the Itanium symbol with the
+// same signature, and keeps what xatlas-rs would drop in this thread's stash.
 
 #[unsafe(export_name = "?Create@xatlas@@YAPEAUAtlas@1@XZ")]
 unsafe extern "C" fn xatlas_create_shim() -> *mut ffi::Atlas {
@@ -822,7 +895,10 @@ unsafe extern "C" fn xatlas_destroy_shim(atlas: *mut ffi::Atlas) {
 }
 
 #[unsafe(export_name = "?AddMesh@xatlas@@YA?AW4Enum@AddMeshError@1@PEAUAtlas@1@AEBUMeshDecl@1@@Z")]
-unsafe extern "C" fn xatlas_add_mesh_shim(atlas: *mut ffi::Atlas, mesh_decl: *const c_void) -> c_int {
+unsafe extern "C" fn xatlas_add_mesh_shim(
+    atlas: *mut ffi::Atlas,
+    mesh_decl: *const c_void,
+) -> c_int {
     // SAFETY: forwards the call xatlas-rs made, with the same signature.
     let result = unsafe { ffi::add_mesh(atlas, mesh_decl) };
     let _ = LAST_ADD_MESH.try_with(|r| r.set(Some(result)));
@@ -858,23 +934,530 @@ unsafe extern "C" fn xatlas_generate_shim(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::time::Instant;
+
+    /// An owned test mesh.
+    #[derive(Debug, Clone, Default)]
+    struct TestMesh {
+        positions: Vec<[f32; 3]>,
+        indices: Vec<u32>,
+    }
+
+    impl TestMesh {
+        fn input(&self) -> AtlasInput<'_> {
+            AtlasInput {
+                positions: &self.positions,
+                indices: &self.indices,
+            }
+        }
+    }
+
+    fn inputs(meshes: &[TestMesh]) -> Vec<AtlasInput<'_>> {
+        meshes.iter().map(TestMesh::input).collect()
+    }
+
+    /// A `w` x `h` quad in the plane z = `z`, lower corner at (`x`, `y`): two triangles.
+    fn quad(x: f32, y: f32, z: f32, w: f32, h: f32) -> TestMesh {
+        TestMesh {
+            positions: vec![[x, y, z], [x + w, y, z], [x + w, y + h, z], [x, y + h, z]],
+            indices: vec![0, 1, 2, 0, 2, 3],
+        }
+    }
+
+    /// A cube of side `size` at `origin`, 8 shared corners, 12 outward triangles.
+    fn cube(origin: [f32; 3], size: f32) -> TestMesh {
+        let positions = (0..8)
+            .map(|i| [0, 1, 2].map(|axis| origin[axis] + size * ((i >> axis) & 1) as f32))
+            .collect();
+        // Corner i has x = bit 0, y = bit 1, z = bit 2. Faces as quads, counter-clockwise seen
+        // from outside.
+        let quads = [
+            [0, 2, 3, 1], // z = 0
+            [4, 5, 7, 6], // z = 1
+            [0, 1, 5, 4], // y = 0
+            [2, 6, 7, 3], // y = 1
+            [0, 4, 6, 2], // x = 0
+            [1, 3, 7, 5], // x = 1
+        ];
+        let indices = quads
+            .iter()
+            .flat_map(|q| [q[0], q[1], q[2], q[0], q[2], q[3]])
+            .collect();
+        TestMesh { positions, indices }
+    }
+
+    /// A connected `n` x `n` grid of quads (2n² triangles) over `size` x `size`, with a height
+    /// bump of amplitude `bump`.
+    fn grid(n: u32, size: f32, bump: f32) -> TestMesh {
+        let mut positions = Vec::new();
+        for j in 0..=n {
+            for i in 0..=n {
+                let x = i as f32 / n as f32 * size;
+                let y = j as f32 / n as f32 * size;
+                positions.push([x, y, bump * (x * 3.0).sin() * (y * 2.0).cos()]);
+            }
+        }
+        let w = n + 1;
+        let mut indices = Vec::new();
+        for j in 0..n {
+            for i in 0..n {
+                let a = j * w + i;
+                indices.extend_from_slice(&[a, a + 1, a + w + 1, a, a + w + 1, a + w]);
+            }
+        }
+        TestMesh { positions, indices }
+    }
+
+    fn options(
+        texels_per_unit: Option<f32>,
+        resolution: Option<u32>,
+        padding: u32,
+    ) -> AtlasOptions {
+        AtlasOptions {
+            texels_per_unit,
+            resolution,
+            padding,
+        }
+    }
+
+    /// Checks the mapping back to the inputs and the bounds: output triangle k comes from input
+    /// triangle k, corner by corner; every UV is inside the page.
+    fn check_mapping(inputs: &[AtlasInput<'_>], atlas: &Atlas) {
+        assert_eq!(atlas.meshes.len(), inputs.len());
+        for (m, (input, mesh)) in inputs.iter().zip(&atlas.meshes).enumerate() {
+            assert_eq!(mesh.xref.len(), mesh.uv.len(), "mesh {m}");
+            assert_eq!(mesh.indices.len(), input.indices.len(), "mesh {m}");
+            for (k, (o, i)) in mesh.indices.iter().zip(input.indices).enumerate() {
+                assert_eq!(mesh.xref[*o as usize], *i, "mesh {m} index {k}");
+            }
+            for uv in &mesh.uv {
+                assert!(
+                    (0.0..=atlas.width as f32).contains(&uv[0])
+                        && (0.0..=atlas.height as f32).contains(&uv[1]),
+                    "mesh {m}: UV {uv:?} outside {}x{}",
+                    atlas.width,
+                    atlas.height
+                );
+            }
+        }
+    }
+
+    type Uv = [f32; 2];
+
+    fn cross(o: Uv, a: Uv, b: Uv) -> f32 {
+        (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0])
+    }
+
+    fn tri_area(t: &[Uv; 3]) -> f32 {
+        0.5 * cross(t[0], t[1], t[2])
+    }
+
+    fn point_segment_distance(p: Uv, a: Uv, b: Uv) -> f32 {
+        let ab = [b[0] - a[0], b[1] - a[1]];
+        let ap = [p[0] - a[0], p[1] - a[1]];
+        let len2 = ab[0] * ab[0] + ab[1] * ab[1];
+        let t = if len2 > 0.0 {
+            ((ap[0] * ab[0] + ap[1] * ab[1]) / len2).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
+        let d = [ap[0] - t * ab[0], ap[1] - t * ab[1]];
+        (d[0] * d[0] + d[1] * d[1]).sqrt()
+    }
+
+    fn segment_distance(p: [Uv; 2], q: [Uv; 2]) -> f32 {
+        let d1 = cross(q[0], q[1], p[0]);
+        let d2 = cross(q[0], q[1], p[1]);
+        let d3 = cross(p[0], p[1], q[0]);
+        let d4 = cross(p[0], p[1], q[1]);
+        if d1 * d2 < 0.0 && d3 * d4 < 0.0 {
+            return 0.0;
+        }
+        point_segment_distance(p[0], q[0], q[1])
+            .min(point_segment_distance(p[1], q[0], q[1]))
+            .min(point_segment_distance(q[0], p[0], p[1]))
+            .min(point_segment_distance(q[1], p[0], p[1]))
+    }
+
+    fn inside(p: Uv, t: &[Uv; 3]) -> bool {
+        let s = [0, 1, 2].map(|k| cross(t[k], t[(k + 1) % 3], p));
+        s.iter().all(|&c| c >= 0.0) || s.iter().all(|&c| c <= 0.0)
+    }
+
+    /// Distance between two UV triangles: 0 if they overlap.
+    fn triangle_distance(a: &[Uv; 3], b: &[Uv; 3]) -> f32 {
+        if a.iter().any(|&p| inside(p, b)) || b.iter().any(|&p| inside(p, a)) {
+            return 0.0;
+        }
+        let mut d = f32::INFINITY;
+        for i in 0..3 {
+            for j in 0..3 {
+                d = d.min(segment_distance(
+                    [a[i], a[(i + 1) % 3]],
+                    [b[j], b[(j + 1) % 3]],
+                ));
+            }
+        }
+        d
+    }
+
+    /// The UV triangles of the atlas that cover area, each with its chart (charts are the
+    /// connected components of output vertices; output vertices are never shared across charts).
+    fn charted_triangles(atlas: &Atlas) -> Vec<(usize, [Uv; 3])> {
+        let mut out = Vec::new();
+        let mut chart_base = 0;
+        for mesh in &atlas.meshes {
+            let n = mesh.uv.len();
+            let mut parent: Vec<usize> = (0..n).collect();
+            fn find(parent: &mut [usize], mut i: usize) -> usize {
+                while parent[i] != i {
+                    parent[i] = parent[parent[i]];
+                    i = parent[i];
+                }
+                i
+            }
+            for t in mesh.indices.chunks_exact(3) {
+                let r0 = find(&mut parent, t[0] as usize);
+                for &v in &t[1..] {
+                    let r = find(&mut parent, v as usize);
+                    parent[r] = r0;
+                }
+            }
+            for t in mesh.indices.chunks_exact(3) {
+                let uv = [0, 1, 2].map(|k| mesh.uv[t[k] as usize]);
+                if tri_area(&uv).abs() > 1e-6 {
+                    out.push((chart_base + find(&mut parent, t[0] as usize), uv));
+                }
+            }
+            chart_base += n;
+        }
+        out
+    }
+
+    /// Checks that no two charts overlap and that triangles within a chart keep one winding (no
+    /// flipped triangles); returns the smallest UV distance between triangles of different
+    /// charts, in texels, and the number of charts.
+    fn check_charts(atlas: &Atlas) -> (f32, usize) {
+        let tris = charted_triangles(atlas);
+        let mut winding = std::collections::HashMap::new();
+        for (chart, t) in &tris {
+            let sign = tri_area(t) > 0.0;
+            assert_eq!(
+                *winding.entry(*chart).or_insert(sign),
+                sign,
+                "flipped triangle in chart"
+            );
+        }
+        let mut min = f32::INFINITY;
+        for (i, (ca, a)) in tris.iter().enumerate() {
+            for (cb, b) in &tris[i + 1..] {
+                if ca != cb {
+                    min = min.min(triangle_distance(a, b));
+                }
+            }
+        }
+        assert!(min > 0.0, "charts overlap");
+        (min, winding.len())
+    }
+
+    /// The UV area, in texels², of one output mesh.
+    fn uv_area(mesh: &AtlasMesh) -> f32 {
+        mesh.indices
+            .chunks_exact(3)
+            .map(|t| tri_area(&[0, 1, 2].map(|k| mesh.uv[t[k] as usize])).abs())
+            .sum()
+    }
 
     #[test]
-    fn placeholder() {
-        let quad = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
-        let idx = [0, 1, 2, 0, 2, 3];
-        let atlas = pack(
-            &[AtlasInput {
-                positions: &quad,
-                indices: &idx,
-            }],
-            &AtlasOptions {
-                texels_per_unit: Some(32.0),
-                resolution: None,
-                padding: 2,
-            },
-        )
-        .unwrap();
-        println!("{atlas:?}");
+    fn quads_and_cube_are_charted_without_overlap_and_with_padding() {
+        let meshes = [
+            quad(0.0, 0.0, 0.0, 1.0, 1.0),
+            quad(5.0, 0.0, 1.0, 1.0, 1.0),
+            cube([2.0, 2.0, 2.0], 1.0),
+        ];
+        let inputs = inputs(&meshes);
+        for padding in [2, 4] {
+            let atlas = pack(&inputs, &options(Some(16.0), None, padding)).unwrap();
+            check_mapping(&inputs, &atlas);
+            let (min, charts) = check_charts(&atlas);
+            println!(
+                "padding {padding}: {}x{} texels, {charts} charts, smallest gap between charts \
+                 {min:.3} texels",
+                atlas.width, atlas.height
+            );
+            // Observed: exactly padding + 1 texels (xatlas dilates each chart by `padding`).
+            assert!(min >= padding as f32, "gap {min} for padding {padding}");
+            assert_eq!(atlas.texels_per_unit, 16.0);
+            // Every input vertex is used by some output vertex; seams only add vertices.
+            for (mesh, input) in atlas.meshes.iter().zip(&inputs) {
+                assert!(mesh.xref.len() >= input.positions.len());
+            }
+        }
+    }
+
+    #[test]
+    fn unit_quad_at_32_texels_per_unit_covers_about_32_by_32_texels() {
+        let meshes = [quad(0.0, 0.0, 0.0, 1.0, 1.0)];
+        let atlas = pack(&inputs(&meshes), &options(Some(32.0), None, 2)).unwrap();
+        let area = uv_area(&atlas.meshes[0]);
+        println!(
+            "unit quad: {area} texels², atlas {}x{}",
+            atlas.width, atlas.height
+        );
+        assert!((area - 1024.0).abs() <= 102.4, "{area}");
+        assert_eq!(atlas.texels_per_unit, 32.0);
+    }
+
+    #[test]
+    fn a_chart_longer_than_1024_texels_keeps_its_density() {
+        // xatlas's default maxChartSize (1024) would silently scale this 1280-texel wall down.
+        let meshes = [quad(0.0, 0.0, 0.0, 40.0, 1.0)];
+        let atlas = pack(&inputs(&meshes), &options(Some(32.0), None, 2)).unwrap();
+        check_mapping(&inputs(&meshes), &atlas);
+        let area = uv_area(&atlas.meshes[0]);
+        assert!(
+            atlas.width.max(atlas.height) >= 1280,
+            "{}x{}",
+            atlas.width,
+            atlas.height
+        );
+        assert!((area / (40.0 * 1024.0) - 1.0).abs() < 0.05, "{area}");
+    }
+
+    #[test]
+    fn default_options_give_one_1024_page() {
+        let meshes = [quad(0.0, 0.0, 0.0, 1.0, 1.0), cube([3.0, 0.0, 0.0], 2.0)];
+        let inputs = inputs(&meshes);
+        let atlas = pack(&inputs, &AtlasOptions::default()).unwrap();
+        assert_eq!((atlas.width, atlas.height), (1024, 1024));
+        check_mapping(&inputs, &atlas);
+        check_charts(&atlas);
+        println!("default options: {} texels per unit", atlas.texels_per_unit);
+    }
+
+    #[test]
+    fn too_many_charts_for_the_page_lower_the_density_until_one_page_holds_them() {
+        let meshes: Vec<_> = (0..10)
+            .map(|i| quad(2.0 * i as f32, 0.0, 0.0, 1.0, 1.0))
+            .collect();
+        let inputs = inputs(&meshes);
+        let atlas = pack(&inputs, &options(Some(64.0), Some(128), 2)).unwrap();
+        println!(
+            "10 unit quads on 128²: {} texels per unit",
+            atlas.texels_per_unit
+        );
+        assert_eq!((atlas.width, atlas.height), (128, 128));
+        assert!(atlas.texels_per_unit < 64.0);
+        check_mapping(&inputs, &atlas);
+        check_charts(&atlas);
+        // Density stays uniform: xatlas only rounds each chart up to whole texels.
+        let tpu = atlas.texels_per_unit;
+        for mesh in &atlas.meshes {
+            let area = uv_area(mesh);
+            assert!(
+                area >= tpu * tpu * 0.999 && area <= (tpu + 1.0) * (tpu + 1.0),
+                "{area}"
+            );
+        }
+    }
+
+    #[test]
+    fn a_chart_larger_than_the_page_lowers_the_density() {
+        let meshes = [quad(0.0, 0.0, 0.0, 4.0, 1.0)];
+        let inputs = inputs(&meshes);
+        let atlas = pack(&inputs, &options(Some(32.0), Some(64), 2)).unwrap();
+        let tpu = atlas.texels_per_unit;
+        println!("4x1 quad on 64²: {tpu} texels per unit");
+        assert_eq!((atlas.width, atlas.height), (64, 64));
+        assert!(4.0 * tpu <= 64.0);
+        check_mapping(&inputs, &atlas);
+        let area = uv_area(&atlas.meshes[0]);
+        assert!(area >= 4.0 * tpu * tpu * 0.999 && area <= (4.0 * tpu + 1.0) * (tpu + 1.0));
+    }
+
+    #[test]
+    fn bad_inputs_are_errors() {
+        let good = quad(0.0, 0.0, 0.0, 1.0, 1.0);
+        let opts = AtlasOptions::default();
+
+        let mut nan = good.clone();
+        nan.positions[2][1] = f32::NAN;
+        let err = pack(&[good.input(), nan.input()], &opts).unwrap_err();
+        assert!(
+            matches!(err, AtlasError::InvalidInput { mesh: 1, .. }),
+            "{err}"
+        );
+        println!("{err}");
+
+        let mut inf = good.clone();
+        inf.positions[0][0] = f32::INFINITY;
+        let err = pack(&[inf.input()], &opts).unwrap_err();
+        assert!(
+            matches!(err, AtlasError::InvalidInput { mesh: 0, .. }),
+            "{err}"
+        );
+
+        let mut out_of_range = good.clone();
+        out_of_range.indices[4] = 4;
+        let err = pack(&[out_of_range.input()], &opts).unwrap_err();
+        assert!(
+            matches!(err, AtlasError::InvalidInput { mesh: 0, .. }),
+            "{err}"
+        );
+        println!("{err}");
+
+        let mut not_triangles = good.clone();
+        not_triangles.indices.pop();
+        let err = pack(&[not_triangles.input()], &opts).unwrap_err();
+        assert!(
+            matches!(err, AtlasError::InvalidInput { mesh: 0, .. }),
+            "{err}"
+        );
+        println!("{err}");
+
+        assert!(matches!(pack(&[], &opts), Err(AtlasError::Empty)));
+        let empty = TestMesh::default();
+        assert!(matches!(
+            pack(&[empty.input()], &opts),
+            Err(AtlasError::Empty)
+        ));
+        let degenerate = TestMesh {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+            indices: vec![0, 1, 2, 0, 0, 1],
+        };
+        assert!(matches!(
+            pack(&[degenerate.input()], &opts),
+            Err(AtlasError::Empty)
+        ));
+
+        for bad in [
+            options(None, None, 1),
+            options(Some(f32::NAN), None, 2),
+            options(Some(0.0), None, 2),
+            options(Some(-1.0), None, 2),
+            options(None, Some(0), 2),
+            options(None, Some(MAX_RESOLUTION + 1), 2),
+            options(None, Some(4), 3),
+        ] {
+            let err = pack(&[good.input()], &bad).unwrap_err();
+            assert!(
+                matches!(err, AtlasError::InvalidOptions { .. }),
+                "{bad:?}: {err}"
+            );
+        }
+        let err = pack(&[good.input()], &options(Some(1e5), None, 2)).unwrap_err();
+        assert!(matches!(err, AtlasError::TooLarge { .. }), "{err}");
+        println!("{err}");
+    }
+
+    #[test]
+    fn empty_and_degenerate_parts_are_kept_in_place() {
+        let empty = TestMesh {
+            positions: vec![[0.0; 3]],
+            indices: vec![],
+        };
+        let mut with_degenerate = quad(0.0, 0.0, 0.0, 1.0, 1.0);
+        with_degenerate.indices.extend_from_slice(&[0, 1, 1]);
+        let only_degenerate = TestMesh {
+            positions: vec![[0.0; 3], [1.0, 0.0, 0.0], [2.0, 0.0, 0.0]],
+            indices: vec![0, 1, 2, 2, 2, 0],
+        };
+        let meshes = [
+            empty,
+            with_degenerate,
+            quad(3.0, 0.0, 0.0, 1.0, 1.0),
+            only_degenerate,
+        ];
+        let inputs = inputs(&meshes);
+        let atlas = pack(&inputs, &options(Some(16.0), None, 2)).unwrap();
+        assert_eq!(atlas.meshes[0], AtlasMesh::default());
+        check_mapping(&inputs, &atlas);
+        check_charts(&atlas);
+        let mesh = &atlas.meshes[1];
+        let degenerate = &mesh.indices[6..9];
+        assert!(
+            degenerate
+                .iter()
+                .all(|&v| mesh.uv[v as usize] == [0.0, 0.0])
+        );
+        assert!(atlas.meshes[3].uv.iter().all(|&uv| uv == [0.0, 0.0]));
+        assert_eq!(atlas.meshes[3].indices.len(), 6);
+    }
+
+    #[test]
+    fn add_mesh_errors_are_caught_by_the_shim() {
+        let positions = [[0.0f32; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]];
+        let xatlas = xatlas_rs::Xatlas::new();
+        for (indices, expected) in [
+            (vec![0u32, 1, 3], 1),
+            (vec![0, 1, 2, 0], 2),
+            (vec![0, 1, 2], 0),
+        ] {
+            LAST_ADD_MESH.with(|r| r.set(None));
+            xatlas.add_mesh(&xatlas_rs::MeshDecl {
+                vertex_count: 3,
+                vertex_position_data: positions_as_bytes(&positions),
+                vertex_position_stride: 12,
+                index_count: indices.len() as u32,
+                index_data: indices_as_bytes(&indices),
+                index_format: xatlas_rs::IndexFormat::Uint32,
+                ..Default::default()
+            });
+            assert_eq!(
+                LAST_ADD_MESH.with(|r| r.take()),
+                Some(expected),
+                "{indices:?}"
+            );
+        }
+        assert!(add_mesh_error_text(1).starts_with("IndexOutOfRange"));
+    }
+
+    /// Every bit of an atlas, for exact comparison.
+    fn bits(atlas: &Atlas) -> Vec<u32> {
+        let mut out = vec![atlas.width, atlas.height, atlas.texels_per_unit.to_bits()];
+        for mesh in &atlas.meshes {
+            out.push(mesh.xref.len() as u32);
+            out.extend(&mesh.xref);
+            out.extend(mesh.uv.iter().flat_map(|uv| uv.map(f32::to_bits)));
+            out.extend(&mesh.indices);
+        }
+        out
+    }
+
+    #[test]
+    fn output_is_deterministic_also_across_threads() {
+        let meshes = [
+            quad(0.0, 0.0, 0.0, 1.0, 1.0),
+            cube([2.0, 0.0, 0.0], 1.0),
+            grid(24, 2.0, 0.3),
+            quad(0.0, 3.0, 1.0, 2.0, 0.5),
+        ];
+        let inputs = inputs(&meshes);
+        let opts = options(None, Some(256), 2);
+        let first = bits(&pack(&inputs, &opts).unwrap());
+        let second = bits(&pack(&inputs, &opts).unwrap());
+        assert!(first == second, "two runs differ");
+        let (a, b) = std::thread::scope(|s| {
+            let a = s.spawn(|| pack(&inputs, &opts).map(|atlas| bits(&atlas)));
+            let b = s.spawn(|| pack(&inputs, &opts).map(|atlas| bits(&atlas)));
+            (a.join().unwrap(), b.join().unwrap())
+        });
+        assert!(a.unwrap() == first, "thread 1 differs");
+        assert!(b.unwrap() == first, "thread 2 differs");
+    }
+
+    #[test]
+    fn a_20k_triangle_connected_grid_packs_in_seconds() {
+        let meshes = [grid(100, 10.0, 0.0)];
+        let inputs = inputs(&meshes);
+        let start = Instant::now();
+        let atlas = pack(&inputs, &AtlasOptions::default()).unwrap();
+        println!(
+            "20k-triangle grid: {:.2} s, {} output vertices, {} texels per unit",
+            start.elapsed().as_secs_f64(),
+            atlas.meshes[0].xref.len(),
+            atlas.texels_per_unit
+        );
+        check_mapping(&inputs, &atlas);
     }
 }

@@ -163,7 +163,12 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
     let positions: Vec<Vec<[f32; 3]>> = scene
         .instances
         .iter()
-        .map(|i| i.positions_world.iter().map(|p| p.as_vec3().to_array()).collect())
+        .map(|i| {
+            i.positions_world
+                .iter()
+                .map(|p| p.as_vec3().to_array())
+                .collect()
+        })
         .collect();
     let inputs: Vec<AtlasInput> = scene
         .instances

@@ -33,7 +33,10 @@ pub enum Error {
     #[error("atlas: {0}")]
     Atlas(#[from] crate::atlas::AtlasError),
     #[error("invalid option {option}: {reason}")]
-    Option { option: &'static str, reason: String },
+    Option {
+        option: &'static str,
+        reason: String,
+    },
     #[error("{0}")]
     Image(String),
 }

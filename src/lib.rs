@@ -10,18 +10,18 @@
 //! W/m² (or the scene's own photometric equivalents, consistently). The lightmap stores irradiance
 //! `H`, linear, without albedo.
 
+pub mod atlas;
+pub mod bake;
 pub mod error;
 pub mod fixtures;
-pub mod load;
-pub mod scene;
-pub mod visibility;
-pub mod mesh;
-pub mod solve;
-pub mod atlas;
 pub mod lightmap;
-pub mod write;
+pub mod load;
+pub mod mesh;
+pub mod scene;
+pub mod solve;
 pub mod stats;
-pub mod bake;
+pub mod visibility;
+pub mod write;
 
 pub use bake::{Bake, BakeOptions, bake, bake_file};
 pub use error::{Error, Result};

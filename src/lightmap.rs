@@ -24,7 +24,10 @@ pub struct Lightmap {
 impl Lightmap {
     /// Largest channel value over all texels (the PNG normalisation factor).
     pub fn max_value(&self) -> f64 {
-        self.texels.iter().map(|t| t.max_element()).fold(0.0, f64::max)
+        self.texels
+            .iter()
+            .map(|t| t.max_element())
+            .fold(0.0, f64::max)
     }
 
     /// 8-bit linear RGB, each channel `round(255 H / scale)`; `scale` is the returned factor
@@ -193,8 +196,18 @@ pub fn rasterize(
     let bands = h.div_ceil(BAND);
     let mut by_band: Vec<Vec<u32>> = vec![Vec::new(); bands];
     for (i, t) in tris.iter().enumerate() {
-        let y0 = t.uv.iter().map(|p| p.y).fold(f64::INFINITY, f64::min).floor().max(0.0) as usize;
-        let y1 = t.uv.iter().map(|p| p.y).fold(f64::NEG_INFINITY, f64::max).floor().max(0.0) as usize;
+        let y0 =
+            t.uv.iter()
+                .map(|p| p.y)
+                .fold(f64::INFINITY, f64::min)
+                .floor()
+                .max(0.0) as usize;
+        let y1 =
+            t.uv.iter()
+                .map(|p| p.y)
+                .fold(f64::NEG_INFINITY, f64::max)
+                .floor()
+                .max(0.0) as usize;
         for b in (y0 / BAND).min(bands - 1)..=(y1 / BAND).min(bands - 1) {
             by_band[b].push(i as u32);
         }
@@ -253,10 +266,7 @@ pub fn rasterize(
                 .zip(&count)
                 .map(|(s, &c)| if c > 0 { *s / c as f64 } else { DVec3::ZERO })
                 .collect();
-            let cov = count
-                .iter()
-                .map(|&c| c as f32 / (n * n) as f32)
-                .collect();
+            let cov = count.iter().map(|&c| c as f32 / (n * n) as f32).collect();
             (values, cov)
         })
         .collect();
@@ -342,7 +352,11 @@ mod tests {
         let f = |p: DVec2| 1.0 + 2.0 * p.x + 3.0 * p.y;
         let values: Vec<DVec3> = m.vertices.iter().map(|&p| DVec3::splat(f(p))).collect();
         let loc = Locator::new(&m, &values);
-        for q in [DVec2::new(0.3, 1.7), DVec2::new(1.99, 0.01), DVec2::new(1.0, 1.0)] {
+        for q in [
+            DVec2::new(0.3, 1.7),
+            DVec2::new(1.99, 0.01),
+            DVec2::new(1.0, 1.0),
+        ] {
             assert!((loc.value(q).x - f(q)).abs() < 1e-12);
         }
         // Just outside: clamped to the nearest triangle's edge value.

@@ -31,6 +31,11 @@ pub fn read(path: &Path) -> Result<Gltf> {
         path: path.to_path_buf(),
         source,
     })?;
+    from_bytes(bytes, path)
+}
+
+/// Parses glTF bytes; `path` names the file in messages and anchors relative URIs.
+pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
     let not_gltf = |reason: String| Error::NotGltf {
         path: path.to_path_buf(),
         reason,
@@ -203,7 +208,10 @@ impl Gltf {
         if accessor.dimensions() != dims {
             return Err(self.bad(
                 item,
-                format!("expected {dims:?} elements, found {:?}", accessor.dimensions()),
+                format!(
+                    "expected {dims:?} elements, found {:?}",
+                    accessor.dimensions()
+                ),
             ));
         }
         let dt = accessor.data_type();
@@ -303,10 +311,8 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
             });
         }
     };
-    let mut stack: Vec<(gltf::Node, DMat4, usize)> = gscene
-        .nodes()
-        .map(|n| (n, DMat4::IDENTITY, 0))
-        .collect();
+    let mut stack: Vec<(gltf::Node, DMat4, usize)> =
+        gscene.nodes().map(|n| (n, DMat4::IDENTITY, 0)).collect();
     stack.reverse();
     let mut lights_seen = 0;
     while let Some((node, parent, depth)) = stack.pop() {
@@ -316,7 +322,8 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
                 "node hierarchy is deeper than 256 levels (a cycle?)",
             ));
         }
-        let local = DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|x| x as f64)));
+        let local =
+            DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(|x| x as f64)));
         let world = parent * local;
         if !world.is_finite() {
             return Err(gltf.bad(format!("node {}", node.index()), "transform is not finite"));
@@ -336,7 +343,15 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
                 ));
             } else {
                 for prim in mesh.primitives() {
-                    add_primitive(gltf, &mut scene, &node, &mesh, &prim, &world, default_material)?;
+                    add_primitive(
+                        gltf,
+                        &mut scene,
+                        &node,
+                        &mesh,
+                        &prim,
+                        &world,
+                        default_material,
+                    )?;
                 }
             }
         }
@@ -349,7 +364,11 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
             path: gltf.path.clone(),
         });
     }
-    let degenerate = scene.triangles.iter().filter(|t| t.polygon.is_none()).count();
+    let degenerate = scene
+        .triangles
+        .iter()
+        .filter(|t| t.polygon.is_none())
+        .count();
     if degenerate > 0 {
         scene.warnings.push(format!(
             "{degenerate} zero-area triangle(s) skipped as receivers and occluders"
@@ -378,7 +397,10 @@ fn add_primitive(
         prim.index()
     );
     let mode = prim.mode();
-    if !matches!(mode, Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan) {
+    if !matches!(
+        mode,
+        Mode::Triangles | Mode::TriangleStrip | Mode::TriangleFan
+    ) {
         scene
             .warnings
             .push(format!("{item}: {mode:?} primitives are skipped"));
@@ -399,7 +421,10 @@ fn add_primitive(
         if !p.is_finite() {
             return Err(gltf.bad(
                 &item,
-                format!("POSITION (accessor {}) vertex {i} is not finite: {p}", pos_acc.index()),
+                format!(
+                    "POSITION (accessor {}) vertex {i} is not finite: {p}",
+                    pos_acc.index()
+                ),
             ));
         }
         let w = world.transform_point3(p);

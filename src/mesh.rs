@@ -97,7 +97,8 @@ pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usiz
             let i = v.fix().index();
             if remap[i] == u32::MAX {
                 remap[i] = mesh.vertices.len() as u32;
-                mesh.vertices.push(DVec2::new(v.position().x, v.position().y));
+                mesh.vertices
+                    .push(DVec2::new(v.position().x, v.position().y));
             }
             remap[i]
         });
@@ -181,7 +182,10 @@ mod tests {
         let m = &meshes[0];
         assert!((m.area() - 2.0).abs() < 1e-9, "area {}", m.area());
         let n = m.triangles.len();
-        assert!((300..=700).contains(&n), "{n} triangles for a budget of 500");
+        assert!(
+            (300..=700).contains(&n),
+            "{n} triangles for a budget of 500"
+        );
         assert!(m.triangles.iter().all(|t| tri_area(m, t) > 0.0));
     }
 
@@ -190,7 +194,14 @@ mod tests {
         // An L shape: the notch [1,2]x[1,2] must stay empty.
         let p = |x: f64, y: f64| DVec3::new(x, 0.0, -y);
         let scene = floor_scene(
-            vec![p(0., 0.), p(2., 0.), p(2., 1.), p(1., 1.), p(1., 2.), p(0., 2.)],
+            vec![
+                p(0., 0.),
+                p(2., 0.),
+                p(2., 1.),
+                p(1., 1.),
+                p(1., 2.),
+                p(0., 2.),
+            ],
             vec![0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 5],
         );
         let meshes = uniform(&scene, 300);

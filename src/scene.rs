@@ -45,7 +45,9 @@ pub struct Triangle {
 impl Triangle {
     /// Area in square scene units.
     pub fn area(&self) -> f64 {
-        0.5 * (self.p[1] - self.p[0]).cross(self.p[2] - self.p[0]).length()
+        0.5 * (self.p[1] - self.p[0])
+            .cross(self.p[2] - self.p[0])
+            .length()
     }
 }
 
@@ -479,7 +481,11 @@ mod tests {
 
     #[test]
     fn frame_round_trips() {
-        let f = Frame::new(DVec3::new(1.0, 2.0, 3.0), DVec3::new(0.3, 0.9, -0.1), DVec3::X);
+        let f = Frame::new(
+            DVec3::new(1.0, 2.0, 3.0),
+            DVec3::new(0.3, 0.9, -0.1),
+            DVec3::X,
+        );
         let p = f.world_from_plane(DVec2::new(0.25, -4.0));
         assert!((f.plane_from_world(p) - DVec2::new(0.25, -4.0)).length() < 1e-12);
         assert!(f.n.dot(f.u).abs() < 1e-12 && f.n.dot(f.v).abs() < 1e-12);

@@ -122,6 +122,52 @@ pub fn point_polygon_form_factor(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
     (sum / (2.0 * PI)).abs()
 }
 
+/// A receiving point: where form factors are evaluated, the unit normal, and where its rays
+/// start (off the surface, and off any neighbouring surface that meets it at an edge).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SurfacePoint {
+    pub p: DVec3,
+    pub n: DVec3,
+    pub ray_origin: DVec3,
+    /// The polygon the point lies on ([`NO_POLYGON`] if none): it never blocks its own rays.
+    pub polygon: usize,
+}
+
+/// [`SurfacePoint::polygon`] of a point on no polygon.
+pub const NO_POLYGON: usize = usize::MAX;
+
+impl SurfacePoint {
+    /// A point inside a surface: rays start `2 epsilon` along the normal.
+    pub fn new(p: DVec3, n: DVec3, polygon: usize, vis: &Visibility) -> SurfacePoint {
+        SurfacePoint {
+            p,
+            n,
+            ray_origin: p + n * (2.0 * vis.epsilon()),
+            polygon,
+        }
+    }
+
+    /// A point on or near a polygon's edge: `inward` is the unit in-plane direction into the
+    /// polygon. Form factors are evaluated `1e-6` of the scene extent inside, rays start
+    /// `4 epsilon` inside and `2 epsilon` off the surface.
+    pub fn near_edge(
+        p: DVec3,
+        n: DVec3,
+        inward: DVec3,
+        polygon: usize,
+        vis: &Visibility,
+        extent: f64,
+    ) -> SurfacePoint {
+        let e = vis.epsilon();
+        SurfacePoint {
+            p: p + inward * (1e-6 * extent),
+            n,
+            ray_origin: p + inward * (4.0 * e) + n * (2.0 * e),
+            polygon,
+        }
+    }
+}
+
 // ---------------------------------------------------------------------------------------------
 // Emitters and direct light
 
@@ -162,8 +208,11 @@ impl AreaEmitter {
             .emitters()
             .map(|id| {
                 let poly = &scene.polygons[id];
-                let triangles: Vec<[DVec3; 3]> =
-                    poly.triangles.iter().map(|&t| scene.triangles[t].p).collect();
+                let triangles: Vec<[DVec3; 3]> = poly
+                    .triangles
+                    .iter()
+                    .map(|&t| scene.triangles[t].p)
+                    .collect();
                 let areas: Vec<f64> = poly
                     .triangles
                     .iter()
@@ -235,10 +284,11 @@ impl<'a> Direct<'a> {
         }
     }
 
-    /// Irradiance H (W/m²) at `p` (already offset off its surface) with unit normal `n`.
-    pub fn irradiance(&self, p: DVec3, n: DVec3) -> DVec3 {
+    /// Irradiance H (W/m²) at a receiving point.
+    pub fn irradiance(&self, at: &SurfacePoint) -> DVec3 {
         let mut h = DVec3::ZERO;
         let mut rays = 0u64;
+        let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
         for e in &self.emitters {
             let f = e.form_factor(p, n);
             if f <= 0.0 {
@@ -257,7 +307,10 @@ impl<'a> Direct<'a> {
                 let w = a * cos_r * cos_e / (r2 * r2);
                 all += w;
                 rays += 1;
-                if !self.vis.occluded(p, s) {
+                if !self
+                    .vis
+                    .occluded_skipping(p_ray, s, [at.polygon, e.polygon])
+                {
                     seen += w;
                 }
             }
@@ -266,7 +319,7 @@ impl<'a> Direct<'a> {
             h += e.radiance * (PI * f * visible);
         }
         for light in &self.scene.lights {
-            let (value, r) = punctual_irradiance(light, self.vis, p, n);
+            let (value, r) = punctual_irradiance(light, self.vis, at);
             h += value;
             rays += r;
         }
@@ -275,15 +328,14 @@ impl<'a> Direct<'a> {
     }
 }
 
-/// Irradiance from one punctual light at `p` with normal `n`, and the rays it cast.
-/// Point and spot: `I cos(theta) / d^2` with glTF's range window and spot falloff;
-/// directional: `E cos(theta)`.
+/// Irradiance from one punctual light at a receiving point, and the rays it cast. Point and spot: `I cos(theta) / d^2` with glTF's
+/// range window and spot falloff; directional: `E cos(theta)`.
 pub fn punctual_irradiance(
     light: &PunctualLight,
     vis: &Visibility,
-    p: DVec3,
-    n: DVec3,
+    at: &SurfacePoint,
 ) -> (DVec3, u64) {
+    let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
     match light.kind {
         LightKind::Directional => {
             let to_light = -light.direction;
@@ -291,8 +343,15 @@ pub fn punctual_irradiance(
             if cos <= 0.0 {
                 return (DVec3::ZERO, 0);
             }
-            let lit = vis.unoccluded_towards(p, to_light);
-            (if lit { light.intensity * cos } else { DVec3::ZERO }, 1)
+            let lit = vis.unoccluded_towards(p_ray, to_light, at.polygon);
+            (
+                if lit {
+                    light.intensity * cos
+                } else {
+                    DVec3::ZERO
+                },
+                1,
+            )
         }
         LightKind::Point | LightKind::Spot { .. } => {
             let d = light.position - p;
@@ -325,7 +384,7 @@ pub fn punctual_irradiance(
             if atten <= 0.0 {
                 return (DVec3::ZERO, 0);
             }
-            let lit = !vis.occluded(p, light.position);
+            let lit = !vis.occluded_skipping(p_ray, light.position, [at.polygon, NO_POLYGON]);
             (
                 if lit {
                     light.intensity * (cos * atten)
@@ -344,6 +403,8 @@ pub fn punctual_irradiance(
 /// A coarse patch of the indirect solve: one triangle.
 #[derive(Clone, Debug)]
 pub struct Patch {
+    /// Index into [`Scene::polygons`].
+    pub polygon: usize,
     pub p: [DVec3; 3],
     pub normal: DVec3,
     pub centroid: DVec3,
@@ -354,11 +415,12 @@ pub struct Patch {
 }
 
 impl Patch {
-    fn new(p: [DVec3; 3], normal: DVec3, rho: DVec3) -> Patch {
+    fn new(polygon: usize, p: [DVec3; 3], normal: DVec3, rho: DVec3) -> Patch {
         let centroid = (p[0] + p[1] + p[2]) / 3.0;
         let area = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
         let radius = p.iter().map(|q| q.distance(centroid)).fold(0.0, f64::max);
         Patch {
+            polygon,
             p,
             normal,
             centroid,
@@ -378,22 +440,22 @@ pub fn patches(scene: &Scene, target: usize) -> Vec<Patch> {
         let rho = scene.materials[poly.material].rho;
         for t in &m.triangles {
             let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
-            out.push(Patch::new(p, poly.frame.n, rho));
+            out.push(Patch::new(m.polygon, p, poly.frame.n, rho));
         }
     }
     out
 }
 
-/// Form factor from a receiving point `(p, n)` to a patch, with visibility: exact unoccluded
+/// Form factor from a receiving surface point `(p, n)` to a patch, with visibility: exact unoccluded
 /// form factor of each piece times the visibility of its centroid; pieces near `p` are split in
 /// four, up to two levels. Returns the form factor and adds the rays cast to `rays`.
 pub fn point_patch_form_factor(
     vis: &Visibility,
-    p: DVec3,
-    n: DVec3,
+    at: &SurfacePoint,
     patch: &Patch,
     rays: &mut u64,
 ) -> f64 {
+    let (p, n) = (at.p, at.n);
     // Cull: the receiver behind the patch, or the patch entirely below the receiver's horizon.
     if patch.normal.dot(p - patch.centroid) <= 0.0 {
         return 0.0;
@@ -401,13 +463,27 @@ pub fn point_patch_form_factor(
     if patch.p.iter().all(|q| n.dot(*q - p) <= 0.0) {
         return 0.0;
     }
-    piece_form_factor(vis, p, n, &patch.p, patch.radius, 0, rays)
+    let skip = [at.polygon, patch.polygon];
+    piece_form_factor(
+        vis,
+        p,
+        at.ray_origin,
+        n,
+        skip,
+        &patch.p,
+        patch.radius,
+        0,
+        rays,
+    )
 }
 
+#[allow(clippy::too_many_arguments)]
 fn piece_form_factor(
     vis: &Visibility,
     p: DVec3,
+    p_ray: DVec3,
     n: DVec3,
+    skip: [usize; 2],
     t: &[DVec3; 3],
     radius: f64,
     depth: u32,
@@ -415,7 +491,11 @@ fn piece_form_factor(
 ) -> f64 {
     let c = (t[0] + t[1] + t[2]) / 3.0;
     if depth < 2 && c.distance(p) < 3.0 * radius {
-        let m = [(t[0] + t[1]) * 0.5, (t[1] + t[2]) * 0.5, (t[2] + t[0]) * 0.5];
+        let m = [
+            (t[0] + t[1]) * 0.5,
+            (t[1] + t[2]) * 0.5,
+            (t[2] + t[0]) * 0.5,
+        ];
         let kids = [
             [t[0], m[0], m[2]],
             [m[0], t[1], m[1]],
@@ -424,7 +504,7 @@ fn piece_form_factor(
         ];
         return kids
             .iter()
-            .map(|k| piece_form_factor(vis, p, n, k, radius * 0.5, depth + 1, rays))
+            .map(|k| piece_form_factor(vis, p, p_ray, n, skip, k, radius * 0.5, depth + 1, rays))
             .sum();
     }
     let f = point_polygon_form_factor(p, n, t);
@@ -432,7 +512,11 @@ fn piece_form_factor(
         return 0.0;
     }
     *rays += 1;
-    if vis.occluded(p, c) { 0.0 } else { f }
+    if vis.occluded_skipping(p_ray, c, skip) {
+        0.0
+    } else {
+        f
+    }
 }
 
 /// Progressive refinement over patches: returns the irradiance of each patch, direct plus
@@ -447,7 +531,11 @@ pub fn progressive(
 ) -> Vec<DVec3> {
     let mut h = direct.to_vec();
     // Unshot radiosity (W/m²) of each patch: its reflected direct light.
-    let mut unshot: Vec<DVec3> = patches.iter().zip(direct).map(|(p, d)| p.rho * *d).collect();
+    let mut unshot: Vec<DVec3> = patches
+        .iter()
+        .zip(direct)
+        .map(|(p, d)| p.rho * *d)
+        .collect();
     let power = |i: usize, u: &[DVec3]| u[i].element_sum() / 3.0 * patches[i].area;
     let initial: f64 = (0..patches.len()).map(|i| power(i, &unshot)).sum();
     let mut rays = 0u64;
@@ -464,8 +552,8 @@ pub fn progressive(
                     return (DVec3::ZERO, 0);
                 }
                 let mut n = 0;
-                let p = r.centroid + r.normal * (2.0 * vis.epsilon());
-                let f = point_patch_form_factor(vis, p, r.normal, src, &mut n);
+                let at = SurfacePoint::new(r.centroid, r.normal, r.polygon, vis);
+                let f = point_patch_form_factor(vis, &at, src, &mut n);
                 (b * f, n)
             })
             .collect();
@@ -526,19 +614,24 @@ pub fn progressive(
 /// reflected direct light and `K_ij` the point-to-patch form factor at patch `i`'s centroid;
 /// returns each patch's irradiance like [`progressive`]. Quadratic memory: for small scenes and
 /// tests.
-pub fn gauss_seidel(vis: &Visibility, patches: &[Patch], direct: &[DVec3], sweeps: usize) -> Vec<DVec3> {
+pub fn gauss_seidel(
+    vis: &Visibility,
+    patches: &[Patch],
+    direct: &[DVec3],
+    sweeps: usize,
+) -> Vec<DVec3> {
     let n = patches.len();
     let mut rays = 0;
     let k: Vec<Vec<f64>> = (0..n)
         .map(|i| {
             let r = &patches[i];
-            let p = r.centroid + r.normal * (2.0 * vis.epsilon());
+            let at = SurfacePoint::new(r.centroid, r.normal, r.polygon, vis);
             (0..n)
                 .map(|j| {
                     if i == j {
                         0.0
                     } else {
-                        point_patch_form_factor(vis, p, r.normal, &patches[j], &mut rays)
+                        point_patch_form_factor(vis, &at, &patches[j], &mut rays)
                     }
                 })
                 .collect()
@@ -557,11 +650,12 @@ pub fn gauss_seidel(vis: &Visibility, patches: &[Patch], direct: &[DVec3], sweep
         .collect()
 }
 
-/// The point where a mesh vertex is evaluated: the vertex pulled a little into one of its
-/// triangles and off the surface, so rays neither start inside neighbouring geometry nor on the
-/// polygon's own edge.
-fn evaluation_points(scene: &Scene, vis: &Visibility, mesh: &ReceiverMesh) -> Vec<DVec3> {
-    let poly = &scene.polygons[mesh.polygon];
+/// Where each mesh vertex is evaluated: the vertex as a [`SurfacePoint::near_edge`], pulled
+/// toward the centroid of one of its triangles. A vertex on the polygon's edge then sees a
+/// surface that meets the edge (a wall on the floor) as its limit from inside the polygon,
+/// instead of lying in that surface's plane, where the contour integral and rays degenerate.
+fn evaluation_points(scene: &Scene, vis: &Visibility, mesh: &ReceiverMesh) -> Vec<SurfacePoint> {
+    let frame = &scene.polygons[mesh.polygon].frame;
     let mut toward = vec![None::<DVec2>; mesh.vertices.len()];
     for t in &mesh.triangles {
         let c = t.iter().map(|&i| mesh.vertices[i as usize]).sum::<DVec2>() / 3.0;
@@ -573,11 +667,18 @@ fn evaluation_points(scene: &Scene, vis: &Visibility, mesh: &ReceiverMesh) -> Ve
         .iter()
         .zip(&toward)
         .map(|(&v, c)| {
-            let q = match c {
-                Some(c) => v + (*c - v) * 1e-3,
-                None => v,
-            };
-            poly.frame.world_from_plane(q) + poly.frame.n * (2.0 * vis.epsilon())
+            let d = c
+                .map(|c| (c - v).normalize_or_zero())
+                .unwrap_or(DVec2::ZERO);
+            let inward = frame.u * d.x + frame.v * d.y;
+            SurfacePoint::near_edge(
+                frame.world_from_plane(v),
+                frame.n,
+                inward,
+                mesh.polygon,
+                vis,
+                scene.extent(),
+            )
         })
         .collect()
 }
@@ -599,9 +700,8 @@ pub fn radiosity(
     let direct_h: Vec<Vec<DVec3>> = meshes
         .par_iter()
         .map(|m| {
-            let n = scene.polygons[m.polygon].frame.n;
             let pts = evaluation_points(scene, vis, m);
-            let out = pts.iter().map(|&p| direct.irradiance(p, n)).collect();
+            let out = pts.iter().map(|p| direct.irradiance(p)).collect();
             let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
             progress("direct light", d + m.vertices.len() as u64, total_vertices);
             out
@@ -615,7 +715,7 @@ pub fn radiosity(
         let patches = patches(scene, options.patches);
         let patch_direct: Vec<DVec3> = patches
             .par_iter()
-            .map(|p| direct.irradiance(p.centroid + p.normal * (2.0 * vis.epsilon()), p.normal))
+            .map(|p| direct.irradiance(&SurfacePoint::new(p.centroid, p.normal, p.polygon, vis)))
             .collect();
         let patch_h = progressive(
             vis,
@@ -636,33 +736,40 @@ pub fn radiosity(
             .map(|(p, h)| p.area * ((DVec3::ONE - p.rho) * *h).element_sum() / 3.0)
             .sum();
         // Reflected radiosity of each patch, the source of the final gather.
-        let reflected: Vec<DVec3> = patches.iter().zip(&patch_h).map(|(p, h)| p.rho * *h).collect();
+        let reflected: Vec<DVec3> = patches
+            .iter()
+            .zip(&patch_h)
+            .map(|(p, h)| p.rho * *h)
+            .collect();
         let gather_rays = AtomicU64::new(0);
         let done = AtomicU64::new(0);
         let out = meshes
             .par_iter()
             .zip(&direct_h)
             .map(|(m, dh)| {
-                let n = scene.polygons[m.polygon].frame.n;
                 let pts = evaluation_points(scene, vis, m);
                 let mut rays = 0u64;
                 let values = pts
                     .iter()
                     .zip(dh)
-                    .map(|(&p, &d)| {
+                    .map(|(p, &d)| {
                         let mut h = d;
                         for (patch, b) in patches.iter().zip(&reflected) {
                             if b.max_element() <= 0.0 {
                                 continue;
                             }
-                            h += *b * point_patch_form_factor(vis, p, n, patch, &mut rays);
+                            h += *b * point_patch_form_factor(vis, p, patch, &mut rays);
                         }
                         h
                     })
                     .collect();
                 gather_rays.fetch_add(rays, Ordering::Relaxed);
                 let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
-                progress("indirect light", d + m.vertices.len() as u64, total_vertices);
+                progress(
+                    "indirect light",
+                    d + m.vertices.len() as u64,
+                    total_vertices,
+                );
                 values
             })
             .collect();

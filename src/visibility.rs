@@ -16,6 +16,8 @@ pub struct Visibility {
     tris: Vec<Triangle>,
     /// Scene triangle index of each BVH primitive.
     ids: Vec<usize>,
+    /// Polygon index of each BVH primitive.
+    polygons: Vec<u32>,
     center: DVec3,
     eps: f64,
 }
@@ -68,10 +70,15 @@ impl Visibility {
                 .map(|&i| (tris[i as usize], ids[i as usize]))
                 .unzip()
         };
+        let polygons = ids
+            .iter()
+            .map(|&i| scene.triangles[i].polygon.map_or(u32::MAX, |p| p as u32))
+            .collect();
         Visibility {
             bvh,
             tris,
             ids,
+            polygons,
             center,
             eps: 1e-5 * scene.extent(),
         }
@@ -123,17 +130,48 @@ impl Visibility {
         }
         let ray = self.ray(a, d / len, self.eps, len - self.eps);
         let tris = &self.tris;
-        !self.bvh.ray_traverse_miss(ray, |r, id| tris[id].intersect(r))
+        !self
+            .bvh
+            .ray_traverse_miss(ray, |r, id| tris[id].intersect(r))
+    }
+
+    /// Like [`Visibility::occluded`], but triangles of the polygons in `skip` never block. A
+    /// planar polygon cannot block a ray that starts or ends on its front side, and skipping it
+    /// removes the grazing-angle self-hits that f32 intersection produces near edges.
+    pub fn occluded_skipping(&self, a: DVec3, b: DVec3, skip: [usize; 2]) -> bool {
+        let d = b - a;
+        let len = d.length();
+        if self.tris.is_empty() || len <= 2.0 * self.eps {
+            return false;
+        }
+        let ray = self.ray(a, d / len, self.eps, len - self.eps);
+        let skip = skip.map(|s| s as u32);
+        let (tris, polys) = (&self.tris, &self.polygons);
+        !self.bvh.ray_traverse_miss(ray, |r, id| {
+            if polys[id] == skip[0] || polys[id] == skip[1] {
+                f32::INFINITY
+            } else {
+                tris[id].intersect(r)
+            }
+        })
     }
 
     /// True when nothing blocks the ray from `a` in unit direction `dir` (to infinity).
-    pub fn unoccluded_towards(&self, a: DVec3, dir: DVec3) -> bool {
+    /// Triangles of polygon `skip` never block (see [`Visibility::occluded_skipping`]).
+    pub fn unoccluded_towards(&self, a: DVec3, dir: DVec3, skip: usize) -> bool {
         if self.tris.is_empty() {
             return true;
         }
         let ray = self.ray(a, dir, self.eps, f64::from(f32::MAX));
-        let tris = &self.tris;
-        self.bvh.ray_traverse_miss(ray, |r, id| tris[id].intersect(r))
+        let skip = skip as u32;
+        let (tris, polys) = (&self.tris, &self.polygons);
+        self.bvh.ray_traverse_miss(ray, |r, id| {
+            if polys[id] == skip {
+                f32::INFINITY
+            } else {
+                tris[id].intersect(r)
+            }
+        })
     }
 
     /// Brute force closest hit over all triangles (for tests).
@@ -247,7 +285,9 @@ mod tests {
             }
             let c = (t.p[0] + t.p[1] + t.p[2]) / 3.0;
             let o = c + t.normal * 20.0 * vis.epsilon();
-            let h = vis.first_hit(o, -t.normal, 1.0).expect("hit right below the origin");
+            let h = vis
+                .first_hit(o, -t.normal, 1.0)
+                .expect("hit right below the origin");
             assert!((h.t - 20.0 * vis.epsilon()).abs() < 5.0 * vis.epsilon());
         }
     }

@@ -55,7 +55,13 @@ fn array_mut<'a>(root: &'a mut Value, key: &str) -> &'a mut Vec<Value> {
     v.as_array_mut().expect("just made an array")
 }
 
-fn push_view(root: &mut Value, bin: &mut Bin, bytes: &[u8], stride: Option<usize>, target: Option<u64>) -> usize {
+fn push_view(
+    root: &mut Value,
+    bin: &mut Bin,
+    bytes: &[u8],
+    stride: Option<usize>,
+    target: Option<u64>,
+) -> usize {
     let offset = bin.push(bytes);
     let mut view = json!({"buffer": 0, "byteOffset": offset, "byteLength": bytes.len()});
     if let Some(s) = stride {
@@ -160,7 +166,9 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                 "application/octet-stream"
             };
             let view = push_view(&mut root, &mut bin, &data, None, None);
-            let img = root["images"][i].as_object_mut().expect("image is an object");
+            let img = root["images"][i]
+                .as_object_mut()
+                .expect("image is an object");
             img.remove("uri");
             img.insert("bufferView".into(), json!(view));
             img.insert("mimeType".into(), json!(mime));
@@ -170,13 +178,17 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     // 3. The lightmap texture.
     let png_view = push_view(&mut root, &mut bin, &image.png, None, None);
     let images = array_mut(&mut root, "images");
-    images.push(json!({"name": "penumbra lightmap", "bufferView": png_view, "mimeType": "image/png"}));
+    images.push(
+        json!({"name": "penumbra lightmap", "bufferView": png_view, "mimeType": "image/png"}),
+    );
     let image_index = images.len() - 1;
     let samplers = array_mut(&mut root, "samplers");
     samplers.push(json!({"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}));
     let sampler_index = samplers.len() - 1;
     let textures = array_mut(&mut root, "textures");
-    textures.push(json!({"name": "penumbra lightmap", "sampler": sampler_index, "source": image_index}));
+    textures.push(
+        json!({"name": "penumbra lightmap", "sampler": sampler_index, "source": image_index}),
+    );
     let texture_index = textures.len() - 1;
     let moz = json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity});
 
@@ -191,7 +203,13 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             .push(i);
     }
     let mut mesh_users: BTreeMap<usize, Vec<usize>> = BTreeMap::new();
-    for (n, node) in root["nodes"].as_array().cloned().unwrap_or_default().iter().enumerate() {
+    for (n, node) in root["nodes"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default()
+        .iter()
+        .enumerate()
+    {
         if let Some(m) = node["mesh"].as_u64() {
             mesh_users.entry(m as usize).or_default().push(n);
         }
@@ -202,7 +220,10 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     let mut lit_material_uses: BTreeMap<Option<usize>, usize> = BTreeMap::new();
     let mut all_material_uses: BTreeMap<Option<usize>, usize> = BTreeMap::new();
     for (m, users) in &mesh_users {
-        let prims = root["meshes"][*m]["primitives"].as_array().cloned().unwrap_or_default();
+        let prims = root["meshes"][*m]["primitives"]
+            .as_array()
+            .cloned()
+            .unwrap_or_default();
         for node in users {
             for (p, prim) in prims.iter().enumerate() {
                 let mat = prim["material"].as_u64().map(|x| x as usize);
@@ -256,7 +277,15 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             for &i in insts {
                 let inst = &scene.instances[i];
                 let prim = &mut mesh_json["primitives"][inst.primitive];
-                rewrite_primitive(gltf, &mut root, &mut bin, prim, inst, &atlas.meshes[i], atlas)?;
+                rewrite_primitive(
+                    gltf,
+                    &mut root,
+                    &mut bin,
+                    prim,
+                    inst,
+                    &atlas.meshes[i],
+                    atlas,
+                )?;
                 let mat = prim["material"].as_u64().map(|x| x as usize);
                 if let Some(&mi) = material_map.get(&mat) {
                     prim["material"] = json!(mi);
@@ -299,7 +328,9 @@ fn rewrite_primitive(
         if name == "TEXCOORD_1" {
             continue; // replaced by the lightmap UVs
         }
-        let Some(acc_index) = acc.as_u64() else { continue };
+        let Some(acc_index) = acc.as_u64() else {
+            continue;
+        };
         let accessor = gltf
             .document
             .accessors()
@@ -316,7 +347,13 @@ fn rewrite_primitive(
             let src = &bytes[x as usize * elem..(x as usize + 1) * elem];
             data[k * stride..k * stride + elem].copy_from_slice(src);
         }
-        let view = push_view(root, bin, &data, (stride != elem).then_some(stride), Some(ARRAY_BUFFER));
+        let view = push_view(
+            root,
+            bin,
+            &data,
+            (stride != elem).then_some(stride),
+            Some(ARRAY_BUFFER),
+        );
         let original = &gltf.json["accessors"][acc_index as usize];
         let ct = original["componentType"].as_u64().unwrap_or(5126);
         let ty = original["type"].as_str().unwrap_or("SCALAR").to_string();
@@ -381,9 +418,18 @@ fn rewrite_primitive(
         }
     }
     let (ct, bytes): (u64, Vec<u8>) = if am.xref.len() <= u16::MAX as usize {
-        (5123, indices.iter().flat_map(|&i| (i as u16).to_le_bytes()).collect())
+        (
+            5123,
+            indices
+                .iter()
+                .flat_map(|&i| (i as u16).to_le_bytes())
+                .collect(),
+        )
     } else {
-        (5125, indices.iter().flat_map(|&i| i.to_le_bytes()).collect())
+        (
+            5125,
+            indices.iter().flat_map(|&i| i.to_le_bytes()).collect(),
+        )
     };
     let view = push_view(root, bin, &bytes, None, Some(ELEMENT_ARRAY_BUFFER));
     let idx_acc = push_accessor(
