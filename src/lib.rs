@@ -17,6 +17,7 @@ pub mod fixtures;
 pub mod lightmap;
 pub mod load;
 pub mod mesh;
+pub mod render;
 pub mod scene;
 pub mod solve;
 pub mod stats;

@@ -30,17 +30,24 @@ impl Lightmap {
             .fold(0.0, f64::max)
     }
 
-    /// 8-bit linear RGB, each channel `round(255 H / scale)`; `scale` is the returned factor
-    /// (the `MOZ_lightmap` intensity): H = value / 255 x scale.
+    /// 8-bit linear RGB: each channel `255 H / scale` quantized with a 4x4 ordered (Bayer)
+    /// dither, so slow gradients in dark regions do not band; `scale` is the returned factor
+    /// (the `MOZ_lightmap` intensity): H = value / 255 x scale, within one level.
     pub fn to_rgb8(&self) -> (Vec<u8>, f64) {
+        const BAYER: [f64; 16] = [
+            0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0, 3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0,
+        ];
         let max = self.max_value();
         let scale = if max > 0.0 { max } else { 1.0 };
+        let w = self.width.max(1) as usize;
         let bytes = self
             .texels
             .iter()
-            .flat_map(|t| {
+            .enumerate()
+            .flat_map(|(k, t)| {
+                let d = (BAYER[(k / w % 4) * 4 + k % w % 4] + 0.5) / 16.0;
                 t.to_array()
-                    .map(|c| (c / scale * 255.0).round().clamp(0.0, 255.0) as u8)
+                    .map(|c| (c / scale * 255.0 + d).floor().clamp(0.0, 255.0) as u8)
             })
             .collect();
         (bytes, scale)

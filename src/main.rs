@@ -20,6 +20,29 @@ struct Cli {
 enum Command {
     /// Bake a lightmap: read IN (.glb or .gltf), write OUT (.glb) with the lightmap inside.
     Bake(BakeArgs),
+    /// Render a baked glb as a client shows it (albedo/pi x lightmap irradiance + emission).
+    Render(RenderArgs),
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// A glb baked by `penumbra bake`.
+    input: PathBuf,
+    /// Output PNG.
+    #[arg(long, value_name = "FILE")]
+    out: PathBuf,
+    /// `gltf`: the file's first camera (falls back to `auto`); `auto`: frame the bounding box.
+    #[arg(long, default_value = "gltf")]
+    camera: String,
+    /// Image width in pixels (the height follows the camera's aspect, 1:1 by default).
+    #[arg(long, default_value_t = 512)]
+    width: u32,
+    /// Image height in pixels [default: same as width].
+    #[arg(long)]
+    height: Option<u32>,
+    /// Radiance (W/(m² sr)) shown as white [default: automatic].
+    #[arg(long)]
+    exposure: Option<f64>,
 }
 
 #[derive(Args)]
@@ -81,7 +104,27 @@ fn main() {
 fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Bake(args) => bake(args),
+        Command::Render(args) => render(args),
     }
+}
+
+fn render(args: RenderArgs) -> anyhow::Result<()> {
+    let gltf = penumbra::load::read(&args.input)?;
+    let camera = match args.camera.as_str() {
+        "gltf" => penumbra::render::Camera::from_gltf(&gltf),
+        "auto" => None,
+        other => anyhow::bail!("--camera must be gltf or auto, not {other:?}"),
+    };
+    anyhow::ensure!(
+        (1..=16384).contains(&args.width),
+        "--width must be between 1 and 16384"
+    );
+    let height = args.height.unwrap_or(args.width).clamp(1, 16384);
+    let img = penumbra::render::render(&gltf, camera, args.width, height, args.exposure)?;
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)?;
+    penumbra::write::write_atomically(&args.out, png.get_ref())?;
+    Ok(())
 }
 
 fn bake(args: BakeArgs) -> anyhow::Result<()> {

@@ -106,6 +106,16 @@ pub fn point_polygon_form_factor(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
     if clipped.len() < 3 {
         return 0.0;
     }
+    // A polygon in the tangent plane (coplanar with the receiver, up to rounding) subtends no
+    // projected solid angle; its contour terms would only add rounding noise.
+    let reach = clipped
+        .iter()
+        .map(|v| (*v - p).length())
+        .fold(0.0, f64::max);
+    let height = clipped.iter().map(|v| n.dot(*v - p)).fold(0.0, f64::max);
+    if height <= 1e-9 * reach {
+        return 0.0;
+    }
     let mut sum = 0.0;
     for i in 0..clipped.len() {
         let a = clipped[i] - p;
@@ -456,8 +466,11 @@ pub fn point_patch_form_factor(
     rays: &mut u64,
 ) -> f64 {
     let (p, n) = (at.p, at.n);
-    // Cull: the receiver behind the patch, or the patch entirely below the receiver's horizon.
-    if patch.normal.dot(p - patch.centroid) <= 0.0 {
+    // Cull: a planar polygon does not see itself; the receiver behind (or in the plane of) the
+    // patch; the patch entirely below the receiver's horizon.
+    if at.polygon == patch.polygon
+        || patch.normal.dot(p - patch.centroid) <= 1e-9 * (p - patch.centroid).length()
+    {
         return 0.0;
     }
     if patch.p.iter().all(|q| n.dot(*q - p) <= 0.0) {

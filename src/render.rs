@@ -1,0 +1,247 @@
+//! Pictures of a baked glb as a client shows it: per pixel, the first surface hit, its
+//! `MOZ_lightmap` texel (bilinear) x intensity = irradiance H, shown as `albedo/pi x H` plus
+//! the surface's own emission, exposed and encoded as sRGB.
+//!
+//! It reads only the output file (TEXCOORD_1, the lightmap image, the materials), so it checks
+//! what a client would see, not the baker's internal state.
+
+use crate::error::{Error, Result};
+use crate::load::{self, Gltf};
+use crate::scene::Scene;
+use crate::visibility::Visibility;
+use glam::{DMat4, DVec2, DVec3};
+use gltf::accessor::Dimensions;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// A pinhole camera in world space.
+#[derive(Clone, Copy, Debug)]
+pub struct Camera {
+    pub eye: DVec3,
+    /// Unit vectors: forward (view direction), up and right.
+    pub forward: DVec3,
+    pub up: DVec3,
+    pub right: DVec3,
+    /// Vertical field of view, radians.
+    pub yfov: f64,
+}
+
+impl Camera {
+    /// The first perspective camera of the default scene, if any.
+    pub fn from_gltf(gltf: &Gltf) -> Option<Camera> {
+        let scene = gltf
+            .document
+            .default_scene()
+            .or_else(|| gltf.document.scenes().next())?;
+        let mut stack: Vec<(gltf::Node, DMat4)> =
+            scene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
+        while let Some((node, parent)) = stack.pop() {
+            let world = parent
+                * DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
+            if let Some(cam) = node.camera()
+                && let gltf::camera::Projection::Perspective(p) = cam.projection()
+            {
+                let forward = world.transform_vector3(DVec3::NEG_Z).normalize();
+                let up0 = world.transform_vector3(DVec3::Y).normalize();
+                let right = forward.cross(up0).normalize();
+                return Some(Camera {
+                    eye: world.transform_point3(DVec3::ZERO),
+                    forward,
+                    up: right.cross(forward),
+                    right,
+                    yfov: p.yfov() as f64,
+                });
+            }
+            stack.extend(node.children().map(|c| (c, world)));
+        }
+        None
+    }
+
+    /// A camera that frames the scene's bounding box from the front-above diagonal.
+    pub fn auto(scene: &Scene) -> Camera {
+        let center = (scene.bounds_min + scene.bounds_max) * 0.5;
+        let radius = scene.extent() * 0.5;
+        let yfov: f64 = 0.8;
+        let dir = DVec3::new(0.6, -0.45, -1.0).normalize();
+        let eye = center - dir * (radius / (yfov * 0.5).sin());
+        let right = dir.cross(DVec3::Y).normalize();
+        Camera {
+            eye,
+            forward: dir,
+            up: right.cross(dir),
+            right,
+            yfov,
+        }
+    }
+}
+
+/// Per instance: TEXCOORD_1 of every vertex, and the lightmap (texture index, intensity).
+struct LightmapBinding {
+    uv1: Vec<DVec2>,
+    texture: usize,
+    intensity: f64,
+}
+
+/// A decoded lightmap texture (linear values 0..1).
+struct Texture {
+    w: usize,
+    h: usize,
+    rgb: Vec<[f32; 3]>,
+}
+
+impl Texture {
+    /// Bilinear sample at normalized UV with clamp-to-edge, as the output's sampler says.
+    fn sample(&self, uv: DVec2) -> DVec3 {
+        let x = (uv.x * self.w as f64 - 0.5).clamp(0.0, self.w as f64 - 1.0);
+        let y = (uv.y * self.h as f64 - 0.5).clamp(0.0, self.h as f64 - 1.0);
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.w - 1), (y0 + 1).min(self.h - 1));
+        let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+        let t = |x: usize, y: usize| DVec3::from(self.rgb[y * self.w + x].map(f64::from));
+        (t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx) * (1.0 - fy)
+            + (t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx) * fy
+    }
+}
+
+/// Renders a baked glb. `exposure`: radiance that maps to white; `None`: automatic.
+pub fn render(
+    gltf: &Gltf,
+    camera: Option<Camera>,
+    width: u32,
+    height: u32,
+    exposure: Option<f64>,
+) -> Result<image::RgbImage> {
+    let scene = load::scene(gltf)?;
+    let vis = Visibility::new(&scene);
+    let camera = camera.unwrap_or_else(|| Camera::auto(&scene));
+    let bad = |item: String, reason: &str| Error::BadItem {
+        path: gltf.path.clone(),
+        item,
+        reason: reason.into(),
+    };
+    // Lightmap bindings per instance, decoded textures per texture index.
+    let mut textures: BTreeMap<usize, Texture> = BTreeMap::new();
+    let mut bindings: Vec<Option<LightmapBinding>> = Vec::new();
+    for inst in &scene.instances {
+        let prim = gltf
+            .document
+            .meshes()
+            .nth(inst.mesh)
+            .and_then(|m| m.primitives().nth(inst.primitive))
+            .ok_or_else(|| bad(format!("mesh {}", inst.mesh), "missing primitive"))?;
+        let moz = inst
+            .gltf_material
+            .and_then(|m| gltf.json["materials"][m]["extensions"]["MOZ_lightmap"].as_object());
+        let (Some(moz), Some(acc)) = (moz, prim.get(&gltf::Semantic::TexCoords(1))) else {
+            bindings.push(None);
+            continue;
+        };
+        let flat = gltf.read_floats(&acc, Dimensions::Vec2)?;
+        let uv1 = flat
+            .chunks_exact(2)
+            .map(|c| DVec2::new(c[0], c[1]))
+            .collect();
+        let texture = moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize;
+        let intensity = moz.get("intensity").and_then(|v| v.as_f64()).unwrap_or(1.0);
+        if let std::collections::btree_map::Entry::Vacant(e) = textures.entry(texture) {
+            let tex = gltf
+                .document
+                .textures()
+                .nth(texture)
+                .ok_or_else(|| bad(format!("texture {texture}"), "does not exist"))?;
+            let bytes = match tex.source().source() {
+                gltf::image::Source::View { view, .. } => {
+                    gltf.view_bytes(&view, "lightmap")?.to_vec()
+                }
+                gltf::image::Source::Uri { uri, .. } => {
+                    load::read_uri(&gltf.path, uri, "lightmap")?
+                }
+            };
+            let img = image::load_from_memory(&bytes)
+                .map_err(|e| bad(format!("texture {texture}"), &e.to_string()))?
+                .to_rgb32f();
+            e.insert(Texture {
+                w: img.width() as usize,
+                h: img.height() as usize,
+                rgb: img.pixels().map(|p| p.0).collect(),
+            });
+        }
+        bindings.push(Some(LightmapBinding {
+            uv1,
+            texture,
+            intensity,
+        }));
+    }
+    let aspect = width as f64 / height as f64;
+    let tan = (camera.yfov * 0.5).tan();
+    let radiance: Vec<DVec3> = (0..width * height)
+        .into_par_iter()
+        .map(|i| {
+            let (x, y) = ((i % width) as f64 + 0.5, (i / width) as f64 + 0.5);
+            let sx = (2.0 * x / width as f64 - 1.0) * tan * aspect;
+            let sy = (1.0 - 2.0 * y / height as f64) * tan;
+            let dir = (camera.forward + camera.right * sx + camera.up * sy).normalize();
+            let Some(hit) = vis.first_hit(camera.eye, dir, f64::MAX) else {
+                return DVec3::ZERO;
+            };
+            let tri = &scene.triangles[hit.triangle];
+            let mat = &scene.materials[tri.material];
+            let p = camera.eye + dir * hit.t;
+            let mut l = if tri.normal.dot(dir) < 0.0 {
+                mat.radiance
+            } else {
+                DVec3::ZERO
+            };
+            if let Some(b) = &bindings[tri.instance] {
+                let inst = &scene.instances[tri.instance];
+                let k = tri.local_index;
+                let ids = &inst.indices[3 * k..3 * k + 3];
+                let bary = barycentric(&tri.p, p);
+                let uv: DVec2 = (0..3).map(|c| b.uv1[ids[c] as usize] * bary[c]).sum();
+                let h = textures[&b.texture].sample(uv) * b.intensity;
+                l += mat.rho / std::f64::consts::PI * h;
+            }
+            l
+        })
+        .collect();
+    let scale = exposure.unwrap_or_else(|| {
+        // Auto exposure: the 97th percentile of the luminance of what was hit maps to 0.9.
+        let mut lum: Vec<f64> = radiance
+            .iter()
+            .map(|c| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z)
+            .filter(|&v| v > 0.0)
+            .collect();
+        lum.sort_by(|a, b| a.total_cmp(b));
+        lum.get(lum.len() * 97 / 100).copied().unwrap_or(1.0) / 0.9
+    });
+    let mut img = image::RgbImage::new(width, height);
+    for (i, c) in radiance.iter().enumerate() {
+        let v = (*c / scale)
+            .to_array()
+            .map(|x| (linear_to_srgb(x.clamp(0.0, 1.0)) * 255.0).round() as u8);
+        img.put_pixel(i as u32 % width, i as u32 / width, image::Rgb(v));
+    }
+    Ok(img)
+}
+
+fn barycentric(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
+    let (e1, e2, d) = (t[1] - t[0], t[2] - t[0], p - t[0]);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d1p, d2p) = (e1.dot(d), e2.dot(d));
+    let den = d11 * d22 - d12 * d12;
+    if den == 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = (d22 * d1p - d12 * d2p) / den;
+    let w = (d11 * d2p - d12 * d1p) / den;
+    [1.0 - v - w, v, w]
+}
+
+/// The sRGB opto-electronic transfer function (IEC 61966-2-1), value in [0,1].
+pub fn linear_to_srgb(c: f64) -> f64 {
+    if c <= 0.0031308 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
