@@ -191,8 +191,9 @@ pub struct AreaEmitter {
     pub normal: DVec3,
     /// The polygon's triangles, world space.
     pub triangles: Vec<[DVec3; 3]>,
-    /// Sample points with their area (the areas sum to the emitter's area).
-    pub samples: Vec<(DVec3, f64)>,
+    /// Sample sets, each a stratified set of points with their area (the areas of a set sum to
+    /// the emitter's area): `samples[0]` has the full count, each next set half as many.
+    pub samples: Vec<Vec<(DVec3, f64)>>,
     /// Bounding sphere (centre, radius) for culling.
     pub center: DVec3,
     pub radius: f64,
@@ -229,19 +230,27 @@ impl AreaEmitter {
                     .map(|&t| scene.triangles[t].area())
                     .collect();
                 let total: f64 = areas.iter().sum();
-                let n = samples.max(1);
-                let mut pts = Vec::with_capacity(n);
-                for k in 0..n {
-                    // First coordinate stratified over the cumulative area of the triangles.
-                    let mut u = (k as f64 + 0.5) / n as f64 * total;
-                    let mut tri = 0;
-                    while tri + 1 < areas.len() && u > areas[tri] {
-                        u -= areas[tri];
-                        tri += 1;
+                let mut sets = Vec::new();
+                let mut n = samples.max(1);
+                loop {
+                    let mut pts = Vec::with_capacity(n);
+                    for k in 0..n {
+                        // First coordinate stratified over the cumulative area of the triangles.
+                        let mut u = (k as f64 + 0.5) / n as f64 * total;
+                        let mut tri = 0;
+                        while tri + 1 < areas.len() && u > areas[tri] {
+                            u -= areas[tri];
+                            tri += 1;
+                        }
+                        let uu = (u / areas[tri]).clamp(0.0, 1.0);
+                        let v = radical_inverse2(k as u32);
+                        pts.push((square_to_triangle(&triangles[tri], uu, v), total / n as f64));
                     }
-                    let uu = (u / areas[tri]).clamp(0.0, 1.0);
-                    let v = radical_inverse2(k as u32);
-                    pts.push((square_to_triangle(&triangles[tri], uu, v), total / n as f64));
+                    sets.push(pts);
+                    if n == 1 {
+                        break;
+                    }
+                    n /= 2;
                 }
                 let center = triangles.iter().flatten().copied().sum::<DVec3>()
                     / (3 * triangles.len()) as f64;
@@ -255,7 +264,7 @@ impl AreaEmitter {
                     radiance: scene.materials[poly.material].radiance,
                     normal: poly.frame.n,
                     triangles,
-                    samples: pts,
+                    samples: sets,
                     center,
                     radius,
                 }
@@ -299,14 +308,28 @@ impl<'a> Direct<'a> {
         let mut h = DVec3::ZERO;
         let mut rays = 0u64;
         let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
-        for e in &self.emitters {
-            let f = e.form_factor(p, n);
+        // Unoccluded contribution of every emitter; shadow rays are spent in proportion to it
+        // (at least one per visible emitter), so scenes with many small emitters stay cheap.
+        let unoccluded: Vec<f64> = self.emitters.iter().map(|e| e.form_factor(p, n)).collect();
+        let weight = |e: &AreaEmitter, f: f64| f * e.radiance.element_sum();
+        let total: f64 = self
+            .emitters
+            .iter()
+            .zip(&unoccluded)
+            .map(|(e, &f)| weight(e, f))
+            .sum();
+        for (e, &f) in self.emitters.iter().zip(&unoccluded) {
             if f <= 0.0 {
                 continue;
             }
+            let wanted = e.samples[0].len() as f64 * weight(e, f) / total.max(f64::MIN_POSITIVE);
+            let mut level = 0;
+            while level + 1 < e.samples.len() && e.samples[level + 1].len() as f64 >= wanted {
+                level += 1;
+            }
             let mut seen = 0.0;
             let mut all = 0.0;
-            for &(s, a) in &e.samples {
+            for &(s, a) in &e.samples[level] {
                 let d = s - p;
                 let r2 = d.length_squared();
                 let cos_r = n.dot(d);
