@@ -7,7 +7,7 @@ use crate::load::{self, Gltf};
 use crate::mesh::{self, Mesher, ReceiverMesh};
 use crate::scene::Scene;
 use crate::solve::{self, Solution, SolveOptions};
-use crate::stats::{Progress, Stats, timed};
+use crate::stats::{Progress, Stats, stage};
 use crate::visibility::Visibility;
 use crate::write::{self, LightmapImage};
 use std::path::Path;
@@ -107,21 +107,25 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         ..Default::default()
     };
     let t = &mut stats.timings_s;
-    let scene = timed(&mut t.load, || load::scene(gltf))?;
-    let vis = timed(&mut t.visibility, || Visibility::new(&scene));
-    let meshes = timed(&mut t.mesh, || match options.mesher {
+    let scene = stage(&mut t.load, "scene", progress, || load::scene(gltf))?;
+    let vis = stage(&mut t.visibility, "visibility", progress, || {
+        Visibility::new(&scene)
+    });
+    let meshes = stage(&mut t.mesh, "mesh", progress, || match options.mesher {
         Mesher::Uniform => mesh::uniform(&scene, options.budget),
         Mesher::Discontinuity | Mesher::Adaptive => unreachable!("rejected by check()"),
     });
-    let solution = timed(&mut t.solve, || {
+    let solution = stage(&mut t.solve, "solve", progress, || {
         solve::radiosity(&scene, &vis, &meshes, &options.solve, progress)
     });
-    let atlas = timed(&mut t.atlas, || pack_atlas(&scene, options))?;
+    let atlas = stage(&mut t.atlas, "atlas", progress, || {
+        pack_atlas(&scene, options)
+    })?;
     let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
     for (i, m) in meshes.iter().enumerate() {
         mesh_of_polygon[m.polygon] = i;
     }
-    let lightmap = timed(&mut t.lightmap, || {
+    let lightmap = stage(&mut t.lightmap, "lightmap", progress, || {
         lightmap::rasterize(
             &scene,
             &meshes,
@@ -200,11 +204,11 @@ pub fn bake_file(
 ) -> Result<Bake> {
     let start = std::time::Instant::now();
     let mut read_time = 0.0;
-    let gltf = timed(&mut read_time, || load::read(input))?;
+    let gltf = stage(&mut read_time, "read", progress, || load::read(input))?;
     let mut result = bake(&gltf, options, progress)?;
     result.stats.timings_s.load += read_time;
     let mut write_time = 0.0;
-    timed(&mut write_time, || -> Result<()> {
+    stage(&mut write_time, "write", progress, || -> Result<()> {
         let (rgb, intensity) = result.lightmap.to_rgb8();
         let png = encode_png(&rgb, result.lightmap.width, result.lightmap.height)?;
         result.stats.lightmap_intensity = intensity;

@@ -215,8 +215,8 @@ pub fn rasterize(
                 .fold(f64::NEG_INFINITY, f64::max)
                 .floor()
                 .max(0.0) as usize;
-        for b in (y0 / BAND).min(bands - 1)..=(y1 / BAND).min(bands - 1) {
-            by_band[b].push(i as u32);
+        for band in &mut by_band[(y0 / BAND).min(bands - 1)..=(y1 / BAND).min(bands - 1)] {
+            band.push(i as u32);
         }
     }
     let n = supersample.max(1) as usize;

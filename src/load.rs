@@ -121,12 +121,13 @@ fn percent_decode(uri: &str) -> String {
     let mut out = Vec::with_capacity(bytes.len());
     let mut i = 0;
     while i < bytes.len() {
-        if bytes[i] == b'%' && i + 2 < bytes.len() {
-            if let Ok(v) = u8::from_str_radix(&uri[i + 1..i + 3], 16) {
-                out.push(v);
-                i += 3;
-                continue;
-            }
+        if bytes[i] == b'%'
+            && i + 2 < bytes.len()
+            && let Ok(v) = u8::from_str_radix(&uri[i + 1..i + 3], 16)
+        {
+            out.push(v);
+            i += 3;
+            continue;
         }
         out.push(bytes[i]);
         i += 1;
@@ -540,10 +541,10 @@ fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Res
     }
     let mut radiance = DVec3::from_array(m.emissive_factor().map(|c| c as f64))
         * m.emissive_strength().unwrap_or(1.0) as f64;
-    if radiance.max_element() > 0.0 {
-        if let Some(info) = m.emissive_texture() {
-            radiance *= textures.mean(gltf, &info.texture())?;
-        }
+    if radiance.max_element() > 0.0
+        && let Some(info) = m.emissive_texture()
+    {
+        radiance *= textures.mean(gltf, &info.texture())?;
     }
     let name = m
         .name()

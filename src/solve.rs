@@ -606,9 +606,9 @@ pub fn progressive(
             // exchange light n-1 times, one generation of unshot light at a time.
             for _ in 1..n {
                 let mut next = vec![DVec3::ZERO; patches.len()];
-                for i in 0..patches.len() {
-                    if unshot[i].max_element() > 0.0 {
-                        shoot(i, unshot[i], &mut h, &mut next);
+                for (i, &b) in unshot.iter().enumerate() {
+                    if b.max_element() > 0.0 {
+                        shoot(i, b, &mut h, &mut next);
                         shots += 1;
                     }
                 }

@@ -43,10 +43,12 @@ pub struct Stats {
     pub warnings: Vec<String>,
 }
 
-/// Measures the wall time of one stage.
-pub fn timed<T>(slot: &mut f64, f: impl FnOnce() -> T) -> T {
+/// Measures the wall time of one stage into `slot` and reports its start and end as progress.
+pub fn stage<T>(slot: &mut f64, name: &str, progress: &Progress<'_>, f: impl FnOnce() -> T) -> T {
+    progress(name, 0, 1);
     let start = Instant::now();
     let out = f();
-    *slot = start.elapsed().as_secs_f64();
+    *slot += start.elapsed().as_secs_f64();
+    progress(name, 1, 1);
     out
 }

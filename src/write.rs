@@ -37,7 +37,7 @@ struct Bin {
 impl Bin {
     /// Appends bytes at an 8-byte aligned offset; returns the offset.
     fn push(&mut self, bytes: &[u8]) -> usize {
-        while self.data.len() % 8 != 0 {
+        while !self.data.len().is_multiple_of(8) {
             self.data.push(0);
         }
         let at = self.data.len();
@@ -447,10 +447,10 @@ fn rewrite_primitive(
 /// Assembles a GLB container: JSON chunk padded with spaces, BIN chunk padded with zeros.
 pub fn to_glb(root: &Value, mut bin: Vec<u8>) -> Vec<u8> {
     let mut json = serde_json::to_vec(root).expect("a serde_json::Value always serializes");
-    while json.len() % 4 != 0 {
+    while !json.len().is_multiple_of(4) {
         json.push(b' ');
     }
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let total = 12 + 8 + json.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };

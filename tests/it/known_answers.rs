@@ -202,3 +202,21 @@ fn cornell_floor_direct_light_matches_reference() {
         }
     }
 }
+
+/// The 8-bit lightmap times `intensity` is the irradiance, within one quantization level.
+#[test]
+fn png_values_times_intensity_give_the_irradiance() {
+    let b = bake(&fixtures::cornell_box(), &quick());
+    let (rgb, intensity) = b.lightmap.to_rgb8();
+    assert!((intensity - b.lightmap.max_value()).abs() < 1e-12);
+    for (k, h) in b.lightmap.texels.iter().enumerate() {
+        for c in 0..3 {
+            let shown = rgb[3 * k + c] as f64 / 255.0 * intensity;
+            assert!(
+                (shown - h[c]).abs() <= intensity / 255.0 + 1e-12,
+                "texel {k}: {shown} vs {}",
+                h[c]
+            );
+        }
+    }
+}

@@ -3,6 +3,7 @@
 mod bad_input;
 mod fixtures;
 mod known_answers;
+mod loading;
 mod output;
 
 use penumbra::load::{self, Gltf};
