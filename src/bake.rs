@@ -1,6 +1,7 @@
 //! The pipeline, stage by stage: [`bake`] reads like the table of contents of the crate.
 
 use crate::atlas::{self, Atlas, AtlasInput, AtlasOptions};
+use crate::discontinuity::{self, DmOptions, Segment};
 use crate::error::{Error, Result};
 use crate::lightmap::{self, Lightmap};
 use crate::load::{self, Gltf};
@@ -18,6 +19,9 @@ pub struct BakeOptions {
     pub mesher: Mesher,
     /// Target number of mesh elements (triangles) over the whole scene.
     pub budget: usize,
+    /// Discontinuity pieces whose light carries less than this share of the unoccluded
+    /// irradiance where they lie are dropped (0..1).
+    pub dm_threshold: f64,
     pub solve: SolveOptions,
     /// Lightmap texels per scene unit; `None`: derived from `resolution`.
     pub texels_per_unit: Option<f32>,
@@ -34,6 +38,7 @@ impl Default for BakeOptions {
         BakeOptions {
             mesher: Mesher::Uniform,
             budget: 20_000,
+            dm_threshold: 0.01,
             solve: SolveOptions::default(),
             texels_per_unit: None,
             resolution: None,
@@ -46,6 +51,8 @@ impl Default for BakeOptions {
 /// The result of a bake, every stage's output kept for inspection and tests.
 pub struct Bake {
     pub scene: Scene,
+    /// Discontinuity segments per polygon (empty for the other meshers).
+    pub segments: Vec<Vec<Segment>>,
     pub meshes: Vec<ReceiverMesh>,
     pub solution: Solution,
     pub atlas: Atlas,
@@ -83,12 +90,11 @@ impl BakeOptions {
         {
             return bad("--resolution", "must be between 16 and 16384");
         }
+        if !(0.0..=1.0).contains(&self.dm_threshold) {
+            return bad("--dm-threshold", "must be between 0 and 1");
+        }
         match self.mesher {
-            Mesher::Uniform => Ok(()),
-            Mesher::Discontinuity => bad(
-                "--mesher",
-                "the discontinuity mesher is not built yet; use --mesher uniform",
-            ),
+            Mesher::Uniform | Mesher::Discontinuity => Ok(()),
             Mesher::Adaptive => bad(
                 "--mesher",
                 "the adaptive mesher is not built yet; use --mesher uniform",
@@ -111,10 +117,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     let vis = stage(&mut t.visibility, "visibility", progress, || {
         Visibility::new(&scene)
     });
-    let meshes = stage(&mut t.mesh, "mesh", progress, || match options.mesher {
-        Mesher::Uniform => mesh::uniform(&scene, options.budget),
-        Mesher::Discontinuity | Mesher::Adaptive => unreachable!("rejected by check()"),
-    });
+    let (segments, meshes) = mesh_scene(&scene, &vis, options, &mut stats, progress);
+    let t = &mut stats.timings_s;
     let solution = stage(&mut t.solve, "solve", progress, || {
         solve::radiosity(&scene, &vis, &meshes, &options.solve, progress)
     });
@@ -155,6 +159,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     }
     Ok(Bake {
         scene,
+        segments,
         meshes,
         solution,
         atlas,
@@ -191,6 +196,56 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
             padding: options.padding,
         },
     )?)
+}
+
+/// The discontinuity and mesh stages: segments per polygon (empty unless discontinuity
+/// meshing) and the receiver meshes. Fills their timings and counters into `stats`.
+fn mesh_scene(
+    scene: &Scene,
+    vis: &Visibility,
+    options: &BakeOptions,
+    stats: &mut Stats,
+    progress: &Progress<'_>,
+) -> (Vec<Vec<Segment>>, Vec<ReceiverMesh>) {
+    let t = &mut stats.timings_s;
+    match options.mesher {
+        Mesher::Uniform => {
+            let meshes = stage(&mut t.mesh, "mesh", progress, || {
+                mesh::uniform(scene, options.budget)
+            });
+            (Vec::new(), meshes)
+        }
+        Mesher::Discontinuity => {
+            let dm = DmOptions {
+                threshold: options.dm_threshold,
+                max_pieces: options.budget / 4,
+            };
+            let (segments, mut dm_stats) =
+                stage(&mut t.discontinuity, "discontinuity", progress, || {
+                    discontinuity::segments(scene, vis, &dm)
+                });
+            let (meshes, refused) = stage(&mut t.mesh, "mesh", progress, || {
+                mesh::discontinuity(scene, &segments, options.budget)
+            });
+            dm_stats.refused = refused;
+            stats.discontinuity = Some(dm_stats);
+            (segments, meshes)
+        }
+        Mesher::Adaptive => unreachable!("rejected by BakeOptions::check"),
+    }
+}
+
+/// Loads the scene and runs the discontinuity and mesh stages only (for debug views).
+pub fn meshes(
+    gltf: &Gltf,
+    options: &BakeOptions,
+) -> Result<(Scene, Vec<Vec<Segment>>, Vec<ReceiverMesh>)> {
+    options.check()?;
+    let scene = load::scene(gltf)?;
+    let vis = Visibility::new(&scene);
+    let (segments, meshes) =
+        mesh_scene(&scene, &vis, options, &mut Stats::default(), &|_, _, _| {});
+    Ok((scene, segments, meshes))
 }
 
 /// Reads `input`, bakes, and writes the lightmapped glb to `output` (temporary file + rename).

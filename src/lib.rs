@@ -11,7 +11,10 @@
 //! `H`, linear, without albedo.
 
 pub mod atlas;
+pub mod backproject;
 pub mod bake;
+pub mod debug;
+pub mod discontinuity;
 pub mod error;
 pub mod fixtures;
 pub mod lightmap;

@@ -3,7 +3,7 @@
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
 use penumbra::mesh::Mesher;
-use penumbra::solve::SolveOptions;
+use penumbra::solve::{DirectMethod, SolveOptions};
 use penumbra::{BakeOptions, bake_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -22,6 +22,32 @@ enum Command {
     Bake(BakeArgs),
     /// Render a baked glb as a client shows it (albedo/pi x lightmap irradiance + emission).
     Render(RenderArgs),
+    /// Debug view of one receiver polygon: outline, discontinuity segments, triangulation (SVG).
+    Mesh(MeshArgs),
+}
+
+#[derive(Args)]
+struct MeshArgs {
+    /// Input glTF scene.
+    input: PathBuf,
+    /// Receiver polygon index (as in --stats; `penumbra mesh IN --list` prints them).
+    #[arg(long, default_value_t = 0)]
+    polygon: usize,
+    /// Output SVG.
+    #[arg(long, value_name = "FILE")]
+    svg: Option<PathBuf>,
+    /// List the polygons (index, material, area, discontinuity segments) and exit.
+    #[arg(long)]
+    list: bool,
+    /// Which mesher (as for bake).
+    #[arg(long, value_enum, default_value_t = Mesher::Discontinuity)]
+    mesher: Mesher,
+    /// Element budget (as for bake).
+    #[arg(long, default_value_t = 20_000)]
+    budget: usize,
+    /// As for bake.
+    #[arg(long, default_value_t = 0.01)]
+    dm_threshold: f64,
 }
 
 #[derive(Args)]
@@ -57,7 +83,16 @@ struct BakeArgs {
     /// Target number of mesh elements (triangles) over the whole scene.
     #[arg(long, default_value_t = 20_000)]
     budget: usize,
-    /// Shadow rays per vertex and area emitter (visibility fraction of the exact form factor).
+    /// Discontinuity meshing: drop wedge pieces whose light carries less than this share
+    /// (0..1) of the unoccluded irradiance where they lie.
+    #[arg(long, default_value_t = 0.01)]
+    dm_threshold: f64,
+    /// Direct light of area emitters: `exact` (backprojection: the visible part of each emitter)
+    /// or `sampled` (shadow rays).
+    #[arg(long, value_enum, default_value_t = DirectMethod::Exact)]
+    direct: DirectMethod,
+    /// Shadow rays per vertex and area emitter (visibility fraction of the exact form factor),
+    /// for `--direct sampled` and the exact method's fallback.
     #[arg(long, default_value_t = 64)]
     shadow_samples: usize,
     /// Light bounces after the direct light (0: direct light only). Default: until the unshot
@@ -105,7 +140,51 @@ fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Bake(args) => bake(args),
         Command::Render(args) => render(args),
+        Command::Mesh(args) => mesh(args),
     }
+}
+
+fn mesh(args: MeshArgs) -> anyhow::Result<()> {
+    let gltf = penumbra::load::read(&args.input)?;
+    let options = BakeOptions {
+        mesher: args.mesher,
+        budget: args.budget,
+        dm_threshold: args.dm_threshold,
+        solve: SolveOptions {
+            bounces: Some(0),
+            ..SolveOptions::default()
+        },
+        ..BakeOptions::default()
+    };
+    let (scene, segments, meshes) = penumbra::bake::meshes(&gltf, &options)?;
+    if args.list {
+        for (i, p) in scene.polygons.iter().enumerate() {
+            println!(
+                "{i}\t{}\tarea {:.6}\t{} segments\t{} triangles",
+                scene.materials[p.material].name,
+                p.area,
+                segments.get(i).map_or(0, |s| s.len()),
+                meshes[i].triangles.len()
+            );
+        }
+        return Ok(());
+    }
+    anyhow::ensure!(
+        args.polygon < scene.polygons.len(),
+        "{}: --polygon {} does not exist (the scene has {} polygons)",
+        args.input.display(),
+        args.polygon,
+        scene.polygons.len()
+    );
+    let svg = penumbra::debug::mesh_svg(
+        &scene.polygons[args.polygon],
+        &meshes[args.polygon],
+        segments.get(args.polygon).map_or(&[], |s| s.as_slice()),
+        800.0,
+    );
+    let out = args.svg.context("--svg FILE is required (or --list)")?;
+    penumbra::write::write_atomically(&out, svg.as_bytes())?;
+    Ok(())
 }
 
 fn render(args: RenderArgs) -> anyhow::Result<()> {
@@ -137,7 +216,9 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
     let options = BakeOptions {
         mesher: args.mesher,
         budget: args.budget,
+        dm_threshold: args.dm_threshold,
         solve: SolveOptions {
+            direct: args.direct,
             shadow_samples: args.shadow_samples,
             bounces: args.bounces,
             patches: args.patches,

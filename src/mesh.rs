@@ -6,9 +6,13 @@
 //! Delaunay refinement as implemented by spade (Shewchuk, "Delaunay refinement algorithms for
 //! triangular mesh generation", 2002).
 
+pub mod arrangement;
+
+use crate::discontinuity::{Kind, Segment};
 use crate::scene::{Polygon, Scene};
 use glam::DVec2;
 use rayon::prelude::*;
+use spade::handles::FixedVertexHandle;
 use spade::{
     AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation,
 };
@@ -20,7 +24,8 @@ pub enum Mesher {
     /// Quality Delaunay refinement of each polygon's outline to an area cap from the budget.
     #[default]
     Uniform,
-    /// Discontinuity meshing (not built yet).
+    /// Discontinuity meshing: umbra, penumbra and contact lines as constraints, then the same
+    /// refinement as uniform.
     Discontinuity,
     /// A-posteriori adaptive meshing (not built yet).
     Adaptive,
@@ -53,24 +58,57 @@ fn tri_area(m: &ReceiverMesh, t: &[u32; 3]) -> f64 {
 /// Minimum angle for quality refinement, degrees.
 pub const ANGLE_LIMIT_DEG: f64 = 25.0;
 
-/// Triangulates one polygon: its boundary as constraints, refined so that no triangle is larger
-/// than `max_area` (scene units²) and, where the outline allows, none has an angle under
-/// [`ANGLE_LIMIT_DEG`]. At most `vertex_cap` vertices are added by refinement. Faces outside
-/// the polygon (holes, concavities) are dropped by testing each face's centroid against the
-/// polygon's own triangles.
+/// Triangulates one polygon without extra constraints; see [`triangulate_with`].
 pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usize) -> ReceiverMesh {
+    triangulate_with(id, polygon, &[], max_area, vertex_cap).0
+}
+
+/// Triangulates one polygon: its boundary and the discontinuity `segments` (plane coordinates)
+/// as constraints, refined so that no triangle is larger than `max_area` (scene units²) and,
+/// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. At most
+/// `vertex_cap` vertices are added by refinement.
+///
+/// The constraints go through [`arrangement::build`] first, so they never cross when inserted
+/// with spade's `try_add_constraint`. Faces outside the polygon (holes, concavities) are dropped
+/// by testing each face's centroid against the polygon's own triangles (spade's
+/// `exclude_outer_faces` is wrong once interior constraints exist). Vertices on D0 (contact)
+/// segments are split, one copy per side, so values never interpolate across a contact.
+/// Returns the mesh and the number of constraint pieces spade refused.
+pub fn triangulate_with(
+    id: usize,
+    polygon: &Polygon,
+    segments: &[Segment],
+    max_area: f64,
+    vertex_cap: usize,
+) -> (ReceiverMesh, usize) {
+    let (lo, hi) = polygon.triangles_plane.iter().flatten().fold(
+        (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let diameter = (hi - lo).length().max(1e-300);
+    let tol = 1e-9 * diameter;
+    let mut input: Vec<(DVec2, DVec2, Option<Kind>)> = polygon
+        .boundary
+        .iter()
+        .map(|[a, b]| (*a, *b, None))
+        .collect();
+    input.extend(segments.iter().map(|s| (s.a, s.b, Some(s.kind))));
+    let arr = arrangement::build(&input, tol);
+
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
-    for [a, b] in &polygon.boundary {
-        let (Ok(va), Ok(vb)) = (
-            cdt.insert(Point2::new(a.x, a.y)),
-            cdt.insert(Point2::new(b.x, b.y)),
-        ) else {
-            continue;
-        };
-        if va != vb {
-            // Never panics; an edge that would cross an existing constraint is left out and the
-            // inside test below still decides which faces belong to the polygon.
-            cdt.try_add_constraint(va, vb);
+    let handles: Vec<Option<FixedVertexHandle>> = arr
+        .points
+        .iter()
+        .map(|p| cdt.insert(Point2::new(p.x, p.y)).ok())
+        .collect();
+    let mut refused = 0;
+    for &(a, b, _) in &arr.edges {
+        if let (Some(va), Some(vb)) = (handles[a as usize], handles[b as usize])
+            && va != vb
+            && cdt.try_add_constraint(va, vb).is_empty()
+            && !cdt.exists_constraint(va, vb)
+        {
+            refused += 1;
         }
     }
     if cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
@@ -79,7 +117,7 @@ pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usiz
             .with_max_allowed_area(max_area.max(polygon.area * 1e-9))
             .with_min_required_area(max_area * 1e-3)
             .with_max_additional_vertices(vertex_cap)
-            .exclude_outer_faces(true);
+            .exclude_outer_faces(segments.is_empty());
         cdt.refine(params);
     }
     let mut mesh = ReceiverMesh {
@@ -87,6 +125,7 @@ pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usiz
         ..Default::default()
     };
     let mut remap = vec![u32::MAX; cdt.num_vertices()];
+    let mut constraint_edges = Vec::new();
     for face in cdt.inner_faces() {
         let pos = face.positions().map(|p| DVec2::new(p.x, p.y));
         let centroid = (pos[0] + pos[1] + pos[2]) / 3.0;
@@ -102,39 +141,173 @@ pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usiz
             }
             remap[i]
         });
+        for e in face.adjacent_edges() {
+            if e.is_constraint_edge() {
+                let [a, b] = e.vertices().map(|v| remap[v.fix().index()]);
+                constraint_edges.push((a.min(b), a.max(b)));
+            }
+        }
         mesh.triangles.push(ids);
     }
-    mesh
+    let d0: Vec<(DVec2, DVec2)> = segments
+        .iter()
+        .filter(|s| s.kind == Kind::D0)
+        .map(|s| (s.a, s.b))
+        .collect();
+    if !d0.is_empty() {
+        let on_d0 = |a: DVec2, b: DVec2| {
+            d0.iter().any(|&(p, q)| {
+                dist_to_segment(a, p, q) <= 1e3 * tol && dist_to_segment(b, p, q) <= 1e3 * tol
+            })
+        };
+        constraint_edges.sort_unstable();
+        constraint_edges.dedup();
+        let cuts: Vec<(u32, u32)> = constraint_edges
+            .into_iter()
+            .filter(|&(a, b)| on_d0(mesh.vertices[a as usize], mesh.vertices[b as usize]))
+            .collect();
+        split_along(&mut mesh, &cuts);
+    }
+    (mesh, refused)
 }
 
-/// The uniform mesher: every polygon refined to one area cap, chosen so that the whole scene
-/// has about `budget` triangles (never fewer than each polygon's own outline needs).
-pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
+fn dist_to_segment(x: DVec2, p: DVec2, q: DVec2) -> f64 {
+    let d = q - p;
+    let l2 = d.length_squared();
+    let t = if l2 > 0.0 {
+        ((x - p).dot(d) / l2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    x.distance(p + d * t)
+}
+
+/// Duplicates the vertices on the `cuts` edges so that the triangles on either side of a cut
+/// have their own copy: the fan around each such vertex is split into the groups connected
+/// through uncut edges, and every group but the first gets a new vertex at the same place.
+fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
+    let cut = |a: u32, b: u32| cuts.binary_search(&(a.min(b), a.max(b))).is_ok();
+    let mut on_cut = vec![false; mesh.vertices.len()];
+    for &(a, b) in cuts {
+        on_cut[a as usize] = true;
+        on_cut[b as usize] = true;
+    }
+    let mut incident: Vec<Vec<usize>> = vec![Vec::new(); mesh.vertices.len()];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for &v in tri {
+            if on_cut[v as usize] {
+                incident[v as usize].push(t);
+            }
+        }
+    }
+    for v in 0..mesh.vertices.len() {
+        let tris = &incident[v];
+        if tris.len() < 2 {
+            continue;
+        }
+        // Union triangles sharing an uncut edge at v.
+        let mut group: Vec<usize> = (0..tris.len()).collect();
+        fn root(g: &mut [usize], mut i: usize) -> usize {
+            while g[i] != i {
+                g[i] = g[g[i]];
+                i = g[i];
+            }
+            i
+        }
+        let others = |t: usize| -> Vec<u32> {
+            mesh.triangles[t]
+                .iter()
+                .copied()
+                .filter(|&x| x != v as u32)
+                .collect()
+        };
+        for i in 0..tris.len() {
+            for j in i + 1..tris.len() {
+                let (oi, oj) = (others(tris[i]), others(tris[j]));
+                if let Some(&u) = oi.iter().find(|u| oj.contains(u))
+                    && !cut(v as u32, u)
+                {
+                    let (ri, rj) = (root(&mut group, i), root(&mut group, j));
+                    group[ri.max(rj)] = ri.min(rj);
+                }
+            }
+        }
+        let first = root(&mut group, 0);
+        let mut copies: Vec<(usize, u32)> = Vec::new();
+        for i in 0..tris.len() {
+            let r = root(&mut group, i);
+            if r == first {
+                continue;
+            }
+            let id = match copies.iter().find(|c| c.0 == r) {
+                Some(c) => c.1,
+                None => {
+                    mesh.vertices.push(mesh.vertices[v]);
+                    let id = (mesh.vertices.len() - 1) as u32;
+                    copies.push((r, id));
+                    id
+                }
+            };
+            for c in mesh.triangles[tris[i]].iter_mut() {
+                if *c == v as u32 {
+                    *c = id;
+                }
+            }
+        }
+    }
+}
+
+/// Meshes every polygon with `mesh_one(polygon, max_area, vertex_cap)` at one area cap, chosen
+/// so that the whole scene has about `budget` triangles: one pass at area/budget, then a rescale
+/// (refinement leaves triangles between a quarter and all of the cap).
+fn to_budget<F>(scene: &Scene, budget: usize, mesh_one: F) -> Vec<ReceiverMesh>
+where
+    F: Fn(usize, f64, usize) -> ReceiverMesh + Sync,
+{
     let total_area: f64 = scene.polygons.iter().map(|p| p.area).sum();
     let budget = budget.max(1) as f64;
     let mesh_all = |max_area: f64| -> Vec<ReceiverMesh> {
-        scene
-            .polygons
-            .par_iter()
-            .enumerate()
-            .map(|(i, p)| {
+        (0..scene.polygons.len())
+            .into_par_iter()
+            .map(|i| {
+                let p = &scene.polygons[i];
                 let expected = (p.area / max_area).ceil() as usize;
-                let cap = 4 * expected + 4 * p.boundary.len() + 64;
-                triangulate(i, p, max_area, cap)
+                mesh_one(i, max_area, 4 * expected + 4 * p.boundary.len() + 64)
             })
             .collect()
     };
-    // Refinement leaves triangles between a quarter and all of the cap, so measure once at
-    // area/budget and rescale.
     let first_area = total_area / budget;
     let first = mesh_all(first_area);
     let count: usize = first.iter().map(|m| m.triangles.len()).sum();
-    let scaled = first_area * count as f64 / budget;
     if (count as f64 - budget).abs() / budget < 0.1 {
         first
     } else {
-        mesh_all(scaled)
+        mesh_all(first_area * count as f64 / budget)
     }
+}
+
+/// The uniform mesher: every polygon refined to one area cap, about `budget` triangles in all.
+pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
+    to_budget(scene, budget, |i, area, cap| {
+        triangulate(i, &scene.polygons[i], area, cap)
+    })
+}
+
+/// The discontinuity mesher: each polygon's discontinuity `segments` as constraints, then the
+/// same refinement as [`uniform`], about `budget` triangles in all. Returns the meshes and the
+/// number of constraint pieces spade refused (should be 0).
+pub fn discontinuity(
+    scene: &Scene,
+    segments: &[Vec<Segment>],
+    budget: usize,
+) -> (Vec<ReceiverMesh>, usize) {
+    let refused = std::sync::atomic::AtomicUsize::new(0);
+    let meshes = to_budget(scene, budget, |i, area, cap| {
+        let (m, r) = triangulate_with(i, &scene.polygons[i], &segments[i], area, cap);
+        refused.fetch_add(r, std::sync::atomic::Ordering::Relaxed);
+        m
+    });
+    (meshes, refused.into_inner())
 }
 
 #[cfg(test)]

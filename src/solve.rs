@@ -1,9 +1,12 @@
 //! Diffuse radiosity at the vertices of the receiver meshes.
 //!
-//! * **Direct light** at every vertex from every emitter: for area emitters the exact unoccluded
-//!   point-to-polygon form factor (Lambert's contour formula, clipped to the receiver's horizon)
-//!   times a visibility fraction from a fixed stratified set of shadow rays; for punctual lights
-//!   the exact term with one shadow ray.
+//! * **Direct light** at every vertex from every emitter. For area emitters, by default
+//!   ([`DirectMethod::Exact`]) the exact point-to-polygon form factor of the part of the emitter
+//!   that the vertex sees, by backprojection ([`crate::backproject`]); with
+//!   [`DirectMethod::Sampled`] (and as the fallback past an occluder cap) the exact unoccluded
+//!   form factor (Lambert's contour formula, clipped to the receiver's horizon) times a
+//!   visibility fraction from a fixed stratified set of shadow rays. Punctual lights: the exact
+//!   term with one shadow ray.
 //! * **Indirect light** by progressive refinement (Cohen, Chen, Wallace, Greenberg, "A progressive
 //!   refinement approach to fast radiosity image generation", SIGGRAPH 1988) over coarse patches,
 //!   with ray-cast form factors (Wallace, Elmquist, Haines, "A ray tracing algorithm for
@@ -16,6 +19,7 @@
 //! channel. `B = M + rho H`. Everything is deterministic: fixed sample patterns, and every
 //! parallel loop writes its own output slot.
 
+use crate::backproject::{self, EmitterShape, Limits, Occluders, Shaft};
 use crate::mesh::ReceiverMesh;
 use crate::scene::{LightKind, PunctualLight, Scene};
 use crate::visibility::Visibility;
@@ -23,12 +27,33 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+/// How the direct light of area emitters is computed (`--direct`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DirectMethod {
+    /// The exact form factor of the visible part of each emitter, by backprojection: occluders
+    /// projected through the point onto the emitter and subtracted from it.
+    #[default]
+    Exact,
+    /// The exact unoccluded form factor times a visibility fraction from a fixed set of
+    /// stratified shadow rays (`shadow_samples` per point and emitter).
+    Sampled,
+}
 
 /// Options of the solve.
 #[derive(Clone, Debug)]
 pub struct SolveOptions {
-    /// Shadow rays per vertex and area emitter for the visibility fraction.
+    /// How area emitters light the vertices.
+    pub direct: DirectMethod,
+    /// Shadow rays per vertex and area emitter for the visibility fraction (sampled direct
+    /// light, and the exact method's fallback).
     pub shadow_samples: usize,
+    /// Exact direct light: when more than this many occluders project onto an emitter from one
+    /// point, that emitter's light at that point is sampled instead (counted in
+    /// [`DirectStats::fallbacks`]).
+    pub occluder_cap: usize,
     /// Number of light bounces after the direct light (`Some(0)`: direct only); `None` iterates
     /// until the unshot power is below `tolerance` of the power first received.
     pub bounces: Option<u32>,
@@ -41,7 +66,9 @@ pub struct SolveOptions {
 impl Default for SolveOptions {
     fn default() -> Self {
         SolveOptions {
+            direct: DirectMethod::Exact,
             shadow_samples: 64,
+            occluder_cap: Limits::default().max_occluders,
             bounces: None,
             patches: 1024,
             tolerance: 1e-3,
@@ -74,6 +101,45 @@ pub struct SolveStats {
     pub direct_power: f64,
     /// Power absorbed by all patches, W (mean over RGB).
     pub absorbed_power: f64,
+    /// The direct light at the mesh vertices.
+    pub direct: DirectStats,
+}
+
+/// Counters of the direct light at the mesh vertices (`--stats`: `solve.direct`).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct DirectStats {
+    pub method: DirectMethod,
+    /// Wall time of the direct light at the vertices, s.
+    pub seconds: f64,
+    /// (vertex, area emitter) pairs with the emitter above the vertex's horizon.
+    pub evaluations: u64,
+    /// Exact method: pairs that fell back to shadow rays (occluders over `occluder_cap`, or
+    /// too many visible pieces).
+    pub fallbacks: u64,
+    pub occluder_cap: usize,
+    /// Exact method: occluders clipped and subtracted, summed over pairs, and the most at one
+    /// pair.
+    pub occluders: u64,
+    pub occluders_max: u64,
+    /// Exact method: the most convex pieces the visible part of an emitter was cut into.
+    pub pieces_max: u64,
+    /// Cost per area emitter.
+    pub emitters: Vec<EmitterCost>,
+}
+
+/// What one area emitter cost in the direct light at the vertices.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct EmitterCost {
+    /// Index into [`Scene::polygons`].
+    pub polygon: usize,
+    /// Triangles of the emitter polygon and the convex pieces they were merged into.
+    pub triangles: usize,
+    pub convex_pieces: usize,
+    pub evaluations: u64,
+    pub occluders: u64,
+    pub fallbacks: u64,
+    /// Time spent on this emitter, summed over threads, s.
+    pub seconds: f64,
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -191,6 +257,9 @@ pub struct AreaEmitter {
     pub normal: DVec3,
     /// The polygon's triangles, world space.
     pub triangles: Vec<[DVec3; 3]>,
+    /// The polygon merged into convex pieces in its plane, for the form factors and the
+    /// backprojection.
+    pub shape: EmitterShape,
     /// Sample sets, each a stratified set of points with their area (the areas of a set sum to
     /// the emitter's area): `samples[0]` has the full count, each next set half as many.
     pub samples: Vec<Vec<(DVec3, f64)>>,
@@ -263,6 +332,7 @@ impl AreaEmitter {
                     polygon: id,
                     radiance: scene.materials[poly.material].radiance,
                     normal: poly.frame.n,
+                    shape: EmitterShape::new(poly.frame, &poly.triangles_plane),
                     triangles,
                     samples: sets,
                     center,
@@ -272,83 +342,369 @@ impl AreaEmitter {
             .collect()
     }
 
-    /// Unoccluded form factor from `(p, n)` to the emitter's front face.
+    /// Unoccluded form factor from `(p, n)` to the emitter's front face: Lambert's contour
+    /// formula over its convex pieces, clipped to the horizon of `p`.
     pub fn form_factor(&self, p: DVec3, n: DVec3) -> f64 {
-        // Front face only: the receiver must be in front of the emitter's plane.
-        if self.normal.dot(p - self.triangles[0][0]) <= 0.0 {
-            return 0.0;
-        }
-        self.triangles
-            .iter()
-            .map(|t| point_polygon_form_factor(p, n, t))
-            .sum()
+        self.shape.form_factor(p, n)
     }
 }
 
+/// Per-emitter counters of a [`Direct`].
+#[derive(Default)]
+struct EmitterCounters {
+    evaluations: AtomicU64,
+    occluders: AtomicU64,
+    fallbacks: AtomicU64,
+    nanos: AtomicU64,
+}
+
+/// Counters of one call, added to the shared ones at its end.
+#[derive(Default)]
+struct Tally {
+    evaluations: u64,
+    fallbacks: u64,
+    occluders: u64,
+    occluders_max: u64,
+    pieces_max: u64,
+    rays: u64,
+}
+
 /// Direct irradiance at a surface point: the light of every emitter and punctual light.
+///
+/// With [`DirectMethod::Exact`], [`Direct::irradiance_points`] evaluates the points of one
+/// receiver together: per emitter, the occluders in the box around the points and the emitter
+/// come from the BVH once, then a kd-tree over the points culls them with the shaft (convex
+/// hull) of each cluster and the emitter, down to clusters of a few points, so each point clips
+/// only the occluders near its own view of the emitter.
 pub struct Direct<'a> {
     pub scene: &'a Scene,
     pub vis: &'a Visibility,
     pub emitters: Vec<AreaEmitter>,
     pub rays: AtomicU64,
+    pub method: DirectMethod,
+    /// Caps of the exact method, past which it falls back to shadow rays.
+    pub limits: Limits,
+    /// The scene's polygons in convex pieces (exact method only; empty otherwise).
+    pub occluders: Occluders,
+    evaluations: AtomicU64,
+    fallbacks: AtomicU64,
+    occluder_total: AtomicU64,
+    occluders_max: AtomicU64,
+    pieces_max: AtomicU64,
+    per_emitter: Vec<EmitterCounters>,
 }
 
+/// Points per leaf of the cluster tree of [`Direct::irradiance_points`].
+const CLUSTER_LEAF: usize = 12;
+
 impl<'a> Direct<'a> {
+    /// Exact direct light, with `shadow_samples` rays for the fallback.
     pub fn new(scene: &'a Scene, vis: &'a Visibility, shadow_samples: usize) -> Direct<'a> {
+        Direct::with_options(
+            scene,
+            vis,
+            &SolveOptions {
+                shadow_samples,
+                ..SolveOptions::default()
+            },
+        )
+    }
+
+    /// Direct light as `options` asks (`direct`, `shadow_samples`, `occluder_cap`).
+    pub fn with_options(
+        scene: &'a Scene,
+        vis: &'a Visibility,
+        options: &SolveOptions,
+    ) -> Direct<'a> {
+        let emitters = AreaEmitter::all(scene, options.shadow_samples);
+        let occluders = match options.direct {
+            DirectMethod::Exact => Occluders::new(scene),
+            DirectMethod::Sampled => Occluders::default(),
+        };
         Direct {
             scene,
             vis,
-            emitters: AreaEmitter::all(scene, shadow_samples),
+            per_emitter: emitters
+                .iter()
+                .map(|_| EmitterCounters::default())
+                .collect(),
+            emitters,
             rays: AtomicU64::new(0),
+            method: options.direct,
+            limits: Limits {
+                max_occluders: options.occluder_cap,
+                ..Limits::default()
+            },
+            occluders,
+            evaluations: AtomicU64::new(0),
+            fallbacks: AtomicU64::new(0),
+            occluder_total: AtomicU64::new(0),
+            occluders_max: AtomicU64::new(0),
+            pieces_max: AtomicU64::new(0),
         }
     }
 
     /// Irradiance H (W/m²) at a receiving point.
     pub fn irradiance(&self, at: &SurfacePoint) -> DVec3 {
+        match self.method {
+            DirectMethod::Sampled => self.irradiance_sampled(at),
+            DirectMethod::Exact => self.irradiance_points(std::slice::from_ref(at))[0],
+        }
+    }
+
+    /// Irradiance H (W/m²) at each of `points`, best called with the points of one receiver
+    /// polygon (a mesh's vertices): the exact method shares the occluder search between
+    /// neighbouring points. The result of each point does not depend on the others, up to
+    /// rounding in rare near-degenerate cases; it is deterministic for given `points`.
+    pub fn irradiance_points(&self, points: &[SurfacePoint]) -> Vec<DVec3> {
+        if self.method == DirectMethod::Sampled {
+            return points.iter().map(|p| self.irradiance_sampled(p)).collect();
+        }
+        let mut h = vec![DVec3::ZERO; points.len()];
+        let mut tally = Tally::default();
+        let mut scale = vec![0.0; points.len()];
+        for (ei, e) in self.emitters.iter().enumerate() {
+            let start = Instant::now();
+            let before = (tally.evaluations, tally.occluders, tally.fallbacks);
+            let f_un: Vec<f64> = points.iter().map(|q| e.form_factor(q.p, q.n)).collect();
+            let mut active: Vec<usize> = (0..points.len()).filter(|&i| f_un[i] > 0.0).collect();
+            if active.is_empty() {
+                continue;
+            }
+            // Candidate occluders: the BVH's triangles in the box around the points and the
+            // emitter, as convex pieces, without the emitter itself.
+            let hull = e.shape.hull_world();
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for q in active
+                .iter()
+                .map(|&i| points[i].p)
+                .chain(hull.iter().copied())
+            {
+                lo = lo.min(q);
+                hi = hi.max(q);
+            }
+            let mut tris = Vec::new();
+            self.vis.triangles_overlapping(lo, hi, &mut tris);
+            let mut candidates: Vec<u32> = tris
+                .iter()
+                .map(|&t| self.occluders.piece_of_triangle[t])
+                .filter(|&k| {
+                    k != u32::MAX && self.occluders.pieces[k as usize].polygon != e.polygon
+                })
+                .collect();
+            candidates.sort_unstable();
+            candidates.dedup();
+            self.exact_cluster(
+                e,
+                &hull,
+                points,
+                &mut active,
+                &candidates,
+                &f_un,
+                &mut scale,
+                &mut tally,
+            );
+            for &i in &active {
+                h[i] += e.radiance * scale[i];
+            }
+            let c = &self.per_emitter[ei];
+            c.evaluations
+                .fetch_add(tally.evaluations - before.0, Ordering::Relaxed);
+            c.occluders
+                .fetch_add(tally.occluders - before.1, Ordering::Relaxed);
+            c.fallbacks
+                .fetch_add(tally.fallbacks - before.2, Ordering::Relaxed);
+            c.nanos
+                .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        }
+        for (pt, h) in points.iter().zip(&mut h) {
+            for light in &self.scene.lights {
+                let (value, r) = punctual_irradiance(light, self.vis, pt);
+                *h += value;
+                tally.rays += r;
+            }
+        }
+        self.rays.fetch_add(tally.rays, Ordering::Relaxed);
+        self.evaluations
+            .fetch_add(tally.evaluations, Ordering::Relaxed);
+        self.fallbacks.fetch_add(tally.fallbacks, Ordering::Relaxed);
+        self.occluder_total
+            .fetch_add(tally.occluders, Ordering::Relaxed);
+        self.occluders_max
+            .fetch_max(tally.occluders_max, Ordering::Relaxed);
+        self.pieces_max
+            .fetch_max(tally.pieces_max, Ordering::Relaxed);
+        h
+    }
+
+    /// Exact light of emitter `e` at the points `idx`: culls `candidates` with the shaft of the
+    /// points and the emitter, then splits the points in two along their widest axis, down to
+    /// [`CLUSTER_LEAF`] points. Writes `pi F_visible` of each point into `scale`.
+    #[allow(clippy::too_many_arguments)]
+    fn exact_cluster(
+        &self,
+        e: &AreaEmitter,
+        hull: &[DVec3],
+        points: &[SurfacePoint],
+        idx: &mut [usize],
+        candidates: &[u32],
+        f_un: &[f64],
+        scale: &mut [f64],
+        tally: &mut Tally,
+    ) {
+        let culled: Vec<u32>;
+        let candidates = if candidates.is_empty() {
+            candidates
+        } else {
+            let shaft = cluster_shaft(points, idx, &e.shape, hull);
+            culled = candidates
+                .iter()
+                .copied()
+                .filter(|&k| !shaft.excludes(&self.occluders.pieces[k as usize].vertices))
+                .collect();
+            &culled
+        };
+        if idx.len() <= CLUSTER_LEAF || candidates.is_empty() {
+            for &i in idx.iter() {
+                scale[i] = self.exact_at(e, &points[i], f_un[i], candidates, tally);
+            }
+            return;
+        }
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for &i in idx.iter() {
+            lo = lo.min(points[i].p);
+            hi = hi.max(points[i].p);
+        }
+        let d = hi - lo;
+        let axis = if d.x >= d.y && d.x >= d.z {
+            0
+        } else if d.y >= d.z {
+            1
+        } else {
+            2
+        };
+        idx.sort_unstable_by(|&a, &b| {
+            points[a].p[axis]
+                .total_cmp(&points[b].p[axis])
+                .then(a.cmp(&b))
+        });
+        let (left, right) = idx.split_at_mut(idx.len() / 2);
+        self.exact_cluster(e, hull, points, left, candidates, f_un, scale, tally);
+        self.exact_cluster(e, hull, points, right, candidates, f_un, scale, tally);
+    }
+
+    /// `pi F` of the visible part of `e` at one point, from the occluder pieces `candidates`
+    /// (the point's own polygon left out); shadow rays past the caps.
+    fn exact_at(
+        &self,
+        e: &AreaEmitter,
+        at: &SurfacePoint,
+        f_unoccluded: f64,
+        candidates: &[u32],
+        tally: &mut Tally,
+    ) -> f64 {
+        tally.evaluations += 1;
+        if candidates.is_empty() {
+            return PI * f_unoccluded;
+        }
+        let pieces = &self.occluders.pieces;
+        let occluders = candidates
+            .iter()
+            .map(|&k| &pieces[k as usize])
+            .filter(|piece| piece.polygon != at.polygon)
+            .map(|piece| piece.vertices.as_slice());
+        let r = backproject::visible_form_factor(at.p, at.n, &e.shape, occluders, &self.limits);
+        tally.occluders += r.occluders as u64;
+        tally.occluders_max = tally.occluders_max.max(r.occluders as u64);
+        tally.pieces_max = tally.pieces_max.max(r.pieces as u64);
+        match r.form_factor {
+            // Nothing in the way: the same value as the sampled method's unoccluded one.
+            Some(_) if r.occluders == 0 => PI * f_unoccluded,
+            Some(f) => PI * f,
+            None => {
+                tally.fallbacks += 1;
+                let total = self.total_weight(at);
+                let (visible, rays) = self.sampled_visibility(e, f_unoccluded, total, at);
+                tally.rays += rays;
+                PI * f_unoccluded * visible
+            }
+        }
+    }
+
+    /// Sum over the emitters of the unoccluded form factor times the summed radiance: how the
+    /// sampled method shares its shadow rays between emitters.
+    fn total_weight(&self, at: &SurfacePoint) -> f64 {
+        self.emitters
+            .iter()
+            .map(|e| e.form_factor(at.p, at.n) * e.radiance.element_sum())
+            .sum()
+    }
+
+    /// Visibility fraction of `e` from `at` by shadow rays: the emitter's share (`f` x radiance
+    /// out of `total`) of its sample count, at least one set; each ray weighted by its
+    /// form-factor kernel. Returns the fraction and the rays cast.
+    fn sampled_visibility(
+        &self,
+        e: &AreaEmitter,
+        f: f64,
+        total: f64,
+        at: &SurfacePoint,
+    ) -> (f64, u64) {
+        let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
+        let mut rays = 0;
+        let wanted =
+            e.samples[0].len() as f64 * f * e.radiance.element_sum() / total.max(f64::MIN_POSITIVE);
+        let mut level = 0;
+        while level + 1 < e.samples.len() && e.samples[level + 1].len() as f64 >= wanted {
+            level += 1;
+        }
+        let mut seen = 0.0;
+        let mut all = 0.0;
+        for &(s, a) in &e.samples[level] {
+            let d = s - p;
+            let r2 = d.length_squared();
+            let cos_r = n.dot(d);
+            let cos_e = -e.normal.dot(d);
+            if cos_r <= 0.0 || cos_e <= 0.0 {
+                continue;
+            }
+            let w = a * cos_r * cos_e / (r2 * r2);
+            all += w;
+            rays += 1;
+            if !self
+                .vis
+                .occluded_skipping(p_ray, s, [at.polygon, e.polygon])
+            {
+                seen += w;
+            }
+        }
+        // When every sample is below the horizon the sliver that remains is taken as seen.
+        (if all > 0.0 { seen / all } else { 1.0 }, rays)
+    }
+
+    /// Sampled direct light at one point: exact unoccluded form factor x visibility fraction
+    /// from shadow rays, spent in proportion to each emitter's contribution (at least one per
+    /// visible emitter), so scenes with many small emitters stay cheap.
+    fn irradiance_sampled(&self, at: &SurfacePoint) -> DVec3 {
         let mut h = DVec3::ZERO;
         let mut rays = 0u64;
-        let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
-        // Unoccluded contribution of every emitter; shadow rays are spent in proportion to it
-        // (at least one per visible emitter), so scenes with many small emitters stay cheap.
+        let (p, n) = (at.p, at.n);
         let unoccluded: Vec<f64> = self.emitters.iter().map(|e| e.form_factor(p, n)).collect();
-        let weight = |e: &AreaEmitter, f: f64| f * e.radiance.element_sum();
         let total: f64 = self
             .emitters
             .iter()
             .zip(&unoccluded)
-            .map(|(e, &f)| weight(e, f))
+            .map(|(e, &f)| f * e.radiance.element_sum())
             .sum();
-        for (e, &f) in self.emitters.iter().zip(&unoccluded) {
+        let mut evaluations = 0;
+        for ((e, &f), c) in self.emitters.iter().zip(&unoccluded).zip(&self.per_emitter) {
             if f <= 0.0 {
                 continue;
             }
-            let wanted = e.samples[0].len() as f64 * weight(e, f) / total.max(f64::MIN_POSITIVE);
-            let mut level = 0;
-            while level + 1 < e.samples.len() && e.samples[level + 1].len() as f64 >= wanted {
-                level += 1;
-            }
-            let mut seen = 0.0;
-            let mut all = 0.0;
-            for &(s, a) in &e.samples[level] {
-                let d = s - p;
-                let r2 = d.length_squared();
-                let cos_r = n.dot(d);
-                let cos_e = -e.normal.dot(d);
-                if cos_r <= 0.0 || cos_e <= 0.0 {
-                    continue;
-                }
-                let w = a * cos_r * cos_e / (r2 * r2);
-                all += w;
-                rays += 1;
-                if !self
-                    .vis
-                    .occluded_skipping(p_ray, s, [at.polygon, e.polygon])
-                {
-                    seen += w;
-                }
-            }
-            // When every sample is below the horizon the sliver that remains is taken as seen.
-            let visible = if all > 0.0 { seen / all } else { 1.0 };
+            evaluations += 1;
+            c.evaluations.fetch_add(1, Ordering::Relaxed);
+            let (visible, r) = self.sampled_visibility(e, f, total, at);
+            rays += r;
             h += e.radiance * (PI * f * visible);
         }
         for light in &self.scene.lights {
@@ -356,9 +712,90 @@ impl<'a> Direct<'a> {
             h += value;
             rays += r;
         }
+        self.evaluations.fetch_add(evaluations, Ordering::Relaxed);
         self.rays.fetch_add(rays, Ordering::Relaxed);
         h
     }
+
+    /// The counters so far (all calls since [`Direct::new`]); `seconds` is left at 0.
+    pub fn stats(&self) -> DirectStats {
+        let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        DirectStats {
+            method: self.method,
+            seconds: 0.0,
+            evaluations: load(&self.evaluations),
+            fallbacks: load(&self.fallbacks),
+            occluder_cap: self.limits.max_occluders,
+            occluders: load(&self.occluder_total),
+            occluders_max: load(&self.occluders_max),
+            pieces_max: load(&self.pieces_max),
+            emitters: self
+                .emitters
+                .iter()
+                .zip(&self.per_emitter)
+                .map(|(e, c)| EmitterCost {
+                    polygon: e.polygon,
+                    triangles: e.triangles.len(),
+                    convex_pieces: e.shape.pieces.len(),
+                    evaluations: load(&c.evaluations),
+                    occluders: load(&c.occluders),
+                    fallbacks: load(&c.fallbacks),
+                    seconds: load(&c.nanos) as f64 * 1e-9,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// The shaft of a cluster of points and an emitter: the convex hull of the points' bounding
+/// box (a rectangle when they are coplanar) and the emitter's hull (its bounding rectangle when
+/// the hull has many corners), plus the emitter's plane and, for points of one plane, their
+/// horizon.
+fn cluster_shaft(
+    points: &[SurfacePoint],
+    idx: &[usize],
+    shape: &EmitterShape,
+    hull: &[DVec3],
+) -> Shaft {
+    let first = &points[idx[0]];
+    let n0 = first.n;
+    let u = n0.any_orthonormal_vector();
+    let v = n0.cross(u);
+    let o = first.p;
+    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+    let mut one_normal = true;
+    for &i in idx {
+        let d = points[i].p - o;
+        let q = DVec3::new(d.dot(u), d.dot(v), d.dot(n0));
+        lo = lo.min(q);
+        hi = hi.max(q);
+        one_normal &= points[i].n == n0;
+    }
+    let extent = (hi - lo).max_element();
+    let flat = hi.z - lo.z <= 1e-9 * extent;
+    let mut corners: Vec<DVec3> = Vec::with_capacity(16);
+    for k in 0..if flat { 4 } else { 8 } {
+        let x = if k & 1 == 0 { lo.x } else { hi.x };
+        let y = if k & 2 == 0 { lo.y } else { hi.y };
+        let z = if flat || k & 4 == 0 { lo.z } else { hi.z };
+        corners.push(o + u * x + v * y + n0 * z);
+    }
+    if hull.len() <= 8 {
+        corners.extend_from_slice(hull);
+    } else {
+        let (a, b) = shape.hull.iter().fold(
+            (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+            |(a, b), q| (a.min(*q), b.max(*q)),
+        );
+        for q in [a, DVec2::new(b.x, a.y), b, DVec2::new(a.x, b.y)] {
+            corners.push(shape.frame.world_from_plane(q));
+        }
+    }
+    let mut shaft = Shaft::hull(&corners).with_plane(-shape.frame.n, shape.frame.origin);
+    if flat && one_normal {
+        shaft = shaft.with_plane(-n0, o + n0 * hi.z);
+    }
+    shaft
 }
 
 /// Irradiance from one punctual light at a receiving point, and the rays it cast. Point and spot: `I cos(theta) / d^2` with glTF's
@@ -719,6 +1156,29 @@ fn evaluation_points(scene: &Scene, vis: &Visibility, mesh: &ReceiverMesh) -> Ve
         .collect()
 }
 
+/// Direct irradiance H (W/m², linear RGB) at every vertex of `meshes`, one mesh per task: the
+/// vertices of one receiver are evaluated together ([`Direct::irradiance_points`]).
+pub fn direct_light(
+    scene: &Scene,
+    vis: &Visibility,
+    direct: &Direct<'_>,
+    meshes: &[ReceiverMesh],
+    progress: &crate::stats::Progress<'_>,
+) -> Vec<Vec<DVec3>> {
+    let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
+    let done = AtomicU64::new(0);
+    meshes
+        .par_iter()
+        .map(|m| {
+            let pts = evaluation_points(scene, vis, m);
+            let out = direct.irradiance_points(&pts);
+            let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
+            progress("direct light", d + m.vertices.len() as u64, total_vertices);
+            out
+        })
+        .collect()
+}
+
 /// Solves direct and indirect light at every vertex of `meshes`.
 pub fn radiosity(
     scene: &Scene,
@@ -727,22 +1187,15 @@ pub fn radiosity(
     options: &SolveOptions,
     progress: &crate::stats::Progress<'_>,
 ) -> Solution {
-    let direct = Direct::new(scene, vis, options.shadow_samples);
+    let direct = Direct::with_options(scene, vis, options);
     let mut stats = SolveStats::default();
 
     // Direct light at the vertices.
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
-    let done = AtomicU64::new(0);
-    let direct_h: Vec<Vec<DVec3>> = meshes
-        .par_iter()
-        .map(|m| {
-            let pts = evaluation_points(scene, vis, m);
-            let out = pts.iter().map(|p| direct.irradiance(p)).collect();
-            let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
-            progress("direct light", d + m.vertices.len() as u64, total_vertices);
-            out
-        })
-        .collect();
+    let start = Instant::now();
+    let direct_h = direct_light(scene, vis, &direct, meshes, progress);
+    stats.direct = direct.stats();
+    stats.direct.seconds = start.elapsed().as_secs_f64();
 
     let irradiance = if options.bounces == Some(0) {
         direct_h.clone()

@@ -12,6 +12,7 @@ pub type Progress<'a> = dyn Fn(&str, u64, u64) + Sync + 'a;
 pub struct Timings {
     pub load: f64,
     pub visibility: f64,
+    pub discontinuity: f64,
     pub mesh: f64,
     pub solve: f64,
     pub atlas: f64,
@@ -33,6 +34,8 @@ pub struct Stats {
     pub punctual_lights: usize,
     pub elements: usize,
     pub vertices: usize,
+    /// Discontinuity meshing counters (only with `--mesher discontinuity`).
+    pub discontinuity: Option<crate::discontinuity::DmStats>,
     pub solve: crate::solve::SolveStats,
     pub lightmap_width: u32,
     pub lightmap_height: u32,

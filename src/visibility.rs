@@ -7,7 +7,7 @@
 
 use crate::scene::Scene;
 use glam::{DVec3, Vec3A};
-use obvhs::{BvhBuildParams, bvh2::Bvh2, ray::Ray, ray::RayHit, triangle::Triangle};
+use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::Bvh2, ray::Ray, ray::RayHit, triangle::Triangle};
 
 /// A BVH over the scene's triangles.
 pub struct Visibility {
@@ -174,6 +174,52 @@ impl Visibility {
         })
     }
 
+    /// Appends to `out` the scene triangles whose bounding boxes overlap the box `[min, max]`
+    /// grown by `epsilon` (so f32 storage never loses one), then sorts `out` and removes
+    /// duplicates. Conservative: every triangle that meets the box is listed, and some that do
+    /// not.
+    pub fn triangles_overlapping(&self, min: DVec3, max: DVec3, out: &mut Vec<usize>) {
+        if !self.tris.is_empty() {
+            let pad = DVec3::splat(self.eps);
+            let query = Aabb::new(
+                Vec3A::from((min - self.center - pad).as_vec3()),
+                Vec3A::from((max - self.center + pad).as_vec3()),
+            );
+            let tris = &self.tris;
+            let ids = &self.ids;
+            self.bvh.aabb_traverse(query, |bvh, node| {
+                let node = &bvh.nodes[node as usize];
+                for k in node.first_index..node.first_index + node.prim_count {
+                    let k = k as usize;
+                    if query.intersect_aabb(&tris[k].aabb()) {
+                        out.push(ids[k]);
+                    }
+                }
+                true
+            });
+        }
+        out.sort_unstable();
+        out.dedup();
+    }
+
+    /// Brute force [`Visibility::triangles_overlapping`] (for tests).
+    pub fn triangles_overlapping_brute_force(&self, min: DVec3, max: DVec3) -> Vec<usize> {
+        let pad = DVec3::splat(self.eps);
+        let query = Aabb::new(
+            Vec3A::from((min - self.center - pad).as_vec3()),
+            Vec3A::from((max - self.center + pad).as_vec3()),
+        );
+        let mut out: Vec<usize> = self
+            .tris
+            .iter()
+            .zip(&self.ids)
+            .filter(|(t, _)| query.intersect_aabb(&t.aabb()))
+            .map(|(_, &i)| i)
+            .collect();
+        out.sort_unstable();
+        out
+    }
+
     /// Brute force closest hit over all triangles (for tests).
     pub fn first_hit_brute_force(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit> {
         let ray = self.ray(origin, dir, self.eps, tmax);
@@ -271,6 +317,23 @@ mod tests {
             }
             assert!(hits > 300, "too few hits to be a test: {hits}");
         }
+    }
+
+    #[test]
+    fn box_query_agrees_with_brute_force() {
+        let mut rng = SplitMix(3);
+        let scene = random_scene(&mut rng, 400, DVec3::new(50.0, 0.0, -20.0));
+        let vis = Visibility::new(&scene);
+        let mut total = 0;
+        for _ in 0..200 {
+            let a = rng.vec(-7.0, 7.0) + DVec3::new(50.0, 0.0, -20.0);
+            let b = a + rng.vec(0.0, 3.0);
+            let mut got = Vec::new();
+            vis.triangles_overlapping(a, b, &mut got);
+            assert_eq!(got, vis.triangles_overlapping_brute_force(a, b));
+            total += got.len();
+        }
+        assert!(total > 200, "too few hits to be a test: {total}");
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! Integration tests: one binary, one module per concern.
 
 mod bad_input;
+mod direct;
+mod discontinuity;
 mod fixtures;
 mod known_answers;
 mod loading;

@@ -1,0 +1,890 @@
+//! Discontinuity segments: where the illumination of each receiver polygon, or one of its
+//! derivatives, is discontinuous (Heckbert, "Discontinuity meshing for radiosity", 1992;
+//! Lischinski, Tampieri, Greenberg, "Discontinuity meshing for accurate radiosity", 1992).
+//!
+//! * **D0**: where a surface touches or crosses a receiver (a box standing on a floor), the
+//!   contact segment. Always kept: it stops light leaking under the box.
+//! * **VE / EV wedges** of every area emitter: an emitter vertex with an occluder edge, and an
+//!   emitter edge with an occluder vertex, kept when the wedge is tangent to the occluder
+//!   (silhouette edge or vertex) and has the whole emitter on one side (the extremal events that
+//!   bound umbra and penumbra). EEE events are not traced.
+//! * **Punctual lights**: the hard shadow boundaries of silhouette edges (central projection for
+//!   point and spot lights, parallel projection for directional lights).
+//!
+//! Each wedge is intersected with the receivers its bounding box reaches, clipped to the wedge and
+//! to the receiver's triangles, and only the pieces whose generator is really visible from the
+//! receiver and from the emitter are kept (shadow rays at sample points, transitions bisected to
+//! 1e-6 of the scene extent). Pieces are ranked by significance, the share of the receiver's
+//! unoccluded irradiance that the wedge's emitter carries at the piece; pieces under the
+//! threshold are dropped, and the weakest go first when the element budget would be exceeded.
+
+use crate::scene::{LightKind, Scene};
+use crate::visibility::Visibility;
+use glam::{DVec2, DVec3, Vec3A};
+use obvhs::aabb::Aabb;
+use rayon::prelude::*;
+use std::collections::BTreeMap;
+
+/// What made a discontinuity segment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+pub enum Kind {
+    /// A surface touching or crossing the receiver (value discontinuity).
+    D0,
+    /// Emitter vertex x occluder edge.
+    Ve,
+    /// Emitter edge x occluder vertex.
+    Ev,
+    /// Silhouette edge of a punctual light.
+    Punctual,
+}
+
+/// A discontinuity segment on one receiver polygon, in its plane coordinates.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Segment {
+    pub a: DVec2,
+    pub b: DVec2,
+    pub kind: Kind,
+    /// Id of the event (wedge or contact) that made it; unique within one [`segments`] call.
+    pub event: u32,
+    /// Share (0..1) of the unoccluded irradiance at the segment carried by the wedge's light;
+    /// 1 for D0.
+    pub significance: f64,
+}
+
+/// Options of the discontinuity stage.
+#[derive(Clone, Debug)]
+pub struct DmOptions {
+    /// Pieces whose significance is below this are dropped.
+    pub threshold: f64,
+    /// At most this many wedge pieces are kept over the scene (the most significant).
+    pub max_pieces: usize,
+}
+
+/// Counters, reported in `--stats`.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct DmStats {
+    /// Wedges traced (tangent to the occluder, emitter on one side).
+    pub wedges: usize,
+    /// D0 (contact) segments.
+    pub d0: usize,
+    /// Wedge pieces kept as constraints.
+    pub kept: usize,
+    /// Wedge pieces whose generator was hidden.
+    pub hidden: usize,
+    /// Wedge pieces below the significance threshold.
+    pub dropped_threshold: usize,
+    /// Wedge pieces dropped to stay within the element budget.
+    pub dropped_budget: usize,
+    /// Constraint pieces spade refused (they would have crossed another; should be 0).
+    pub refused: usize,
+}
+
+/// A convex region in a plane, given by half-spaces `m·(x - c) >= 0` (m in the plane).
+struct Wedge {
+    kind: Kind,
+    /// A point of the wedge plane and its unit normal.
+    origin: DVec3,
+    normal: DVec3,
+    half_spaces: Vec<(DVec3, DVec3)>,
+    /// Points whose bounding box (clipped to the scene) contains the wedge.
+    hull: Vec<DVec3>,
+    /// The light it belongs to (area emitter polygon or punctual light index).
+    light: Light,
+    /// The generator: emitter point or light position, and the occluder edge or vertex.
+    generator: Generator,
+    /// Polygons that never receive this wedge (the emitter and the occluder feature's own).
+    skip: Vec<usize>,
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Light {
+    Area(usize),
+    Punctual(usize),
+}
+
+#[derive(Clone, Copy, Debug)]
+enum Generator {
+    /// Emitter vertex (or point light) `v`, occluder edge `a-b`.
+    VertexEdge { v: DVec3, a: DVec3, b: DVec3 },
+    /// Emitter edge `e0-e1`, occluder vertex `w`.
+    EdgeVertex { e0: DVec3, e1: DVec3, w: DVec3 },
+    /// Direction `d` the light travels, occluder edge `a-b`.
+    DirectionEdge { d: DVec3, a: DVec3, b: DVec3 },
+}
+
+/// Mesh connectivity of the whole scene with vertices welded by exact position.
+struct Topology {
+    /// Welded vertex positions.
+    points: Vec<DVec3>,
+    /// Edge (welded ids, low first) -> the triangles using it.
+    edges: BTreeMap<(u32, u32), Vec<usize>>,
+    /// Welded id -> neighbouring welded ids, sorted.
+    neighbours: Vec<Vec<u32>>,
+    /// Welded id -> polygons of the triangles using it, sorted.
+    vertex_polygons: Vec<Vec<usize>>,
+}
+
+impl Topology {
+    fn new(scene: &Scene) -> Topology {
+        let mut ids: BTreeMap<[u64; 3], u32> = BTreeMap::new();
+        let mut points = Vec::new();
+        let mut edges: BTreeMap<(u32, u32), Vec<usize>> = BTreeMap::new();
+        let mut corner_ids = Vec::with_capacity(scene.triangles.len());
+        for t in &scene.triangles {
+            let c = t.p.map(|p| {
+                let key = [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()];
+                *ids.entry(key).or_insert_with(|| {
+                    points.push(p);
+                    (points.len() - 1) as u32
+                })
+            });
+            corner_ids.push(c);
+        }
+        let mut neighbours = vec![Vec::new(); points.len()];
+        let mut vertex_polygons = vec![Vec::new(); points.len()];
+        for (i, (t, c)) in scene.triangles.iter().zip(&corner_ids).enumerate() {
+            let Some(poly) = t.polygon else { continue };
+            for e in 0..3 {
+                let (a, b) = (c[e], c[(e + 1) % 3]);
+                edges.entry((a.min(b), a.max(b))).or_default().push(i);
+                neighbours[a as usize].push(b);
+                neighbours[b as usize].push(a);
+                vertex_polygons[a as usize].push(poly);
+            }
+        }
+        for n in &mut neighbours {
+            n.sort_unstable();
+            n.dedup();
+        }
+        for p in &mut vertex_polygons {
+            p.sort_unstable();
+            p.dedup();
+        }
+        Topology {
+            points,
+            edges,
+            neighbours,
+            vertex_polygons,
+        }
+    }
+}
+
+/// True when the faces at an edge are seen from different sides from `eye` (or the edge has one
+/// face): a silhouette edge. `facing(t)` tells whether triangle `t` faces the eye.
+fn is_silhouette(faces: &[usize], facing: impl Fn(usize) -> i8) -> bool {
+    if faces.len() == 1 {
+        return true;
+    }
+    let s: Vec<i8> = faces.iter().map(|&t| facing(t)).collect();
+    s.iter().any(|&x| x > 0) && s.iter().any(|&x| x < 0)
+}
+
+fn sign(x: f64, tol: f64) -> i8 {
+    if x > tol {
+        1
+    } else if x < -tol {
+        -1
+    } else {
+        0
+    }
+}
+
+/// Half-space through `c` with normal `m`, flipped so that `inside` is in it.
+fn half_space(c: DVec3, m: DVec3, inside: DVec3) -> (DVec3, DVec3) {
+    if m.dot(inside - c) >= 0.0 {
+        (c, m)
+    } else {
+        (c, -m)
+    }
+}
+
+/// Per receiver polygon: its discontinuity segments.
+pub fn segments(
+    scene: &Scene,
+    vis: &Visibility,
+    options: &DmOptions,
+) -> (Vec<Vec<Segment>>, DmStats) {
+    let extent = scene.extent();
+    let tol = 1e-6 * extent;
+    let topo = Topology::new(scene);
+    let index = PolygonIndex::new(scene);
+    let mut stats = DmStats::default();
+
+    // D0: contacts, per receiver.
+    let d0: Vec<Vec<(DVec3, DVec3)>> = (0..scene.polygons.len())
+        .into_par_iter()
+        .map(|r| contacts(scene, &index, r, tol))
+        .collect();
+
+    // Wedges of every light, in a fixed order.
+    let wedges = wedges(scene, &topo, extent, options.threshold);
+    stats.wedges = wedges.len();
+
+    // Intersect each wedge with the receivers it reaches; keep visible pieces.
+    struct Piece {
+        polygon: usize,
+        a: DVec3,
+        b: DVec3,
+        kind: Kind,
+        event: u32,
+        significance: f64,
+    }
+    let traced: Vec<(Vec<Piece>, usize)> = wedges
+        .par_iter()
+        .enumerate()
+        .map(|(event, w)| {
+            let mut out = Vec::new();
+            let mut hidden = 0;
+            for r in index.query(&w.hull) {
+                if w.skip.contains(&r) || !faces_light(scene, r, w) {
+                    continue;
+                }
+                for (a, b) in clip_wedge_to_polygon(scene, r, w, tol) {
+                    for (a, b, visible) in split_by_visibility(scene, vis, r, w, a, b, extent) {
+                        if !visible {
+                            hidden += 1;
+                            continue;
+                        }
+                        let significance =
+                            share(scene, w.light, (a + b) * 0.5, scene.polygons[r].frame.n);
+                        out.push(Piece {
+                            polygon: r,
+                            a,
+                            b,
+                            kind: w.kind,
+                            event: event as u32,
+                            significance,
+                        });
+                    }
+                }
+            }
+            (out, hidden)
+        })
+        .collect();
+    let mut pieces = Vec::new();
+    for (p, h) in traced {
+        pieces.extend(p);
+        stats.hidden += h;
+    }
+    let before = pieces.len();
+    pieces.retain(|p| p.significance >= options.threshold);
+    stats.dropped_threshold = before - pieces.len();
+    if pieces.len() > options.max_pieces {
+        // Most significant first; ties by event and polygon so the order is total.
+        pieces.sort_by(|x, y| {
+            y.significance
+                .total_cmp(&x.significance)
+                .then(x.event.cmp(&y.event))
+                .then(x.polygon.cmp(&y.polygon))
+        });
+        stats.dropped_budget = pieces.len() - options.max_pieces;
+        pieces.truncate(options.max_pieces);
+        pieces.sort_by(|x, y| x.event.cmp(&y.event).then(x.polygon.cmp(&y.polygon)));
+    }
+    stats.kept = pieces.len();
+
+    let mut out: Vec<Vec<Segment>> = vec![Vec::new(); scene.polygons.len()];
+    let first_d0_event = wedges.len() as u32;
+    let mut event = first_d0_event;
+    for (r, segs) in d0.iter().enumerate() {
+        let frame = &scene.polygons[r].frame;
+        for &(a, b) in segs {
+            out[r].push(Segment {
+                a: frame.plane_from_world(a),
+                b: frame.plane_from_world(b),
+                kind: Kind::D0,
+                event,
+                significance: 1.0,
+            });
+            event += 1;
+            stats.d0 += 1;
+        }
+    }
+    for p in pieces {
+        let frame = &scene.polygons[p.polygon].frame;
+        out[p.polygon].push(Segment {
+            a: frame.plane_from_world(p.a),
+            b: frame.plane_from_world(p.b),
+            kind: p.kind,
+            event: p.event,
+            significance: p.significance,
+        });
+    }
+    (out, stats)
+}
+
+/// A BVH over polygon bounding boxes, for "which receivers can this reach" queries.
+struct PolygonIndex {
+    bvh: obvhs::bvh2::Bvh2,
+    boxes: Vec<Aabb>,
+    center: DVec3,
+}
+
+impl PolygonIndex {
+    fn new(scene: &Scene) -> PolygonIndex {
+        let center = (scene.bounds_min + scene.bounds_max) * 0.5;
+        let pad = 1e-5 * scene.extent();
+        let boxes: Vec<Aabb> = scene
+            .polygons
+            .iter()
+            .map(|p| {
+                let pts: Vec<Vec3A> = p
+                    .triangles
+                    .iter()
+                    .flat_map(|&t| scene.triangles[t].p)
+                    .map(|q| Vec3A::from((q - center).as_vec3()))
+                    .collect();
+                let b = Aabb::from_points(&pts);
+                Aabb::new(b.min - pad as f32, b.max + pad as f32)
+            })
+            .collect();
+        let bvh = if boxes.is_empty() {
+            obvhs::bvh2::Bvh2::default()
+        } else {
+            obvhs::bvh2::builder::build_bvh2(
+                &boxes,
+                obvhs::BvhBuildParams::fast_build(),
+                &mut std::time::Duration::default(),
+            )
+        };
+        PolygonIndex { bvh, boxes, center }
+    }
+
+    /// Polygons whose boxes meet the box of `points`, sorted.
+    fn query(&self, points: &[DVec3]) -> Vec<usize> {
+        let pts: Vec<Vec3A> = points
+            .iter()
+            .map(|q| Vec3A::from((*q - self.center).as_vec3()))
+            .collect();
+        let query = Aabb::from_points(&pts);
+        let mut out = Vec::new();
+        self.bvh.aabb_traverse(query, |bvh, node| {
+            let n = &bvh.nodes[node as usize];
+            for i in n.first_index..n.first_index + n.prim_count {
+                let p = bvh.primitive_indices[i as usize] as usize;
+                if self.boxes[p].intersect_aabb(&query) {
+                    out.push(p);
+                }
+            }
+            true
+        });
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+}
+
+/// Contact segments on receiver `r`: other triangles touching, crossing or lying in its plane.
+fn contacts(scene: &Scene, index: &PolygonIndex, r: usize, tol: f64) -> Vec<(DVec3, DVec3)> {
+    let poly = &scene.polygons[r];
+    let frame = &poly.frame;
+    let corners: Vec<DVec3> = poly
+        .triangles
+        .iter()
+        .flat_map(|&t| scene.triangles[t].p)
+        .collect();
+    let mut out = Vec::new();
+    for other in index.query(&corners) {
+        if other == r {
+            continue;
+        }
+        for &t in &scene.polygons[other].triangles {
+            let tri = &scene.triangles[t];
+            let d = tri.p.map(|p| frame.n.dot(p - frame.origin));
+            let mut raw = Vec::new();
+            if d.iter().all(|x| x.abs() <= tol) {
+                // Coplanar: its edges are where a different surface starts.
+                for e in 0..3 {
+                    raw.push((tri.p[e], tri.p[(e + 1) % 3]));
+                }
+            } else if d.iter().any(|&x| x <= tol) && d.iter().any(|&x| x >= -tol) {
+                let mut pts = Vec::new();
+                for e in 0..3 {
+                    let (i, j) = (e, (e + 1) % 3);
+                    if d[i].abs() <= tol {
+                        pts.push(tri.p[i]);
+                    }
+                    if (d[i] < -tol && d[j] > tol) || (d[i] > tol && d[j] < -tol) {
+                        let s = d[i] / (d[i] - d[j]);
+                        pts.push(tri.p[i] + (tri.p[j] - tri.p[i]) * s);
+                    }
+                }
+                // The two farthest apart points span the contact.
+                let mut best = (0.0, DVec3::ZERO, DVec3::ZERO);
+                for i in 0..pts.len() {
+                    for j in i + 1..pts.len() {
+                        let l = pts[i].distance_squared(pts[j]);
+                        if l > best.0 {
+                            best = (l, pts[i], pts[j]);
+                        }
+                    }
+                }
+                if best.0 > tol * tol {
+                    raw.push((best.1, best.2));
+                }
+            }
+            for (a, b) in raw {
+                // Project onto the plane, then keep the part inside the polygon.
+                let a = a - frame.n * frame.n.dot(a - frame.origin);
+                let b = b - frame.n * frame.n.dot(b - frame.origin);
+                out.extend(clip_segment_to_polygon(scene, r, a, b, &[], tol));
+            }
+        }
+    }
+    out
+}
+
+/// Clips the 3D segment `a-b` (in polygon `r`'s plane) to the polygon's triangles and to the
+/// extra half-spaces; returns the pieces, merged where they touch.
+fn clip_segment_to_polygon(
+    scene: &Scene,
+    r: usize,
+    a: DVec3,
+    b: DVec3,
+    half_spaces: &[(DVec3, DVec3)],
+    tol: f64,
+) -> Vec<(DVec3, DVec3)> {
+    let poly = &scene.polygons[r];
+    let n = poly.frame.n;
+    let u = b - a;
+    let clip = |lo: &mut f64, hi: &mut f64, c: DVec3, m: DVec3| {
+        // m·(a + t u - c) >= 0
+        let base = m.dot(a - c);
+        let slope = m.dot(u);
+        if slope.abs() < 1e-300 {
+            if base < 0.0 {
+                *hi = -1.0;
+            }
+        } else {
+            let t = -base / slope;
+            if slope > 0.0 {
+                *lo = lo.max(t);
+            } else {
+                *hi = hi.min(t);
+            }
+        }
+    };
+    let mut lo0 = 0.0;
+    let mut hi0 = 1.0;
+    for &(c, m) in half_spaces {
+        clip(&mut lo0, &mut hi0, c, m);
+    }
+    if hi0 <= lo0 {
+        return Vec::new();
+    }
+    let mut intervals = Vec::new();
+    for &t in &poly.triangles {
+        let p = scene.triangles[t].p;
+        let (mut lo, mut hi) = (lo0, hi0);
+        let centroid = (p[0] + p[1] + p[2]) / 3.0;
+        for e in 0..3 {
+            let edge = p[(e + 1) % 3] - p[e];
+            let (c, m) = half_space(p[e], n.cross(edge), centroid);
+            // Widen by the tolerance so pieces meet across shared triangle edges.
+            let len = m.length();
+            if len == 0.0 {
+                hi = -1.0;
+                break;
+            }
+            let m = m / len;
+            clip(&mut lo, &mut hi, c - m * tol, m);
+        }
+        if hi > lo {
+            intervals.push((lo, hi));
+        }
+    }
+    intervals.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let mut merged: Vec<(f64, f64)> = Vec::new();
+    for (lo, hi) in intervals {
+        match merged.last_mut() {
+            Some(last) if lo <= last.1 => last.1 = last.1.max(hi),
+            _ => merged.push((lo, hi)),
+        }
+    }
+    let len = u.length();
+    merged
+        .into_iter()
+        .filter(|(lo, hi)| (hi - lo) * len > tol)
+        .map(|(lo, hi)| (a + u * lo, a + u * hi))
+        .collect()
+}
+
+/// The wedges of every light, tangent to the occluders, in a fixed order.
+fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<Wedge> {
+    let tol = 1e-9 * extent;
+    let far = 4.0 * extent;
+    let mut out = Vec::new();
+    // Area emitters, strongest first is not needed: significance is judged per piece. Emitters
+    // carrying less than `threshold` of the strongest one's power are skipped outright.
+    let power = |p: usize| {
+        let poly = &scene.polygons[p];
+        scene.materials[poly.material].radiance.element_sum() * poly.area
+    };
+    let emitters: Vec<usize> = scene.emitters().collect();
+    let max_power = emitters.iter().map(|&e| power(e)).fold(0.0, f64::max);
+    for &e in &emitters {
+        if power(e) < threshold * max_power {
+            continue;
+        }
+        let poly = &scene.polygons[e];
+        let ne = poly.frame.n;
+        let verts: Vec<DVec3> = {
+            let mut v: Vec<DVec3> = poly
+                .boundary
+                .iter()
+                .map(|s| poly.frame.world_from_plane(s[0]))
+                .collect();
+            v.dedup_by(|a, b| a == b);
+            v
+        };
+        let edges: Vec<(DVec3, DVec3)> = poly
+            .boundary
+            .iter()
+            .map(|s| {
+                (
+                    poly.frame.world_from_plane(s[0]),
+                    poly.frame.world_from_plane(s[1]),
+                )
+            })
+            .collect();
+        let in_front = |p: DVec3| ne.dot(p - poly.frame.origin) > tol;
+        // VE: emitter vertex x occluder silhouette edge.
+        for (&(wa, wb), faces) in &topo.edges {
+            if faces.iter().all(|&t| scene.triangles[t].polygon == Some(e)) {
+                continue;
+            }
+            let (a, b) = (topo.points[wa as usize], topo.points[wb as usize]);
+            if !in_front(a) && !in_front(b) {
+                continue;
+            }
+            for &v in &verts {
+                let facing = |t: usize| {
+                    let tri = &scene.triangles[t];
+                    sign(tri.normal.dot(v - tri.p[0]), tol)
+                };
+                if !is_silhouette(faces, facing) {
+                    continue;
+                }
+                let nw = (a - v).cross(b - v);
+                let Some(nw) = nw.try_normalize() else {
+                    continue;
+                };
+                // The whole emitter on one side of the wedge plane.
+                let sides: Vec<i8> = verts.iter().map(|q| sign(nw.dot(*q - v), tol)).collect();
+                if sides.contains(&1) && sides.contains(&-1) {
+                    continue;
+                }
+                let (da, db) = ((a - v).normalize(), (b - v).normalize());
+                let mut skip = vec![e];
+                skip.extend(faces.iter().filter_map(|&t| scene.triangles[t].polygon));
+                out.push(Wedge {
+                    kind: Kind::Ve,
+                    origin: v,
+                    normal: nw,
+                    half_spaces: vec![
+                        half_space(a, nw.cross(b - a), a + da),
+                        half_space(a, nw.cross(da), b),
+                        half_space(b, nw.cross(db), a),
+                    ],
+                    hull: vec![a, b, a + da * far, b + db * far],
+                    light: Light::Area(e),
+                    generator: Generator::VertexEdge { v, a, b },
+                    skip,
+                });
+            }
+        }
+        // EV: emitter edge x occluder silhouette vertex.
+        for (w_id, w) in topo.points.iter().enumerate() {
+            let w = *w;
+            if topo.neighbours[w_id].is_empty() || !in_front(w) {
+                continue;
+            }
+            if topo.vertex_polygons[w_id].iter().all(|&p| p == e) {
+                continue;
+            }
+            for &(e0, e1) in &edges {
+                let nw = (e1 - e0).cross(w - e0);
+                let Some(nw) = nw.try_normalize() else {
+                    continue;
+                };
+                let sides: Vec<i8> = topo.neighbours[w_id]
+                    .iter()
+                    .map(|&q| sign(nw.dot(topo.points[q as usize] - w), tol))
+                    .collect();
+                if sides.contains(&1) && sides.contains(&-1) {
+                    continue;
+                }
+                let esides: Vec<i8> = verts.iter().map(|q| sign(nw.dot(*q - w), tol)).collect();
+                if esides.contains(&1) && esides.contains(&-1) {
+                    continue;
+                }
+                let (d0, d1) = ((w - e0).normalize(), (w - e1).normalize());
+                let mut skip = vec![e];
+                skip.extend(&topo.vertex_polygons[w_id]);
+                out.push(Wedge {
+                    kind: Kind::Ev,
+                    origin: w,
+                    normal: nw,
+                    half_spaces: vec![
+                        half_space(w, nw.cross(d0), w + d1),
+                        half_space(w, nw.cross(d1), w + d0),
+                    ],
+                    hull: vec![w, w + d0 * far, w + d1 * far],
+                    light: Light::Area(e),
+                    generator: Generator::EdgeVertex { e0, e1, w },
+                    skip,
+                });
+            }
+        }
+    }
+    // Punctual lights: silhouette edges.
+    for (li, light) in scene.lights.iter().enumerate() {
+        for (&(wa, wb), faces) in &topo.edges {
+            let (a, b) = (topo.points[wa as usize], topo.points[wb as usize]);
+            let mut skip: Vec<usize> = faces
+                .iter()
+                .filter_map(|&t| scene.triangles[t].polygon)
+                .collect();
+            skip.sort_unstable();
+            skip.dedup();
+            match light.kind {
+                LightKind::Directional => {
+                    let d = light.direction;
+                    let facing = |t: usize| sign(-scene.triangles[t].normal.dot(d), 1e-12);
+                    if !is_silhouette(faces, facing) {
+                        continue;
+                    }
+                    let Some(nw) = (b - a).cross(d).try_normalize() else {
+                        continue;
+                    };
+                    out.push(Wedge {
+                        kind: Kind::Punctual,
+                        origin: a,
+                        normal: nw,
+                        half_spaces: vec![
+                            half_space(a, nw.cross(b - a), a + d),
+                            half_space(a, nw.cross(d), b),
+                            half_space(b, nw.cross(d), a),
+                        ],
+                        hull: vec![a, b, a + d * far, b + d * far],
+                        light: Light::Punctual(li),
+                        generator: Generator::DirectionEdge { d, a, b },
+                        skip,
+                    });
+                }
+                LightKind::Point | LightKind::Spot { .. } => {
+                    let v = light.position;
+                    let facing = |t: usize| {
+                        let tri = &scene.triangles[t];
+                        sign(tri.normal.dot(v - tri.p[0]), tol)
+                    };
+                    if !is_silhouette(faces, facing) {
+                        continue;
+                    }
+                    let Some(nw) = (a - v).cross(b - v).try_normalize() else {
+                        continue;
+                    };
+                    let (da, db) = ((a - v).normalize(), (b - v).normalize());
+                    out.push(Wedge {
+                        kind: Kind::Punctual,
+                        origin: v,
+                        normal: nw,
+                        half_spaces: vec![
+                            half_space(a, nw.cross(b - a), a + da),
+                            half_space(a, nw.cross(da), b),
+                            half_space(b, nw.cross(db), a),
+                        ],
+                        hull: vec![a, b, a + da * far, b + db * far],
+                        light: Light::Punctual(li),
+                        generator: Generator::VertexEdge { v, a, b },
+                        skip,
+                    });
+                }
+            }
+        }
+    }
+    out
+}
+
+/// True when receiver `r` can be lit by the wedge's light at all (some of the light above its
+/// plane, the receiver in front of the emitter).
+fn faces_light(scene: &Scene, r: usize, w: &Wedge) -> bool {
+    let f = &scene.polygons[r].frame;
+    match w.light {
+        Light::Area(e) => {
+            let ep = &scene.polygons[e];
+            let above = ep
+                .triangles
+                .iter()
+                .flat_map(|&t| scene.triangles[t].p)
+                .any(|q| f.n.dot(q - f.origin) > 0.0);
+            let front = scene.polygons[r]
+                .triangles
+                .iter()
+                .flat_map(|&t| scene.triangles[t].p)
+                .any(|q| ep.frame.n.dot(q - ep.frame.origin) > 0.0);
+            above && front
+        }
+        Light::Punctual(l) => {
+            let light = &scene.lights[l];
+            match light.kind {
+                LightKind::Directional => f.n.dot(-light.direction) > 0.0,
+                _ => f.n.dot(light.position - f.origin) > 0.0,
+            }
+        }
+    }
+}
+
+/// The wedge's intersection with receiver `r`, as 3D segments inside the polygon.
+fn clip_wedge_to_polygon(scene: &Scene, r: usize, w: &Wedge, tol: f64) -> Vec<(DVec3, DVec3)> {
+    let f = &scene.polygons[r].frame;
+    // Line of the two planes.
+    let dir = w.normal.cross(f.n);
+    let l2 = dir.length_squared();
+    if l2 < 1e-18 {
+        return Vec::new();
+    }
+    let dw = w.normal.dot(w.origin);
+    let dr = f.n.dot(f.origin);
+    let point = (f.n.cross(dir) * dw + dir.cross(w.normal) * dr) / l2;
+    let dir = dir / l2.sqrt();
+    // A segment long enough to cover the polygon, clipped by the wedge and the polygon.
+    let reach = scene.extent() * 4.0 + (point - f.origin).length();
+    let a = point - dir * reach;
+    let b = point + dir * reach;
+    clip_segment_to_polygon(scene, r, a, b, &w.half_spaces, tol)
+}
+
+/// Splits a wedge piece by whether its generator is visible from the receiver and from the
+/// light: sample points, transitions bisected.
+fn split_by_visibility(
+    scene: &Scene,
+    vis: &Visibility,
+    r: usize,
+    w: &Wedge,
+    a: DVec3,
+    b: DVec3,
+    extent: f64,
+) -> Vec<(DVec3, DVec3, bool)> {
+    let n_r = scene.polygons[r].frame.n;
+    let visible = |t: f64| generator_visible(vis, r, n_r, w, a + (b - a) * t, extent);
+    const SAMPLES: usize = 9;
+    let ts: Vec<f64> = (0..SAMPLES)
+        .map(|k| (k as f64 + 0.5) / SAMPLES as f64)
+        .collect();
+    let labels: Vec<bool> = ts.iter().map(|&t| visible(t)).collect();
+    let len = (b - a).length();
+    let mut cuts = vec![0.0];
+    let mut states = vec![labels[0]];
+    for k in 1..SAMPLES {
+        if labels[k] != labels[k - 1] {
+            let (mut lo, mut hi) = (ts[k - 1], ts[k]);
+            while (hi - lo) * len > 1e-6 * extent {
+                let mid = 0.5 * (lo + hi);
+                if visible(mid) == labels[k - 1] {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            cuts.push(0.5 * (lo + hi));
+            states.push(labels[k]);
+        }
+    }
+    cuts.push(1.0);
+    (0..states.len())
+        .map(|i| (a + (b - a) * cuts[i], a + (b - a) * cuts[i + 1], states[i]))
+        .collect()
+}
+
+/// Is the wedge's generator seen from receiver point `x`, and the light from the generator?
+fn generator_visible(
+    vis: &Visibility,
+    r: usize,
+    n_r: DVec3,
+    w: &Wedge,
+    x: DVec3,
+    extent: f64,
+) -> bool {
+    let gap = 1e-4 * extent;
+    let x_ray = x + n_r * (2.0 * vis.epsilon());
+    let clear = |p: DVec3, q: DVec3, skip: [usize; 2]| {
+        let d = q - p;
+        let len = d.length();
+        if len <= 2.0 * gap {
+            return true;
+        }
+        let u = d / len;
+        !vis.occluded_skipping(p + u * gap, q - u * gap, skip)
+    };
+    let light_skip = match w.light {
+        Light::Area(e) => e,
+        Light::Punctual(_) => usize::MAX,
+    };
+    match w.generator {
+        Generator::VertexEdge { v, a, b } => {
+            // The point of edge a-b on the line from v through x.
+            let q = closest_on_line(v, x, a, b);
+            clear(x_ray, q, [r, usize::MAX]) && clear(q, v, [light_skip, usize::MAX])
+        }
+        Generator::EdgeVertex { e0, e1, w: wv } => {
+            let s = closest_on_line(x, wv, e0, e1);
+            clear(x_ray, wv, [r, usize::MAX]) && clear(wv, s, [light_skip, usize::MAX])
+        }
+        Generator::DirectionEdge { d, a, b } => {
+            let q = closest_on_line(x, x - d, a, b);
+            let to_light = -d;
+            clear(x_ray, q, [r, usize::MAX])
+                && vis.unoccluded_towards(q + to_light * gap, to_light, usize::MAX)
+        }
+    }
+}
+
+/// The point of line `c-d` closest to line `p-q` (their intersection when they meet).
+fn closest_on_line(p: DVec3, q: DVec3, c: DVec3, d: DVec3) -> DVec3 {
+    let u = q - p;
+    let v = d - c;
+    let w0 = c - p;
+    let (uu, uv, vv) = (u.dot(u), u.dot(v), v.dot(v));
+    let den = uu * vv - uv * uv;
+    if den.abs() < 1e-300 {
+        return c;
+    }
+    let s = (uv * u.dot(w0) - uu * v.dot(w0)) / den;
+    c + v * s.clamp(0.0, 1.0)
+}
+
+/// Share of the unoccluded irradiance at `p` (normal `n`) that `light` carries, by luminance.
+fn share(scene: &Scene, light: Light, p: DVec3, n: DVec3) -> f64 {
+    let lum = |c: DVec3| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+    let area = |e: usize| {
+        let poly = &scene.polygons[e];
+        if poly.frame.n.dot(p - poly.frame.origin) <= 0.0 {
+            return 0.0;
+        }
+        let f: f64 = poly
+            .triangles
+            .iter()
+            .map(|&t| crate::solve::point_polygon_form_factor(p, n, &scene.triangles[t].p))
+            .sum();
+        std::f64::consts::PI * f * lum(scene.materials[poly.material].radiance)
+    };
+    let punctual = |l: usize| {
+        let light = &scene.lights[l];
+        match light.kind {
+            LightKind::Directional => n.dot(-light.direction).max(0.0) * lum(light.intensity),
+            _ => {
+                let d = light.position - p;
+                let r2 = d.length_squared().max(1e-300);
+                (n.dot(d) / r2.sqrt()).max(0.0) / r2 * lum(light.intensity)
+            }
+        }
+    };
+    let mine = match light {
+        Light::Area(e) => area(e),
+        Light::Punctual(l) => punctual(l),
+    };
+    let total: f64 = scene.emitters().map(area).sum::<f64>()
+        + (0..scene.lights.len()).map(punctual).sum::<f64>();
+    if total > 0.0 { mine / total } else { 0.0 }
+}

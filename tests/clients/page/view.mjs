@@ -1,0 +1,122 @@
+// The three.js side of the client check: load a baked glb with GLTFLoader and the MOZ_lightmap
+// plugin, draw it from the file's camera as a lightmap-only client shows it, and report what
+// was loaded. The driver (../run.mjs) calls `window.renderGlb(options)` and takes the screenshot.
+//
+// What a client shows: radiance = albedo/pi x (lightmap x intensity) + emissive, in W/(m² sr).
+// MeshLambertMaterial with no scene lights does exactly that. To show it like
+// `penumbra render --exposure E` (radiance E is white, clamped, sRGB-encoded), the lightmap
+// intensity and the emissive intensity are divided by E, with no tone mapping and sRGB output.
+// (LinearToneMapping with toneMappingExposure = 1/E is the same thing.)
+
+import * as THREE from 'three';
+import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+import { MozLightmapExtension } from './moz-lightmap.mjs';
+
+let renderer = null;
+
+function rendererOfSize(width, height) {
+  if (!renderer) {
+    renderer = new THREE.WebGLRenderer({ antialias: false, alpha: false, preserveDrawingBuffer: true });
+    renderer.setPixelRatio(1);
+    renderer.toneMapping = THREE.NoToneMapping;
+    renderer.outputColorSpace = THREE.SRGBColorSpace;
+    renderer.setClearColor(0x000000, 1);
+    document.body.appendChild(renderer.domElement);
+  }
+  renderer.setSize(width, height);
+  return renderer;
+}
+
+/** Replaces every mesh material by a MeshLambertMaterial with the same diffuse, emission and lightmap. */
+function toLambert(root) {
+  const converted = new Map();
+  root.traverse((obj) => {
+    if (!obj.isMesh) return;
+    const one = (m) => {
+      if (!converted.has(m)) {
+        converted.set(m, new THREE.MeshLambertMaterial({
+          name: m.name,
+          color: m.color,
+          map: m.map,
+          emissive: m.emissive,
+          emissiveIntensity: m.emissiveIntensity,
+          emissiveMap: m.emissiveMap,
+          lightMap: m.lightMap,
+          lightMapIntensity: m.lightMapIntensity,
+          side: m.side,
+          vertexColors: m.vertexColors,
+        }));
+        m.dispose();
+      }
+      return converted.get(m);
+    };
+    obj.material = Array.isArray(obj.material) ? obj.material.map(one) : one(obj.material);
+  });
+  return [...converted.values()];
+}
+
+function dispose(root) {
+  root.traverse((obj) => {
+    if (!obj.isMesh) return;
+    obj.geometry.dispose();
+    for (const m of [obj.material].flat()) {
+      for (const t of [m.map, m.emissiveMap, m.lightMap]) t?.dispose();
+      m.dispose();
+    }
+  });
+}
+
+/**
+ * options: url (the glb), width, height, exposure (radiance shown as white, W/(m² sr)),
+ * lightmapColorSpace ('none' as the extension means, or 'srgb' to break it on purpose).
+ * Draws the glb, leaves the picture in the canvas, and returns what was loaded.
+ */
+window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'none' }) {
+  const r = rendererOfSize(width, height);
+  const loader = new GLTFLoader();
+  loader.register((parser) => new MozLightmapExtension(parser));
+  const gltf = await loader.loadAsync(url);
+  const scene = gltf.scene;
+
+  // The lightmap holds all the light: drop the file's punctual lights.
+  const lights = [];
+  scene.traverse((obj) => { if (obj.isLight) lights.push(obj); });
+  for (const l of lights) l.removeFromParent();
+
+  const materials = toLambert(scene);
+  const channels = new Set();
+  for (const m of materials) {
+    m.emissiveIntensity /= exposure;
+    if (m.lightMap) {
+      m.lightMapIntensity /= exposure;
+      channels.add(m.lightMap.channel);
+      if (lightmapColorSpace === 'srgb') {
+        m.lightMap.colorSpace = THREE.SRGBColorSpace;
+        m.lightMap.needsUpdate = true;
+      }
+    }
+  }
+
+  const camera = gltf.cameras[0];
+  if (!camera) throw new Error(`${url}: no camera in the file`);
+  camera.aspect = width / height;
+  camera.updateProjectionMatrix();
+  scene.updateMatrixWorld(true);
+  r.render(scene, camera);
+  const gl = r.getContext();
+  const result = {
+    three: THREE.REVISION,
+    webgl2: r.capabilities.isWebGL2 !== false && gl instanceof WebGL2RenderingContext,
+    glRenderer: gl.getParameter(gl.getExtension('WEBGL_debug_renderer_info')?.UNMASKED_RENDERER_WEBGL ?? gl.RENDERER),
+    meshes: 0,
+    materials: materials.length,
+    lightmapped: materials.filter((m) => m.lightMap).length,
+    lightmapChannels: [...channels],
+    lightsRemoved: lights.length,
+  };
+  scene.traverse((obj) => { if (obj.isMesh) result.meshes++; });
+  dispose(scene);
+  return result;
+};
+
+window.pageReady = true;

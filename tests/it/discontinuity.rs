@@ -1,0 +1,192 @@
+//! Discontinuity meshing: analytic boundary lines, goldens, stability where methods fail.
+
+use crate::{parse, quick};
+use glam::DVec3;
+use penumbra::discontinuity::{Kind, Segment};
+use penumbra::fixtures::{self, GlbBuilder, Material, TriangleMesh};
+use penumbra::mesh::Mesher;
+use penumbra::{Bake, BakeOptions};
+
+pub fn dm() -> BakeOptions {
+    BakeOptions {
+        mesher: Mesher::Discontinuity,
+        ..quick()
+    }
+}
+
+fn bake_dm(bytes: &[u8]) -> Bake {
+    crate::bake(bytes, &dm())
+}
+
+/// The floor polygon (the largest one facing up at y = 0).
+fn floor(b: &Bake) -> usize {
+    (0..b.scene.polygons.len())
+        .filter(|&i| {
+            let p = &b.scene.polygons[i];
+            p.frame.n.y > 0.99 && p.frame.origin.y.abs() < 1e-9
+        })
+        .max_by(|&i, &j| {
+            b.scene.polygons[i]
+                .area
+                .total_cmp(&b.scene.polygons[j].area)
+        })
+        .expect("a floor")
+}
+
+fn world(b: &Bake, poly: usize, s: &Segment) -> (DVec3, DVec3) {
+    let f = &b.scene.polygons[poly].frame;
+    (f.world_from_plane(s.a), f.world_from_plane(s.b))
+}
+
+/// Square source over a square occluder (../shared/reference): every wedge segment on the
+/// floor lies on the umbra lines |x| = 0.5 or |z| = 0.5, or on the penumbra lines |x| = 1.5 or
+/// |z| = 1.5, to 1e-6, and none reaches into the fully lit region.
+#[test]
+fn square_occluder_segments_lie_on_the_analytic_lines() {
+    let b = bake_dm(&fixtures::square_occluder());
+    let f = floor(&b);
+    let segs: Vec<&Segment> = b.segments[f]
+        .iter()
+        .filter(|s| s.kind != Kind::D0)
+        .collect();
+    assert!(
+        segs.len() >= 16,
+        "{} wedge segments on the floor",
+        segs.len()
+    );
+    let on_line = |v: f64| [0.5, 1.5].iter().any(|l| (v.abs() - l).abs() < 1e-6);
+    let mut lines = std::collections::BTreeSet::new();
+    for s in &segs {
+        let (a, c) = world(&b, f, s);
+        let along_z = (a.x - c.x).abs() < 1e-6;
+        let along_x = (a.z - c.z).abs() < 1e-6;
+        assert!(along_x || along_z, "segment {a} {c} is not axis-aligned");
+        let fixed = if along_z { a.x } else { a.z };
+        assert!(
+            on_line(fixed),
+            "segment {a} {c} is off the umbra/penumbra lines"
+        );
+        for p in [a, c] {
+            assert!(
+                p.x.abs() <= 1.5 + 1e-6 && p.z.abs() <= 1.5 + 1e-6,
+                "{p} is in the lit region"
+            );
+        }
+        lines.insert(((fixed * 2.0).round() as i64, along_z));
+    }
+    // All eight lines are present.
+    assert_eq!(lines.len(), 8, "{lines:?}");
+    // The mesh has vertices on those lines and the values there match the exact profile.
+    let m = &b.meshes[b.meshes.iter().position(|m| m.polygon == f).unwrap()];
+    let frame = &b.scene.polygons[f].frame;
+    let on_boundary = m
+        .vertices
+        .iter()
+        .map(|v| frame.world_from_plane(*v))
+        .filter(|p| p.z.abs() < 0.4 && on_line(p.x))
+        .count();
+    assert!(
+        on_boundary >= 4,
+        "{on_boundary} mesh vertices on the x lines"
+    );
+}
+
+/// The DESIGN's 5-segment case that makes spade's constraint splitting panic goes through the
+/// arrangement and into spade without a refused piece.
+#[test]
+fn spade_five_segment_repro_meshes() {
+    let scene_bytes = {
+        let mut g = GlbBuilder::new();
+        let m = g.add_material(Material::diffuse("grey", [0.5; 3]));
+        g.add_mesh_node(
+            "floor",
+            &fixtures::horizontal_rect([-1.0, 5.0], [-1.0, 5.0], 0.0, true),
+            m,
+        );
+        g.to_glb()
+    };
+    let scene = penumbra::load::scene(&parse(&scene_bytes, "floor.glb")).unwrap();
+    let poly = &scene.polygons[0];
+    let seg = |a: (f64, f64), b: (f64, f64)| Segment {
+        a: poly.frame.plane_from_world(DVec3::new(a.0, 0.0, a.1)),
+        b: poly.frame.plane_from_world(DVec3::new(b.0, 0.0, b.1)),
+        kind: Kind::Ve,
+        event: 0,
+        significance: 1.0,
+    };
+    let segments = vec![
+        seg((1.5, 0.5), (1.0, 4.0)),
+        seg((1.0, 1.5), (3.5, 0.0)),
+        seg((1.0, 3.0), (1.5, 2.5)),
+        seg((0.0, 0.0), (2.5, 1.5)),
+        seg((0.5, 0.0), (1.5, 3.0)),
+    ];
+    let (mesh, refused) = penumbra::mesh::triangulate_with(0, poly, &segments, 0.05, 10_000);
+    assert_eq!(refused, 0);
+    assert!((mesh.area() - 36.0).abs() < 1e-9);
+}
+
+/// A box standing on the floor: the floor under the box is dark right up to the contact line,
+/// and the lit side right next to it is bright (one value per side of the D0 line).
+#[test]
+fn contact_lines_do_not_leak_light() {
+    let mut o = dm();
+    o.solve.bounces = Some(0);
+    // A box standing on a floor (no shared vertices), lit by a point light off to the side.
+    let mut g = GlbBuilder::new();
+    let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
+    g.add_mesh_node(
+        "floor",
+        &fixtures::horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
+        grey,
+    );
+    let top = [
+        [-0.5, 1.0, -0.5],
+        [-0.5, 1.0, 0.5],
+        [0.5, 1.0, 0.5],
+        [0.5, 1.0, -0.5],
+    ];
+    g.add_mesh_node("box", &fixtures::block(top, 0.0, true), grey);
+    let light = g.add_light(fixtures::Light::point("lamp", 10.0));
+    g.add_node(
+        fixtures::Node::new("lamp")
+            .with_transform(fixtures::Transform::translation([2.0, 2.0, 0.3]))
+            .with_light(light),
+    );
+    let b = crate::bake(&g.to_glb(), &o);
+    let f = floor(&b);
+    assert!(b.segments[f].iter().any(|s| s.kind == Kind::D0));
+    let mi = b.meshes.iter().position(|m| m.polygon == f).unwrap();
+    let m = &b.meshes[mi];
+    let frame = &b.scene.polygons[f].frame;
+    let mut inside_max: f64 = 0.0;
+    let mut outside_min = f64::INFINITY;
+    for t in &m.triangles {
+        let c = t
+            .iter()
+            .map(|&i| frame.world_from_plane(m.vertices[i as usize]))
+            .sum::<DVec3>()
+            / 3.0;
+        for &i in t {
+            let h = b.solution.irradiance[mi][i as usize].x;
+            if c.x.abs() < 0.5 && c.z.abs() < 0.5 {
+                inside_max = inside_max.max(h);
+            } else {
+                let p = frame.world_from_plane(m.vertices[i as usize]);
+                // On the lit face's contact line, x = 0.5.
+                if (p.x - 0.5).abs() < 1e-9 && p.z.abs() < 0.45 {
+                    outside_min = outside_min.min(h);
+                }
+            }
+        }
+    }
+    assert!(inside_max < 1e-9, "light leaks under the box: {inside_max}");
+    assert!(
+        outside_min.is_finite(),
+        "no mesh vertex on the contact line"
+    );
+    assert!(
+        outside_min > 0.01,
+        "the lit side of the contact is dark: {outside_min}"
+    );
+}
