@@ -289,6 +289,12 @@ impl EmitterShape {
         EmitterShape::new(frame, &tris)
     }
 
+    /// Occluders no farther than this in front of the emitter's plane (scene units) are taken
+    /// to lie in it, and never block it.
+    pub fn plane_tolerance(&self) -> f64 {
+        1e-9 * self.size
+    }
+
     /// The hull's corners in world space.
     pub fn hull_world(&self) -> Vec<DVec3> {
         self.hull
@@ -434,6 +440,11 @@ impl Shaft {
 
     pub fn plane_count(&self) -> usize {
         self.planes.len()
+    }
+
+    /// The distance by which a polygon must be beyond a plane to be excluded (scene units).
+    pub fn tolerance(&self) -> f64 {
+        self.tol
     }
 }
 
@@ -647,7 +658,9 @@ pub fn visible_form_factor<'a>(
     // Side planes of the pyramid p -> hull, inward normals; then the emitter's plane.
     let hull_world: Vec<DVec3> = hull.iter().map(|q| fr.world_from_plane(*q)).collect();
     let centre = hull_world.iter().copied().sum::<DVec3>() / hull_world.len().max(1) as f64;
+    // The emitter's plane first: it culls the emitter's neighbours at once.
     let mut planes: Vec<(DVec3, DVec3)> = Vec::with_capacity(hull.len() + 1);
+    planes.push((fr.n, fr.origin + fr.n * emitter.plane_tolerance()));
     for i in 0..hull_world.len() {
         let m = (hull_world[i] - p).cross(hull_world[(i + 1) % hull_world.len()] - p);
         let len = m.length();
@@ -657,8 +670,6 @@ pub fn visible_form_factor<'a>(
         let m = m / len;
         planes.push((if m.dot(centre - p) < 0.0 { -m } else { m }, p));
     }
-    let plane_tol = 1e-9 * emitter.size;
-    planes.push((fr.n, fr.origin + fr.n * plane_tol));
 
     // Clip and project every occluder.
     let mut projected: Vec<(f64, usize, Piece)> = Vec::new();
@@ -667,32 +678,40 @@ pub fn visible_form_factor<'a>(
         if occ.len() < 3 {
             continue;
         }
-        if planes
-            .iter()
-            .any(|(m, o)| occ.iter().all(|v| m.dot(*v - *o) <= 0.0))
-        {
+        // Clip to the pyramid; planes the polygon lies inside of are skipped, and one it lies
+        // outside of ends the clip.
+        buf_a.clear();
+        buf_a.extend_from_slice(occ);
+        for (m, o) in &planes {
+            let (mut any_in, mut any_out) = (false, false);
+            for v in &buf_a {
+                let d = m.dot(*v - *o);
+                any_in |= d > 0.0;
+                any_out |= d < 0.0;
+            }
+            if !any_in {
+                buf_a.clear();
+                break;
+            }
+            if any_out {
+                clip3(&buf_a, *m, *o, &mut buf_b);
+                std::mem::swap(&mut buf_a, &mut buf_b);
+                if buf_a.len() < 3 {
+                    break;
+                }
+            }
+        }
+        if buf_a.len() < 3 {
             continue;
         }
         // An occluder whose plane passes through p projects to a segment.
         let mut normal = DVec3::ZERO;
         for i in 0..occ.len() {
-            normal += (occ[i] - p).cross(occ[(i + 1) % occ.len()] - p);
+            normal += occ[i].cross(occ[(i + 1) % occ.len()]);
         }
-        let reach = occ.iter().map(|v| v.distance(p)).fold(0.0, f64::max);
         let nl = normal.length();
-        if nl == 0.0 || nl.abs() <= 1e-12 * reach * reach {
-            continue;
-        }
-        buf_a.clear();
-        buf_a.extend_from_slice(occ);
-        for (m, o) in &planes {
-            clip3(&buf_a, *m, *o, &mut buf_b);
-            std::mem::swap(&mut buf_a, &mut buf_b);
-            if buf_a.len() < 3 {
-                break;
-            }
-        }
-        if buf_a.len() < 3 {
+        let reach = occ.iter().map(|v| v.distance(p)).fold(0.0, f64::max);
+        if nl == 0.0 || (normal.dot(p - occ[0]) / nl).abs() <= 1e-12 * reach {
             continue;
         }
         let mut poly = Vec::with_capacity(buf_a.len());

@@ -218,16 +218,18 @@ fn mesh_scene(
         Mesher::Discontinuity => {
             let dm = DmOptions {
                 threshold: options.dm_threshold,
-                max_pieces: options.budget / 4,
+                max_pieces: options.budget,
             };
             let (segments, mut dm_stats) =
                 stage(&mut t.discontinuity, "discontinuity", progress, || {
                     discontinuity::segments(scene, vis, &dm)
                 });
-            let (meshes, refused) = stage(&mut t.mesh, "mesh", progress, || {
+            let (meshes, refused, dropped) = stage(&mut t.mesh, "mesh", progress, || {
                 mesh::discontinuity(scene, &segments, options.budget)
             });
             dm_stats.refused = refused;
+            dm_stats.dropped_budget += dropped;
+            dm_stats.kept -= dropped;
             stats.discontinuity = Some(dm_stats);
             (segments, meshes)
         }

@@ -25,6 +25,10 @@ use obvhs::aabb::Aabb;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
+/// Geometric tolerance of the stage, relative to the scene's extent: contacts closer than this
+/// count as touching, and the mesher merges segments closer than this.
+pub const TOLERANCE: f64 = 1e-6;
+
 /// What made a discontinuity segment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
 pub enum Kind {
@@ -46,15 +50,15 @@ pub struct Segment {
     pub kind: Kind,
     /// Id of the event (wedge or contact) that made it; unique within one [`segments`] call.
     pub event: u32,
-    /// Share (0..1) of the unoccluded irradiance at the segment carried by the wedge's light;
-    /// 1 for D0.
+    /// Unoccluded irradiance of the wedge's light at the segment, relative to the brightest
+    /// wedge piece of the scene (0..1); 1 for D0.
     pub significance: f64,
 }
 
 /// Options of the discontinuity stage.
 #[derive(Clone, Debug)]
 pub struct DmOptions {
-    /// Pieces whose significance is below this are dropped.
+    /// Pieces whose significance (relative unoccluded irradiance) is below this are dropped.
     pub threshold: f64,
     /// At most this many wedge pieces are kept over the scene (the most significant).
     pub max_pieces: usize,
@@ -205,7 +209,7 @@ pub fn segments(
     options: &DmOptions,
 ) -> (Vec<Vec<Segment>>, DmStats) {
     let extent = scene.extent();
-    let tol = 1e-6 * extent;
+    let tol = TOLERANCE * extent;
     let topo = Topology::new(scene);
     let index = PolygonIndex::new(scene);
     let mut stats = DmStats::default();
@@ -245,8 +249,8 @@ pub fn segments(
                             hidden += 1;
                             continue;
                         }
-                        let significance =
-                            share(scene, w.light, (a + b) * 0.5, scene.polygons[r].frame.n);
+                        let n = scene.polygons[r].frame.n;
+                        let significance = unoccluded_irradiance(scene, w.light, (a + b) * 0.5, n);
                         out.push(Piece {
                             polygon: r,
                             a,
@@ -265,6 +269,16 @@ pub fn segments(
     for (p, h) in traced {
         pieces.extend(p);
         stats.hidden += h;
+    }
+    // Significance relative to the brightest piece: an event where its light is faint cannot
+    // cause a visible change.
+    let peak = pieces.iter().map(|p| p.significance).fold(0.0, f64::max);
+    for p in &mut pieces {
+        p.significance = if peak > 0.0 {
+            p.significance / peak
+        } else {
+            0.0
+        };
     }
     let before = pieces.len();
     pieces.retain(|p| p.significance >= options.threshold);
@@ -424,14 +438,36 @@ fn contacts(scene: &Scene, index: &PolygonIndex, r: usize, tol: f64) -> Vec<(DVe
                 }
             }
             for (a, b) in raw {
-                // Project onto the plane, then keep the part inside the polygon.
+                // Project onto the plane, then keep the part inside the polygon and off its
+                // outline (a contact along the outline adds nothing).
                 let a = a - frame.n * frame.n.dot(a - frame.origin);
                 let b = b - frame.n * frame.n.dot(b - frame.origin);
-                out.extend(clip_segment_to_polygon(scene, r, a, b, &[], tol));
+                for (p, q) in clip_segment_to_polygon(scene, r, a, b, &[], tol) {
+                    if !on_outline(
+                        poly,
+                        frame.plane_from_world(p),
+                        frame.plane_from_world(q),
+                        10.0 * tol,
+                    ) {
+                        out.push((p, q));
+                    }
+                }
             }
         }
     }
     out
+}
+
+/// True when the plane segment `a-b` lies along one of the polygon's boundary edges.
+fn on_outline(poly: &crate::scene::Polygon, a: DVec2, b: DVec2, tol: f64) -> bool {
+    let near = |x: DVec2, p: DVec2, q: DVec2| {
+        let d = q - p;
+        let t = ((x - p).dot(d) / d.length_squared().max(1e-300)).clamp(0.0, 1.0);
+        x.distance(p + d * t) <= tol
+    };
+    poly.boundary
+        .iter()
+        .any(|[p, q]| near(a, *p, *q) && near(b, *p, *q) && near((a + b) * 0.5, *p, *q))
 }
 
 /// Clips the 3D segment `a-b` (in polygon `r`'s plane) to the polygon's triangles and to the
@@ -478,26 +514,20 @@ fn clip_segment_to_polygon(
         let (mut lo, mut hi) = (lo0, hi0);
         let centroid = (p[0] + p[1] + p[2]) / 3.0;
         for e in 0..3 {
-            let edge = p[(e + 1) % 3] - p[e];
-            let (c, m) = half_space(p[e], n.cross(edge), centroid);
-            // Widen by the tolerance so pieces meet across shared triangle edges.
-            let len = m.length();
-            if len == 0.0 {
-                hi = -1.0;
-                break;
-            }
-            let m = m / len;
-            clip(&mut lo, &mut hi, c - m * tol, m);
+            let (c, m) = half_space(p[e], n.cross(p[(e + 1) % 3] - p[e]), centroid);
+            clip(&mut lo, &mut hi, c, m);
         }
         if hi > lo {
             intervals.push((lo, hi));
         }
     }
+    // Pieces from neighbouring triangles meet (up to rounding) at shared edges: join them.
+    let gap = tol / u.length().max(1e-300);
     intervals.sort_by(|x, y| x.0.total_cmp(&y.0));
     let mut merged: Vec<(f64, f64)> = Vec::new();
     for (lo, hi) in intervals {
         match merged.last_mut() {
-            Some(last) if lo <= last.1 => last.1 = last.1.max(hi),
+            Some(last) if lo <= last.1 + gap => last.1 = last.1.max(hi),
             _ => merged.push((lo, hi)),
         }
     }
@@ -854,37 +884,32 @@ fn closest_on_line(p: DVec3, q: DVec3, c: DVec3, d: DVec3) -> DVec3 {
     c + v * s.clamp(0.0, 1.0)
 }
 
-/// Share of the unoccluded irradiance at `p` (normal `n`) that `light` carries, by luminance.
-fn share(scene: &Scene, light: Light, p: DVec3, n: DVec3) -> f64 {
+/// Unoccluded irradiance (luminance, W/m²) that `light` gives at `p` with normal `n`.
+fn unoccluded_irradiance(scene: &Scene, light: Light, p: DVec3, n: DVec3) -> f64 {
     let lum = |c: DVec3| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
-    let area = |e: usize| {
-        let poly = &scene.polygons[e];
-        if poly.frame.n.dot(p - poly.frame.origin) <= 0.0 {
-            return 0.0;
+    match light {
+        Light::Area(e) => {
+            let poly = &scene.polygons[e];
+            if poly.frame.n.dot(p - poly.frame.origin) <= 0.0 {
+                return 0.0;
+            }
+            let f: f64 = poly
+                .triangles
+                .iter()
+                .map(|&t| crate::solve::point_polygon_form_factor(p, n, &scene.triangles[t].p))
+                .sum();
+            std::f64::consts::PI * f * lum(scene.materials[poly.material].radiance)
         }
-        let f: f64 = poly
-            .triangles
-            .iter()
-            .map(|&t| crate::solve::point_polygon_form_factor(p, n, &scene.triangles[t].p))
-            .sum();
-        std::f64::consts::PI * f * lum(scene.materials[poly.material].radiance)
-    };
-    let punctual = |l: usize| {
-        let light = &scene.lights[l];
-        match light.kind {
-            LightKind::Directional => n.dot(-light.direction).max(0.0) * lum(light.intensity),
-            _ => {
-                let d = light.position - p;
-                let r2 = d.length_squared().max(1e-300);
-                (n.dot(d) / r2.sqrt()).max(0.0) / r2 * lum(light.intensity)
+        Light::Punctual(l) => {
+            let light = &scene.lights[l];
+            match light.kind {
+                LightKind::Directional => n.dot(-light.direction).max(0.0) * lum(light.intensity),
+                _ => {
+                    let d = light.position - p;
+                    let r2 = d.length_squared().max(1e-300);
+                    (n.dot(d) / r2.sqrt()).max(0.0) / r2 * lum(light.intensity)
+                }
             }
         }
-    };
-    let mine = match light {
-        Light::Area(e) => area(e),
-        Light::Punctual(l) => punctual(l),
-    };
-    let total: f64 = scene.emitters().map(area).sum::<f64>()
-        + (0..scene.lights.len()).map(punctual).sum::<f64>();
-    if total > 0.0 { mine / total } else { 0.0 }
+    }
 }

@@ -60,13 +60,17 @@ pub const ANGLE_LIMIT_DEG: f64 = 25.0;
 
 /// Triangulates one polygon without extra constraints; see [`triangulate_with`].
 pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usize) -> ReceiverMesh {
-    triangulate_with(id, polygon, &[], max_area, vertex_cap).0
+    triangulate_with(id, polygon, &[], 0.0, max_area, vertex_cap).0
 }
 
 /// Triangulates one polygon: its boundary and the discontinuity `segments` (plane coordinates)
 /// as constraints, refined so that no triangle is larger than `max_area` (scene units²) and,
 /// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. At most
 /// `vertex_cap` vertices are added by refinement.
+///
+/// Points closer than `snap` (scene units; at least 1e-9 of the polygon's size) are merged, and
+/// segments within `snap` of each other (or of the outline) become one: use the tolerance the
+/// segments were computed to, so near-coincident events do not force slivers.
 ///
 /// The constraints go through [`arrangement::build`] first, so they never cross when inserted
 /// with spade's `try_add_constraint`. Faces outside the polygon (holes, concavities) are dropped
@@ -78,6 +82,7 @@ pub fn triangulate_with(
     id: usize,
     polygon: &Polygon,
     segments: &[Segment],
+    snap: f64,
     max_area: f64,
     vertex_cap: usize,
 ) -> (ReceiverMesh, usize) {
@@ -86,14 +91,15 @@ pub fn triangulate_with(
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
     );
     let diameter = (hi - lo).length().max(1e-300);
-    let tol = 1e-9 * diameter;
+    let tol = (1e-9 * diameter).max(snap);
     let mut input: Vec<(DVec2, DVec2, Option<Kind>)> = polygon
         .boundary
         .iter()
         .map(|[a, b]| (*a, *b, None))
         .collect();
     input.extend(segments.iter().map(|s| (s.a, s.b, Some(s.kind))));
-    let arr = arrangement::build(&input, tol);
+    let mut arr = arrangement::build(&input, tol);
+    bulge_straight_outline_points(&mut arr, 1e-10 * diameter);
 
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let handles: Vec<Option<FixedVertexHandle>> = arr
@@ -169,6 +175,34 @@ pub fn triangulate_with(
         split_along(&mut mesh, &cuts);
     }
     (mesh, refused)
+}
+
+/// Pushes every outline point that lies on a straight stretch of the outline (a split point, or
+/// a T-junction of the input mesh) outward by `delta`.
+///
+/// Rounding leaves such a point a hair inside or outside the line through its neighbours. Inside,
+/// spade's convex hull bridges it with a zero-area face outside the polygon; refinement then
+/// splits the encroached outline pieces without end. Outside, the outline there is itself
+/// convex and no such face exists.
+fn bulge_straight_outline_points(arr: &mut arrangement::Arrangement<Option<Kind>>, delta: f64) {
+    // Outline edges keep the polygon on their left.
+    let mut dirs: Vec<Vec<DVec2>> = vec![Vec::new(); arr.points.len()];
+    for &(a, b, tag) in &arr.edges {
+        if tag.is_none() {
+            let d = arr.points[b as usize] - arr.points[a as usize];
+            dirs[a as usize].push(d);
+            dirs[b as usize].push(d);
+        }
+    }
+    for (p, d) in arr.points.iter_mut().zip(&dirs) {
+        if let [d1, d2] = d[..]
+            && d1.perp_dot(d2).abs() <= 1e-9 * d1.length() * d2.length()
+            && d1.dot(d2) > 0.0
+        {
+            let outward = DVec2::new(d1.y, -d1.x).normalize_or_zero();
+            *p += outward * delta;
+        }
+    }
 }
 
 fn dist_to_segment(x: DVec2, p: DVec2, q: DVec2) -> f64 {
@@ -294,20 +328,68 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 }
 
 /// The discontinuity mesher: each polygon's discontinuity `segments` as constraints, then the
-/// same refinement as [`uniform`], about `budget` triangles in all. Returns the meshes and the
-/// number of constraint pieces spade refused (should be 0).
+/// same refinement as [`uniform`], about `budget` triangles in all.
+///
+/// Constraints cost elements of their own (refinement grades the mesh around them), so when the
+/// result exceeds the budget by more than a quarter, the weakest wedge pieces (lowest
+/// significance; D0 lines are always kept) are dropped in proportion and the scene is meshed
+/// again. Returns the meshes, the constraint pieces spade refused (should be 0) and the wedge
+/// pieces dropped for the budget.
 pub fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],
     budget: usize,
-) -> (Vec<ReceiverMesh>, usize) {
-    let refused = std::sync::atomic::AtomicUsize::new(0);
-    let meshes = to_budget(scene, budget, |i, area, cap| {
-        let (m, r) = triangulate_with(i, &scene.polygons[i], &segments[i], area, cap);
-        refused.fetch_add(r, std::sync::atomic::Ordering::Relaxed);
-        m
+) -> (Vec<ReceiverMesh>, usize, usize) {
+    // Wedge pieces, strongest first (ties by polygon and position: a total, fixed order).
+    let mut ranked: Vec<(usize, usize)> = segments
+        .iter()
+        .enumerate()
+        .flat_map(|(p, segs)| {
+            segs.iter()
+                .enumerate()
+                .filter(|(_, s)| s.kind != Kind::D0)
+                .map(move |(i, _)| (p, i))
+        })
+        .collect();
+    ranked.sort_by(|&(p, i), &(q, j)| {
+        segments[q][j]
+            .significance
+            .total_cmp(&segments[p][i].significance)
+            .then((p, i).cmp(&(q, j)))
     });
-    (meshes, refused.into_inner())
+    let mut keep = ranked.len();
+    loop {
+        let mut kept: Vec<Vec<bool>> = segments
+            .iter()
+            .map(|segs| segs.iter().map(|s| s.kind == Kind::D0).collect())
+            .collect();
+        for &(p, i) in &ranked[..keep] {
+            kept[p][i] = true;
+        }
+        let selected: Vec<Vec<Segment>> = segments
+            .iter()
+            .zip(&kept)
+            .map(|(segs, k)| {
+                segs.iter()
+                    .zip(k)
+                    .filter(|(_, k)| **k)
+                    .map(|(s, _)| s.clone())
+                    .collect()
+            })
+            .collect();
+        let refused = std::sync::atomic::AtomicUsize::new(0);
+        let meshes = to_budget(scene, budget, |i, area, cap| {
+            let snap = 10.0 * crate::discontinuity::TOLERANCE * scene.extent();
+            let (m, r) = triangulate_with(i, &scene.polygons[i], &selected[i], snap, area, cap);
+            refused.fetch_add(r, std::sync::atomic::Ordering::Relaxed);
+            m
+        });
+        let count: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+        if count * 4 <= budget * 5 || keep == 0 {
+            return (meshes, refused.into_inner(), ranked.len() - keep);
+        }
+        keep = (keep as f64 * budget as f64 / count as f64 * 0.8) as usize;
+    }
 }
 
 #[cfg(test)]

@@ -117,6 +117,9 @@ pub struct DirectStats {
     /// too many visible pieces).
     pub fallbacks: u64,
     pub occluder_cap: usize,
+    /// Exact method: candidate occluders (convex pieces) left after the shaft culling, summed
+    /// over pairs: what the per-point clipping looked at.
+    pub candidates: u64,
     /// Exact method: occluders clipped and subtracted, summed over pairs, and the most at one
     /// pair.
     pub occluders: u64,
@@ -362,6 +365,7 @@ struct EmitterCounters {
 #[derive(Default)]
 struct Tally {
     evaluations: u64,
+    candidates: u64,
     fallbacks: u64,
     occluders: u64,
     occluders_max: u64,
@@ -387,6 +391,7 @@ pub struct Direct<'a> {
     /// The scene's polygons in convex pieces (exact method only; empty otherwise).
     pub occluders: Occluders,
     evaluations: AtomicU64,
+    candidates: AtomicU64,
     fallbacks: AtomicU64,
     occluder_total: AtomicU64,
     occluders_max: AtomicU64,
@@ -437,6 +442,7 @@ impl<'a> Direct<'a> {
             },
             occluders,
             evaluations: AtomicU64::new(0),
+            candidates: AtomicU64::new(0),
             fallbacks: AtomicU64::new(0),
             occluder_total: AtomicU64::new(0),
             occluders_max: AtomicU64::new(0),
@@ -463,21 +469,22 @@ impl<'a> Direct<'a> {
         let mut h = vec![DVec3::ZERO; points.len()];
         let mut tally = Tally::default();
         let mut scale = vec![0.0; points.len()];
+        let tree = ClusterTree::new(points);
         for (ei, e) in self.emitters.iter().enumerate() {
             let start = Instant::now();
             let before = (tally.evaluations, tally.occluders, tally.fallbacks);
             let f_un: Vec<f64> = points.iter().map(|q| e.form_factor(q.p, q.n)).collect();
-            let mut active: Vec<usize> = (0..points.len()).filter(|&i| f_un[i] > 0.0).collect();
-            if active.is_empty() {
+            let active = f_un.iter().filter(|f| **f > 0.0).count();
+            if active == 0 {
                 continue;
             }
             // Candidate occluders: the BVH's triangles in the box around the points and the
             // emitter, as convex pieces, without the emitter itself.
             let hull = e.shape.hull_world();
             let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-            for q in active
-                .iter()
-                .map(|&i| points[i].p)
+            for q in (0..points.len())
+                .filter(|&i| f_un[i] > 0.0)
+                .map(|i| points[i].p)
                 .chain(hull.iter().copied())
             {
                 lo = lo.min(q);
@@ -494,18 +501,18 @@ impl<'a> Direct<'a> {
                 .collect();
             candidates.sort_unstable();
             candidates.dedup();
-            self.exact_cluster(
-                e,
-                &hull,
+            let job = EmitterJob {
+                emitter: e,
+                hull: &hull,
                 points,
-                &mut active,
-                &candidates,
-                &f_un,
-                &mut scale,
-                &mut tally,
-            );
-            for &i in &active {
-                h[i] += e.radiance * scale[i];
+                tree: &tree,
+                f_un: &f_un,
+            };
+            self.exact_cluster(&job, 0, &candidates, &mut scale, &mut tally);
+            for (i, h) in h.iter_mut().enumerate() {
+                if f_un[i] > 0.0 {
+                    *h += e.radiance * scale[i];
+                }
             }
             let c = &self.per_emitter[ei];
             c.evaluations
@@ -528,6 +535,8 @@ impl<'a> Direct<'a> {
         self.evaluations
             .fetch_add(tally.evaluations, Ordering::Relaxed);
         self.fallbacks.fetch_add(tally.fallbacks, Ordering::Relaxed);
+        self.candidates
+            .fetch_add(tally.candidates, Ordering::Relaxed);
         self.occluder_total
             .fetch_add(tally.occluders, Ordering::Relaxed);
         self.occluders_max
@@ -537,26 +546,29 @@ impl<'a> Direct<'a> {
         h
     }
 
-    /// Exact light of emitter `e` at the points `idx`: culls `candidates` with the shaft of the
-    /// points and the emitter, then splits the points in two along their widest axis, down to
-    /// [`CLUSTER_LEAF`] points. Writes `pi F_visible` of each point into `scale`.
-    #[allow(clippy::too_many_arguments)]
+    /// Exact light of one emitter at the points of cluster `node` that see it: culls
+    /// `candidates` with the shaft of the cluster and the emitter, then goes down to the two
+    /// halves, or evaluates the points of a leaf. Writes `pi F_visible` of each point into
+    /// `scale`.
     fn exact_cluster(
         &self,
-        e: &AreaEmitter,
-        hull: &[DVec3],
-        points: &[SurfacePoint],
-        idx: &mut [usize],
+        job: &EmitterJob,
+        node: usize,
         candidates: &[u32],
-        f_un: &[f64],
         scale: &mut [f64],
         tally: &mut Tally,
     ) {
+        let cluster = &job.tree.nodes[node];
+        let members = &job.tree.order[cluster.start..cluster.end];
+        if !members.iter().any(|&i| job.f_un[i] > 0.0) {
+            return;
+        }
+        // A short list is left to the per-point clipping; a shaft costs more than it saves.
         let culled: Vec<u32>;
-        let candidates = if candidates.is_empty() {
+        let candidates = if candidates.len() <= 4 {
             candidates
         } else {
-            let shaft = cluster_shaft(points, idx, &e.shape, hull);
+            let shaft = cluster.shaft(&job.emitter.shape, job.hull);
             culled = candidates
                 .iter()
                 .copied()
@@ -564,33 +576,25 @@ impl<'a> Direct<'a> {
                 .collect();
             &culled
         };
-        if idx.len() <= CLUSTER_LEAF || candidates.is_empty() {
-            for &i in idx.iter() {
-                scale[i] = self.exact_at(e, &points[i], f_un[i], candidates, tally);
+        match cluster.children {
+            Some([left, right]) if !candidates.is_empty() => {
+                self.exact_cluster(job, left, candidates, scale, tally);
+                self.exact_cluster(job, right, candidates, scale, tally);
             }
-            return;
+            _ => {
+                for &i in members {
+                    if job.f_un[i] > 0.0 {
+                        scale[i] = self.exact_at(
+                            job.emitter,
+                            &job.points[i],
+                            job.f_un[i],
+                            candidates,
+                            tally,
+                        );
+                    }
+                }
+            }
         }
-        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-        for &i in idx.iter() {
-            lo = lo.min(points[i].p);
-            hi = hi.max(points[i].p);
-        }
-        let d = hi - lo;
-        let axis = if d.x >= d.y && d.x >= d.z {
-            0
-        } else if d.y >= d.z {
-            1
-        } else {
-            2
-        };
-        idx.sort_unstable_by(|&a, &b| {
-            points[a].p[axis]
-                .total_cmp(&points[b].p[axis])
-                .then(a.cmp(&b))
-        });
-        let (left, right) = idx.split_at_mut(idx.len() / 2);
-        self.exact_cluster(e, hull, points, left, candidates, f_un, scale, tally);
-        self.exact_cluster(e, hull, points, right, candidates, f_un, scale, tally);
     }
 
     /// `pi F` of the visible part of `e` at one point, from the occluder pieces `candidates`
@@ -607,6 +611,7 @@ impl<'a> Direct<'a> {
         if candidates.is_empty() {
             return PI * f_unoccluded;
         }
+        tally.candidates += candidates.len() as u64;
         let pieces = &self.occluders.pieces;
         let occluders = candidates
             .iter()
@@ -702,8 +707,11 @@ impl<'a> Direct<'a> {
                 continue;
             }
             evaluations += 1;
-            c.evaluations.fetch_add(1, Ordering::Relaxed);
+            let start = Instant::now();
             let (visible, r) = self.sampled_visibility(e, f, total, at);
+            c.evaluations.fetch_add(1, Ordering::Relaxed);
+            c.nanos
+                .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
             rays += r;
             h += e.radiance * (PI * f * visible);
         }
@@ -724,6 +732,7 @@ impl<'a> Direct<'a> {
             method: self.method,
             seconds: 0.0,
             evaluations: load(&self.evaluations),
+            candidates: load(&self.candidates),
             fallbacks: load(&self.fallbacks),
             occluder_cap: self.limits.max_occluders,
             occluders: load(&self.occluder_total),
@@ -747,55 +756,140 @@ impl<'a> Direct<'a> {
     }
 }
 
-/// The shaft of a cluster of points and an emitter: the convex hull of the points' bounding
-/// box (a rectangle when they are coplanar) and the emitter's hull (its bounding rectangle when
-/// the hull has many corners), plus the emitter's plane and, for points of one plane, their
-/// horizon.
-fn cluster_shaft(
-    points: &[SurfacePoint],
-    idx: &[usize],
-    shape: &EmitterShape,
-    hull: &[DVec3],
-) -> Shaft {
-    let first = &points[idx[0]];
-    let n0 = first.n;
-    let u = n0.any_orthonormal_vector();
-    let v = n0.cross(u);
-    let o = first.p;
-    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
-    let mut one_normal = true;
-    for &i in idx {
-        let d = points[i].p - o;
-        let q = DVec3::new(d.dot(u), d.dot(v), d.dot(n0));
-        lo = lo.min(q);
-        hi = hi.max(q);
-        one_normal &= points[i].n == n0;
-    }
-    let extent = (hi - lo).max_element();
-    let flat = hi.z - lo.z <= 1e-9 * extent;
-    let mut corners: Vec<DVec3> = Vec::with_capacity(16);
-    for k in 0..if flat { 4 } else { 8 } {
-        let x = if k & 1 == 0 { lo.x } else { hi.x };
-        let y = if k & 2 == 0 { lo.y } else { hi.y };
-        let z = if flat || k & 4 == 0 { lo.z } else { hi.z };
-        corners.push(o + u * x + v * y + n0 * z);
-    }
-    if hull.len() <= 8 {
-        corners.extend_from_slice(hull);
-    } else {
-        let (a, b) = shape.hull.iter().fold(
-            (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
-            |(a, b), q| (a.min(*q), b.max(*q)),
-        );
-        for q in [a, DVec2::new(b.x, a.y), b, DVec2::new(a.x, b.y)] {
-            corners.push(shape.frame.world_from_plane(q));
+/// One emitter's exact pass over the points of one [`Direct::irradiance_points`] call.
+struct EmitterJob<'a> {
+    emitter: &'a AreaEmitter,
+    /// The emitter's hull, world space.
+    hull: &'a [DVec3],
+    points: &'a [SurfacePoint],
+    tree: &'a ClusterTree,
+    /// Unoccluded form factor of each point (0: the emitter is behind or below its horizon).
+    f_un: &'a [f64],
+}
+
+/// A kd-tree over receiving points, built once per call and shared by all emitters: each node
+/// holds the points `order[start..end]`, halved along their widest axis down to
+/// [`CLUSTER_LEAF`] points.
+struct ClusterTree {
+    order: Vec<usize>,
+    nodes: Vec<Cluster>,
+}
+
+struct Cluster {
+    start: usize,
+    end: usize,
+    /// Corners of the points' bounding box in a frame of the first point's normal: 4 when the
+    /// points lie in one plane, 8 otherwise.
+    corners: Vec<DVec3>,
+    /// For points of one plane with one normal: the normal and the highest point's height along
+    /// it, as a point. Occluders below that plane cannot block them.
+    plane: Option<(DVec3, DVec3)>,
+    children: Option<[usize; 2]>,
+}
+
+impl ClusterTree {
+    fn new(points: &[SurfacePoint]) -> ClusterTree {
+        let mut tree = ClusterTree {
+            order: (0..points.len()).collect(),
+            nodes: Vec::new(),
+        };
+        if !points.is_empty() {
+            tree.build(points, 0, points.len());
         }
+        tree
     }
-    let mut shaft = Shaft::hull(&corners).with_plane(-shape.frame.n, shape.frame.origin);
-    if flat && one_normal {
-        shaft = shaft.with_plane(-n0, o + n0 * hi.z);
+
+    fn build(&mut self, points: &[SurfacePoint], start: usize, end: usize) -> usize {
+        let members = &self.order[start..end];
+        let first = &points[members[0]];
+        let n0 = first.n;
+        let u = n0.any_orthonormal_vector();
+        let v = n0.cross(u);
+        let o = first.p;
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        let (mut wlo, mut whi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        let mut one_normal = true;
+        for &i in members {
+            let d = points[i].p - o;
+            let q = DVec3::new(d.dot(u), d.dot(v), d.dot(n0));
+            lo = lo.min(q);
+            hi = hi.max(q);
+            wlo = wlo.min(points[i].p);
+            whi = whi.max(points[i].p);
+            one_normal &= points[i].n == n0;
+        }
+        let extent = (hi - lo).max_element();
+        let flat = hi.z - lo.z <= 1e-9 * extent;
+        let corners = (0..if flat { 4 } else { 8 })
+            .map(|k| {
+                let x = if k & 1 == 0 { lo.x } else { hi.x };
+                let y = if k & 2 == 0 { lo.y } else { hi.y };
+                let z = if flat || k & 4 == 0 { lo.z } else { hi.z };
+                o + u * x + v * y + n0 * z
+            })
+            .collect();
+        let id = self.nodes.len();
+        self.nodes.push(Cluster {
+            start,
+            end,
+            corners,
+            plane: (flat && one_normal).then_some((n0, o + n0 * hi.z)),
+            children: None,
+        });
+        if end - start > CLUSTER_LEAF {
+            let d = whi - wlo;
+            let axis = if d.x >= d.y && d.x >= d.z {
+                0
+            } else if d.y >= d.z {
+                1
+            } else {
+                2
+            };
+            let mid = (end - start) / 2;
+            self.order[start..end].select_nth_unstable_by(mid, |&a, &b| {
+                points[a].p[axis]
+                    .total_cmp(&points[b].p[axis])
+                    .then(a.cmp(&b))
+            });
+            let left = self.build(points, start, start + mid);
+            let right = self.build(points, start + mid, end);
+            self.nodes[id].children = Some([left, right]);
+        }
+        id
     }
-    shaft
+}
+
+impl Cluster {
+    /// The shaft of the cluster and an emitter: the convex hull of the cluster's corners and
+    /// the emitter's hull (its bounding rectangle when the hull has many corners), less what
+    /// lies on or behind the emitter's plane and, for a planar cluster, below its plane.
+    fn shaft(&self, shape: &EmitterShape, hull: &[DVec3]) -> Shaft {
+        let mut pts: Vec<DVec3> = Vec::with_capacity(self.corners.len() + 8);
+        pts.extend_from_slice(&self.corners);
+        if hull.len() <= 8 {
+            pts.extend_from_slice(hull);
+        } else {
+            let (a, b) = shape.hull.iter().fold(
+                (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+                |(a, b), q| (a.min(*q), b.max(*q)),
+            );
+            for q in [a, DVec2::new(b.x, a.y), b, DVec2::new(a.x, b.y)] {
+                pts.push(shape.frame.world_from_plane(q));
+            }
+        }
+        let shaft = Shaft::hull(&pts);
+        let tol = shaft.tolerance();
+        let fr = &shape.frame;
+        // Excluded when every corner is less than the plane tolerance in front of the emitter,
+        // as the per-point clipping does.
+        let mut shaft = shaft.with_plane(-fr.n, fr.origin + fr.n * (shape.plane_tolerance() + tol));
+        if let Some((n, q)) = self.plane {
+            // Excluded when every corner is below the receivers' plane (or in it, to within
+            // the tolerance): such an occluder projects to nothing from points in that plane.
+            shaft = shaft.with_plane(-n, q + n * (2.0 * tol));
+        }
+        shaft
+    }
 }
 
 /// Irradiance from one punctual light at a receiving point, and the rays it cast. Point and spot: `I cos(theta) / d^2` with glTF's

@@ -20,7 +20,7 @@
 // Pictures and baked files go to <target>/clients/.
 // The last line is `N passed, N failed[, N skipped]`; the exit code is 1 when anything failed.
 
-import { execFileSync, spawnSync } from 'node:child_process';
+import { spawnSync } from 'node:child_process';
 import fs from 'node:fs';
 import http from 'node:http';
 import os from 'node:os';
@@ -68,15 +68,19 @@ const CHROMIUM_ARGS = [
 // Reporting
 
 const counts = { passed: 0, failed: 0, skipped: 0 };
+const results = [];
 function check(name, ok, detail) {
   counts[ok ? 'passed' : 'failed']++;
+  results.push({ name, result: ok ? 'passed' : 'failed', detail });
   console.log(`${ok ? 'ok  ' : 'FAIL'} ${name}: ${detail}`);
 }
 function skip(name, why) {
   counts.skipped++;
+  results.push({ name, result: 'skipped', detail: why });
   console.log(`skip ${name}: ${why}`);
 }
 function finish() {
+  if (fs.existsSync(OUT)) fs.writeFileSync(path.join(OUT, 'summary.json'), JSON.stringify({ counts, results }, null, 1));
   const skipped = counts.skipped ? `, ${counts.skipped} skipped` : '';
   console.log(`\nclient checks: pictures and baked files in ${path.relative(process.cwd(), OUT) || '.'}`);
   console.log(`${counts.passed} passed, ${counts.failed} failed${skipped}`);
@@ -180,6 +184,13 @@ function serve() {
   return new Promise((resolve) => server.listen(0, '127.0.0.1', () => resolve(server)));
 }
 
+/** `promise`, or an error naming `what` after `ms` milliseconds. */
+function withTimeout(ms, what, promise) {
+  let timer;
+  const late = new Promise((_, reject) => { timer = setTimeout(() => reject(new Error(`${what}: no answer in ${ms / 1000} s`)), ms); });
+  return Promise.race([promise, late]).finally(() => clearTimeout(timer));
+}
+
 function findChromium() {
   if (process.env.CHROMIUM) return process.env.CHROMIUM;
   for (const name of ['chromium', 'chromium-browser']) {
@@ -225,10 +236,10 @@ class Browser {
   async render(glb, png, { exposure, lightmapColorSpace }) {
     this.messages.length = 0;
     const url = `${this.base}/out/${path.relative(OUT, glb).split(path.sep).join('/')}`;
-    const info = await this.page.evaluate(
+    const info = await withTimeout(60_000, `three.js drawing ${path.basename(glb)}`, this.page.evaluate(
       (o) => window.renderGlb(o),
       { url, width: SIZE, height: SIZE, exposure, lightmapColorSpace },
-    );
+    ));
     await this.page.locator('canvas').screenshot({ path: png });
     info.messages = [...this.messages];
     return info;
@@ -373,33 +384,33 @@ async function main() {
     const selfTests = [
       {
         name: 'MOZ_lightmap.texCoord 2 (a UV set that does not exist)',
-        base: 'cornell-box', edit: breakages.lightmapTexCoord(2),
+        tag: 'broken-texcoord2', base: 'cornell-box', edit: breakages.lightmapTexCoord(2),
         caught: (r) => r.mad >= MAD_TOLERANCE, what: (r) => `mean |diff| ${fmt(r.mad)} vs tolerance ${MAD_TOLERANCE}`,
       },
       {
         // instanced's panel mesh has its own TEXCOORD_0; elsewhere TEXCOORD_0 is a copy of
         // TEXCOORD_1 (penumbra adds it where the input had none), so texCoord 0 changes nothing there.
         name: 'MOZ_lightmap.texCoord 0 (the material UVs)',
-        base: 'instanced', edit: breakages.lightmapTexCoord(0),
+        tag: 'broken-texcoord0', base: 'instanced', edit: breakages.lightmapTexCoord(0),
         caught: (r) => r.mad >= MAD_TOLERANCE, what: (r) => `mean |diff| ${fmt(r.mad)} vs tolerance ${MAD_TOLERANCE}`,
       },
       {
         name: 'MOZ_lightmap removed',
-        base: 'cornell-box', edit: breakages.removeLightmap,
+        tag: 'broken-no-lightmap', base: 'cornell-box', edit: breakages.removeLightmap,
         caught: (r) => r.applied < APPLIED_MIN_MAD, what: (r) => `mean |lit - without lightmap| ${fmt(r.applied)} vs minimum ${APPLIED_MIN_MAD}`,
       },
       {
         name: 'client decodes the lightmap as sRGB',
-        base: 'cornell-box', edit: () => {}, client: { lightmapColorSpace: 'srgb' },
+        tag: 'broken-srgb-decode', base: 'cornell-box', edit: () => {}, client: { lightmapColorSpace: 'srgb' },
         caught: (r) => r.mad >= MAD_TOLERANCE, what: (r) => `mean |diff| ${fmt(r.mad)} vs tolerance ${MAD_TOLERANCE}`,
       },
     ];
-    for (const [i, t] of selfTests.entries()) {
+    for (const t of selfTests) {
       const view = path.join(OUT, 'glb', `${t.base}-view.glb`);
       if (!fs.existsSync(view)) continue;
-      const broken = path.join(OUT, 'glb', `broken-${i + 1}.glb`);
+      const broken = path.join(OUT, 'glb', `${t.tag}.glb`);
       editGlb(view, broken, t.edit);
-      const r = await compare(browser, broken, `broken-${i + 1}`, t.client);
+      const r = await compare(browser, broken, t.tag, t.client);
       check(`self-test: three.js checks catch ${t.name}`, t.caught(r), t.what(r));
     }
   } catch (e) {

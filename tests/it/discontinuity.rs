@@ -121,7 +121,7 @@ fn spade_five_segment_repro_meshes() {
         seg((0.0, 0.0), (2.5, 1.5)),
         seg((0.5, 0.0), (1.5, 3.0)),
     ];
-    let (mesh, refused) = penumbra::mesh::triangulate_with(0, poly, &segments, 0.05, 10_000);
+    let (mesh, refused) = penumbra::mesh::triangulate_with(0, poly, &segments, 0.0, 0.05, 10_000);
     assert_eq!(refused, 0);
     assert!((mesh.area() - 36.0).abs() < 1e-9);
 }
@@ -188,5 +188,69 @@ fn contact_lines_do_not_leak_light() {
     assert!(
         outside_min > 0.01,
         "the lit side of the contact is dark: {outside_min}"
+    );
+}
+
+/// The segments of a fixture as text: one line per segment, world coordinates to 1e-6.
+fn segment_text(b: &Bake) -> String {
+    let mut out = String::new();
+    for (poly, segs) in b.segments.iter().enumerate() {
+        for s in segs {
+            let (a, c) = world(b, poly, s);
+            out.push_str(&format!(
+                "{poly} {:?} {:.6} {:.6} {:.6}  {:.6} {:.6} {:.6}\n",
+                s.kind, a.x, a.y, a.z, c.x, c.y, c.z
+            ));
+        }
+    }
+    out.replace("-0.000000", "0.000000")
+}
+
+/// Compares with `tests/golden/NAME`; `PENUMBRA_BLESS=1` rewrites it. Prints the differing lines.
+fn golden(name: &str, actual: &str) {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/golden")
+        .join(name);
+    if std::env::var_os("PENUMBRA_BLESS").is_some() {
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(&path, actual).unwrap();
+        return;
+    }
+    let expected = std::fs::read_to_string(&path).unwrap_or_else(|e| {
+        panic!(
+            "{}: {e} (run with PENUMBRA_BLESS=1 to create it)",
+            path.display()
+        )
+    });
+    if expected != actual {
+        let exp: std::collections::BTreeSet<&str> = expected.lines().collect();
+        let act: std::collections::BTreeSet<&str> = actual.lines().collect();
+        let mut diff = String::new();
+        for l in exp.difference(&act) {
+            diff.push_str(&format!("- {l}\n"));
+        }
+        for l in act.difference(&exp) {
+            diff.push_str(&format!("+ {l}\n"));
+        }
+        panic!(
+            "{} differs (- expected, + actual; PENUMBRA_BLESS=1 to accept):\n{diff}",
+            path.display()
+        );
+    }
+}
+
+#[test]
+fn golden_segments_square_occluder() {
+    golden(
+        "square-occluder.segments.txt",
+        &segment_text(&bake_dm(&fixtures::square_occluder())),
+    );
+}
+
+#[test]
+fn golden_segments_cornell_box() {
+    golden(
+        "cornell-box.segments.txt",
+        &segment_text(&bake_dm(&fixtures::cornell_box())),
     );
 }

@@ -7,6 +7,7 @@ mod fixtures;
 mod known_answers;
 mod loading;
 mod output;
+mod stability;
 
 use penumbra::load::{self, Gltf};
 use penumbra::stats::Progress;
