@@ -236,6 +236,8 @@ pub struct EmitterShape {
     pub frame: Frame,
     /// Convex pieces, counter-clockwise in `frame` coordinates (seen from the front).
     pub pieces: Vec<Vec<DVec2>>,
+    /// The pieces in world space.
+    pub pieces_world: Vec<Vec<DVec3>>,
     /// Convex hull of all pieces, counter-clockwise.
     pub hull: Vec<DVec2>,
     /// Area, scene units².
@@ -265,6 +267,10 @@ impl EmitterShape {
         EmitterShape {
             frame,
             area: pieces.iter().map(|p| signed_area(p)).sum(),
+            pieces_world: pieces
+                .iter()
+                .map(|p| p.iter().map(|q| frame.world_from_plane(*q)).collect())
+                .collect(),
             pieces,
             hull,
             size: if all.is_empty() {
@@ -309,17 +315,27 @@ impl EmitterShape {
         if self.frame.n.dot(p - self.frame.origin) <= 0.0 {
             return 0.0;
         }
-        self.pieces
+        self.pieces_world
             .iter()
-            .map(|piece| point_polygon_form_factor(p, n, &self.lift(piece)))
+            .map(|piece| {
+                // Entirely above the horizon: the contour sum as is, without the clipping's
+                // copy (the same value as `point_polygon_form_factor`).
+                let (mut reach, mut height, mut below) = (0.0f64, 0.0f64, false);
+                for v in piece {
+                    let h = n.dot(*v - p);
+                    below |= h < 0.0;
+                    height = height.max(h);
+                    reach = reach.max((*v - p).length());
+                }
+                if below {
+                    point_polygon_form_factor(p, n, piece)
+                } else if height <= 1e-9 * reach {
+                    0.0
+                } else {
+                    contour_sum(p, n, piece).abs() / (2.0 * std::f64::consts::PI)
+                }
+            })
             .sum()
-    }
-
-    fn lift(&self, piece: &[DVec2]) -> Vec<DVec3> {
-        piece
-            .iter()
-            .map(|q| self.frame.world_from_plane(*q))
-            .collect()
     }
 }
 
@@ -481,29 +497,72 @@ pub struct Backprojection {
     pub pieces: usize,
 }
 
-/// A convex polygon in the emitter's plane with its bounding box.
-#[derive(Clone, Debug)]
-struct Piece {
-    v: Vec<DVec2>,
+/// Convex polygons in the emitter's plane, stored flat, each with its bounding box.
+#[derive(Clone, Debug, Default)]
+struct PieceSet {
+    verts: Vec<DVec2>,
+    spans: Vec<Span>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Span {
+    start: usize,
+    len: usize,
     lo: DVec2,
     hi: DVec2,
 }
 
-impl Piece {
-    fn new(v: Vec<DVec2>) -> Piece {
-        let (lo, hi) = v.iter().fold(
-            (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
-            |(lo, hi), q| (lo.min(*q), hi.max(*q)),
-        );
-        Piece { v, lo, hi }
-    }
-
-    fn overlaps(&self, other: &Piece) -> bool {
+impl Span {
+    fn overlaps(&self, other: &Span) -> bool {
         self.lo.x <= other.hi.x
             && other.lo.x <= self.hi.x
             && self.lo.y <= other.hi.y
             && other.lo.y <= self.hi.y
     }
+}
+
+impl PieceSet {
+    fn clear(&mut self) {
+        self.verts.clear();
+        self.spans.clear();
+    }
+
+    fn push(&mut self, v: &[DVec2]) {
+        let (lo, hi) = v.iter().fold(
+            (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+            |(lo, hi), q| (lo.min(*q), hi.max(*q)),
+        );
+        self.spans.push(Span {
+            start: self.verts.len(),
+            len: v.len(),
+            lo,
+            hi,
+        });
+        self.verts.extend_from_slice(v);
+    }
+
+    fn get(&self, s: &Span) -> &[DVec2] {
+        &self.verts[s.start..s.start + s.len]
+    }
+}
+
+/// Reusable buffers of [`Scratch::visible_form_factor`]: one per thread saves the allocations
+/// of every evaluation.
+#[derive(Clone, Debug, Default)]
+pub struct Scratch {
+    pieces: PieceSet,
+    next: PieceSet,
+    projected: PieceSet,
+    order: Vec<(f64, usize)>,
+    s: Vec<f64>,
+    rest: Vec<DVec2>,
+    inside: Vec<DVec2>,
+    outside: Vec<DVec2>,
+    poly: Vec<DVec2>,
+    buf_a: Vec<DVec3>,
+    buf_b: Vec<DVec3>,
+    planes: Vec<(DVec3, DVec3)>,
+    hull_world: Vec<DVec3>,
 }
 
 /// Clips a 3D polygon to `n·(x - o) >= 0` (Sutherland-Hodgman).
@@ -545,24 +604,45 @@ fn split2(poly: &[DVec2], s: &[f64], outside: &mut Vec<DVec2>, inside: &mut Vec<
     }
 }
 
+/// Buffers of [`subtract`].
+#[derive(Clone, Debug, Default)]
+struct SubtractBuffers {
+    s: Vec<f64>,
+    rest: Vec<DVec2>,
+    inside: Vec<DVec2>,
+    outside: Vec<DVec2>,
+}
+
 /// `p \ q` for convex `p` and convex counter-clockwise `q`: the convex pieces of `p` outside `q`
 /// are appended to `out` (pieces of area at most `area_tol` are dropped). `tol` is the distance
 /// within which a vertex counts as on an edge's line.
-fn subtract(p: &Piece, q: &Piece, tol: f64, area_tol: f64, out: &mut Vec<Piece>) {
-    let mut rest = p.v.clone();
-    let mut s = Vec::with_capacity(rest.len() + 2);
-    let (mut outside, mut inside) = (Vec::new(), Vec::new());
-    let m = q.v.len();
+fn subtract(
+    p: &[DVec2],
+    q: &[DVec2],
+    tol: f64,
+    area_tol: f64,
+    out: &mut PieceSet,
+    buf: &mut SubtractBuffers,
+) {
+    let SubtractBuffers {
+        s,
+        rest,
+        inside,
+        outside,
+    } = buf;
+    rest.clear();
+    rest.extend_from_slice(p);
+    let m = q.len();
     for i in 0..m {
-        let a = q.v[i];
-        let e = q.v[(i + 1) % m] - a;
+        let a = q[i];
+        let e = q[(i + 1) % m] - a;
         let len = e.length();
         if len <= tol {
             continue;
         }
         s.clear();
         let (mut any_out, mut any_in) = (false, false);
-        for v in &rest {
+        for v in rest.iter() {
             let mut d = e.perp_dot(*v - a) / len;
             if d.abs() <= tol {
                 d = 0.0;
@@ -576,31 +656,45 @@ fn subtract(p: &Piece, q: &Piece, tol: f64, area_tol: f64, out: &mut Vec<Piece>)
         }
         if !any_in {
             // Entirely outside this edge: the rest does not meet q.
-            if signed_area(&rest) > area_tol {
-                out.push(Piece::new(rest));
+            if signed_area(rest) > area_tol {
+                out.push(rest);
             }
             return;
         }
-        split2(&rest, &s, &mut outside, &mut inside);
-        if signed_area(&outside) > area_tol {
-            out.push(Piece::new(outside.clone()));
+        split2(rest, s, outside, inside);
+        if signed_area(outside) > area_tol {
+            out.push(outside);
         }
-        std::mem::swap(&mut rest, &mut inside);
-        if signed_area(&rest) <= area_tol {
+        std::mem::swap(rest, inside);
+        if signed_area(rest) <= area_tol {
             return;
         }
     }
     // What is left lies inside q: hidden.
 }
 
+/// Lambert's contour sum `sum_i gamma_i n·unit(r_i x r_(i+1))` of a polygon above the horizon
+/// of `p` (no clipping), signed by its winding; `F` is its absolute value over `2 pi`.
+fn contour_sum(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
+    let mut sum = 0.0;
+    for i in 0..poly.len() {
+        let a = poly[i] - p;
+        let b = poly[(i + 1) % poly.len()] - p;
+        let c = a.cross(b);
+        let cl = c.length();
+        if cl <= 0.0 {
+            continue;
+        }
+        // atan2 keeps the angle accurate for tiny and near-straight angles.
+        sum += cl.atan2(a.dot(b)) * n.dot(c) / cl;
+    }
+    sum
+}
+
 /// The form factor from `(p, n)` to the part of `emitter` that the polygons `occluders` leave
 /// visible (exact for polygonal occluders). Occluders are convex planar polygons in world space,
 /// on either side facing; the receiving and emitting surfaces themselves must not be among them.
-///
-/// Each occluder is clipped to the pyramid with apex `p` over the emitter's hull (clipped to the
-/// horizon of `p`) and to the open side of the emitter's plane facing `p`, projected through
-/// `p` onto that plane, and subtracted from the emitter's convex pieces, largest projection
-/// first. Lambert's contour formula over the remaining pieces gives the form factor.
+/// See [`Scratch::visible_form_factor`], which this calls with fresh buffers.
 pub fn visible_form_factor<'a>(
     p: DVec3,
     n: DVec3,
@@ -608,170 +702,229 @@ pub fn visible_form_factor<'a>(
     occluders: impl IntoIterator<Item = &'a [DVec3]>,
     limits: &Limits,
 ) -> Backprojection {
-    let fr = &emitter.frame;
-    let mut result = Backprojection {
-        form_factor: Some(0.0),
-        occluders: 0,
-        pieces: 0,
-    };
-    let d_p = fr.n.dot(p - fr.origin);
-    if d_p <= 0.0 || emitter.pieces.is_empty() {
-        return result;
-    }
-    let tol = 1e-12 * emitter.size;
-    let area_tol = 1e-15 * emitter.area;
-    // The horizon of p in the emitter's plane: h(q) = a q.x + b q.y + c >= 0.
-    let (ha, hb, hc) = (n.dot(fr.u), n.dot(fr.v), n.dot(fr.origin - p));
-    let hlen = (ha * ha + hb * hb).sqrt();
-    let mut pieces: Vec<Piece> = Vec::with_capacity(emitter.pieces.len());
-    let (mut outside, mut inside) = (Vec::new(), Vec::new());
-    let mut s = Vec::new();
-    for piece in &emitter.pieces {
-        s.clear();
-        s.extend(piece.iter().map(|q| {
-            let h = ha * q.x + hb * q.y + hc;
-            // Snap to the horizon within the tolerance (in length units when the line exists).
-            if hlen > 0.0 && (h / hlen).abs() <= tol {
-                0.0
-            } else {
-                h
-            }
-        }));
-        if s.iter().all(|&h| h >= 0.0) {
-            pieces.push(Piece::new(piece.clone()));
-        } else if s.iter().any(|&h| h > 0.0) {
-            split2(piece, &s, &mut outside, &mut inside);
-            if signed_area(&inside) > area_tol {
-                pieces.push(Piece::new(inside.clone()));
-            }
-        }
-    }
-    if pieces.is_empty() {
-        return result;
-    }
-    let hull = convex_hull(
-        &pieces
-            .iter()
-            .flat_map(|q| q.v.iter().copied())
-            .collect::<Vec<_>>(),
-    );
-    // Side planes of the pyramid p -> hull, inward normals; then the emitter's plane.
-    let hull_world: Vec<DVec3> = hull.iter().map(|q| fr.world_from_plane(*q)).collect();
-    let centre = hull_world.iter().copied().sum::<DVec3>() / hull_world.len().max(1) as f64;
-    // The emitter's plane first: it culls the emitter's neighbours at once.
-    let mut planes: Vec<(DVec3, DVec3)> = Vec::with_capacity(hull.len() + 1);
-    planes.push((fr.n, fr.origin + fr.n * emitter.plane_tolerance()));
-    for i in 0..hull_world.len() {
-        let m = (hull_world[i] - p).cross(hull_world[(i + 1) % hull_world.len()] - p);
-        let len = m.length();
-        if len == 0.0 {
-            continue;
-        }
-        let m = m / len;
-        planes.push((if m.dot(centre - p) < 0.0 { -m } else { m }, p));
-    }
+    Scratch::default().visible_form_factor(p, n, emitter, occluders, limits, None)
+}
 
-    // Clip and project every occluder.
-    let mut projected: Vec<(f64, usize, Piece)> = Vec::new();
-    let (mut buf_a, mut buf_b) = (Vec::new(), Vec::new());
-    for (index, occ) in occluders.into_iter().enumerate() {
-        if occ.len() < 3 {
-            continue;
+impl Scratch {
+    /// The form factor from `(p, n)` to the part of `emitter` that the polygons `occluders`
+    /// leave visible (exact for polygonal occluders). Occluders are convex planar polygons in
+    /// world space, on either side facing; the receiving and emitting surfaces themselves must
+    /// not be among them.
+    ///
+    /// Each occluder is clipped to the open side of the emitter's plane facing `p` and to the
+    /// pyramid with apex `p` over the emitter's hull (clipped to the horizon of `p`), projected
+    /// through `p` onto that plane, and subtracted from the emitter's convex pieces, largest
+    /// projection first. Lambert's contour formula over the remaining pieces gives the form
+    /// factor. When no occluder projects with area, `unoccluded` (if given) is returned as the
+    /// form factor instead of recomputing it.
+    pub fn visible_form_factor<'a>(
+        &mut self,
+        p: DVec3,
+        n: DVec3,
+        emitter: &EmitterShape,
+        occluders: impl IntoIterator<Item = &'a [DVec3]>,
+        limits: &Limits,
+        unoccluded: Option<f64>,
+    ) -> Backprojection {
+        let fr = &emitter.frame;
+        let mut result = Backprojection {
+            form_factor: Some(0.0),
+            occluders: 0,
+            pieces: 0,
+        };
+        let d_p = fr.n.dot(p - fr.origin);
+        if d_p <= 0.0 || emitter.pieces.is_empty() {
+            return result;
         }
-        // Clip to the pyramid; planes the polygon lies inside of are skipped, and one it lies
-        // outside of ends the clip.
-        buf_a.clear();
-        buf_a.extend_from_slice(occ);
-        for (m, o) in &planes {
-            let (mut any_in, mut any_out) = (false, false);
-            for v in &buf_a {
-                let d = m.dot(*v - *o);
-                any_in |= d > 0.0;
-                any_out |= d < 0.0;
+        let tol = 1e-12 * emitter.size;
+        let area_tol = 1e-15 * emitter.area;
+        // The horizon of p in the emitter's plane: h(q) = a q.x + b q.y + c >= 0.
+        let (ha, hb, hc) = (n.dot(fr.u), n.dot(fr.v), n.dot(fr.origin - p));
+        let hlen = (ha * ha + hb * hb).sqrt();
+        self.pieces.clear();
+        let mut clipped = false;
+        for piece in &emitter.pieces {
+            self.s.clear();
+            self.s.extend(piece.iter().map(|q| {
+                let h = ha * q.x + hb * q.y + hc;
+                // Snap to the horizon within the tolerance (when the line exists).
+                if hlen > 0.0 && (h / hlen).abs() <= tol {
+                    0.0
+                } else {
+                    h
+                }
+            }));
+            if self.s.iter().all(|&h| h >= 0.0) {
+                self.pieces.push(piece);
+            } else if self.s.iter().any(|&h| h > 0.0) {
+                split2(piece, &self.s, &mut self.outside, &mut self.inside);
+                if signed_area(&self.inside) > area_tol {
+                    self.pieces.push(&self.inside);
+                }
+                clipped = true;
+            } else {
+                clipped = true;
             }
-            if !any_in {
-                buf_a.clear();
-                break;
+        }
+        if self.pieces.spans.is_empty() {
+            return result;
+        }
+        // Side planes of the pyramid p -> hull, inward normals, after the emitter's plane
+        // (first: it culls the emitter's neighbours at once).
+        self.hull_world.clear();
+        if clipped {
+            let hull = convex_hull(&self.pieces.verts);
+            self.hull_world
+                .extend(hull.iter().map(|q| fr.world_from_plane(*q)));
+        } else {
+            self.hull_world
+                .extend(emitter.hull.iter().map(|q| fr.world_from_plane(*q)));
+        }
+        let hw = &self.hull_world;
+        let centre = hw.iter().copied().sum::<DVec3>() / hw.len().max(1) as f64;
+        self.planes.clear();
+        self.planes
+            .push((fr.n, fr.origin + fr.n * emitter.plane_tolerance()));
+        for i in 0..hw.len() {
+            let m = (hw[i] - p).cross(hw[(i + 1) % hw.len()] - p);
+            let len = m.length();
+            if len == 0.0 {
+                continue;
             }
-            if any_out {
-                clip3(&buf_a, *m, *o, &mut buf_b);
-                std::mem::swap(&mut buf_a, &mut buf_b);
-                if buf_a.len() < 3 {
+            let m = m / len;
+            self.planes
+                .push((if m.dot(centre - p) < 0.0 { -m } else { m }, p));
+        }
+
+        // Clip and project every occluder.
+        self.projected.clear();
+        self.order.clear();
+        for occ in occluders {
+            if occ.len() < 3 {
+                continue;
+            }
+            // Clip to the pyramid; planes the polygon lies inside of are skipped, and one it
+            // lies outside of ends the clip.
+            self.buf_a.clear();
+            self.buf_a.extend_from_slice(occ);
+            for (m, o) in &self.planes {
+                let (mut any_in, mut any_out) = (false, false);
+                for v in &self.buf_a {
+                    let d = m.dot(*v - *o);
+                    any_in |= d > 0.0;
+                    any_out |= d < 0.0;
+                }
+                if !any_in {
+                    self.buf_a.clear();
                     break;
                 }
+                if any_out {
+                    clip3(&self.buf_a, *m, *o, &mut self.buf_b);
+                    std::mem::swap(&mut self.buf_a, &mut self.buf_b);
+                    if self.buf_a.len() < 3 {
+                        break;
+                    }
+                }
             }
+            if self.buf_a.len() < 3 {
+                continue;
+            }
+            // An occluder whose plane passes through p projects to a segment.
+            let mut normal = DVec3::ZERO;
+            for i in 0..occ.len() {
+                normal += occ[i].cross(occ[(i + 1) % occ.len()]);
+            }
+            let nl = normal.length();
+            let reach = occ.iter().map(|v| v.distance(p)).fold(0.0, f64::max);
+            if nl == 0.0 || (normal.dot(p - occ[0]) / nl).abs() <= 1e-12 * reach {
+                continue;
+            }
+            self.poly.clear();
+            let mut ok = true;
+            for x in &self.buf_a {
+                let denom = fr.n.dot(p - *x);
+                if denom <= 1e-15 * d_p {
+                    ok = false;
+                    break;
+                }
+                let y = (p - fr.origin) + (*x - p) * (d_p / denom);
+                self.poly.push(DVec2::new(y.dot(fr.u), y.dot(fr.v)));
+            }
+            if !ok {
+                continue;
+            }
+            let mut area = signed_area(&self.poly);
+            if area < 0.0 {
+                self.poly.reverse();
+                area = -area;
+            }
+            if area <= area_tol {
+                continue;
+            }
+            result.occluders += 1;
+            if result.occluders > limits.max_occluders {
+                result.form_factor = None;
+                return result;
+            }
+            self.order.push((area, self.projected.spans.len()));
+            self.projected.push(&self.poly);
         }
-        if buf_a.len() < 3 {
-            continue;
+        result.pieces = self.pieces.spans.len();
+        if result.occluders == 0
+            && let Some(f) = unoccluded
+        {
+            result.form_factor = Some(f);
+            return result;
         }
-        // An occluder whose plane passes through p projects to a segment.
-        let mut normal = DVec3::ZERO;
-        for i in 0..occ.len() {
-            normal += occ[i].cross(occ[(i + 1) % occ.len()]);
-        }
-        let nl = normal.length();
-        let reach = occ.iter().map(|v| v.distance(p)).fold(0.0, f64::max);
-        if nl == 0.0 || (normal.dot(p - occ[0]) / nl).abs() <= 1e-12 * reach {
-            continue;
-        }
-        let mut poly = Vec::with_capacity(buf_a.len());
-        let mut ok = true;
-        for x in &buf_a {
-            let denom = fr.n.dot(p - *x);
-            if denom <= 1e-15 * d_p {
-                ok = false;
+        // Largest first: big occluders remove most of the emitter before small ones fragment
+        // it.
+        self.order
+            .sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
+        let mut buf = SubtractBuffers {
+            s: std::mem::take(&mut self.s),
+            rest: std::mem::take(&mut self.rest),
+            inside: std::mem::take(&mut self.inside),
+            outside: std::mem::take(&mut self.outside),
+        };
+        for &(_, k) in &self.order {
+            let qs = self.projected.spans[k];
+            let q = self.projected.get(&qs);
+            self.next.clear();
+            for ps in &self.pieces.spans {
+                let piece = self.pieces.get(ps);
+                if ps.overlaps(&qs) {
+                    subtract(piece, q, tol, area_tol, &mut self.next, &mut buf);
+                } else {
+                    self.next.push(piece);
+                }
+            }
+            std::mem::swap(&mut self.pieces, &mut self.next);
+            result.pieces = result.pieces.max(self.pieces.spans.len());
+            if self.pieces.spans.len() > limits.max_pieces {
+                result.form_factor = None;
                 break;
             }
-            let y = (p - fr.origin) + (*x - p) * (d_p / denom);
-            poly.push(DVec2::new(y.dot(fr.u), y.dot(fr.v)));
-        }
-        if !ok {
-            continue;
-        }
-        let mut area = signed_area(&poly);
-        if area < 0.0 {
-            poly.reverse();
-            area = -area;
-        }
-        if area <= area_tol {
-            continue;
-        }
-        result.occluders += 1;
-        if result.occluders > limits.max_occluders {
-            result.form_factor = None;
-            return result;
-        }
-        projected.push((area, index, Piece::new(poly)));
-    }
-    // Largest first: big occluders remove most of the emitter before small ones fragment it.
-    projected.sort_by(|a, b| b.0.total_cmp(&a.0).then(a.1.cmp(&b.1)));
-    result.pieces = pieces.len();
-    let mut next = Vec::new();
-    for (_, _, q) in &projected {
-        next.clear();
-        for piece in &pieces {
-            if piece.overlaps(q) {
-                subtract(piece, q, tol, area_tol, &mut next);
-            } else {
-                next.push(piece.clone());
+            if self.pieces.spans.is_empty() {
+                break;
             }
         }
-        std::mem::swap(&mut pieces, &mut next);
-        result.pieces = result.pieces.max(pieces.len());
-        if pieces.len() > limits.max_pieces {
-            result.form_factor = None;
+        self.s = buf.s;
+        self.rest = buf.rest;
+        self.inside = buf.inside;
+        self.outside = buf.outside;
+        if result.form_factor.is_none() {
             return result;
         }
-        if pieces.is_empty() {
-            break;
+        let mut sum = 0.0;
+        for ps in &self.pieces.spans {
+            self.buf_a.clear();
+            self.buf_a
+                .extend(self.pieces.get(ps).iter().map(|q| fr.world_from_plane(*q)));
+            sum += contour_sum(p, n, &self.buf_a);
         }
+        result.form_factor = Some(sum.abs() / (2.0 * std::f64::consts::PI));
+        result
     }
-    let f: f64 = pieces
-        .iter()
-        .map(|piece| point_polygon_form_factor(p, n, &emitter.lift(&piece.v)))
-        .sum();
-    result.form_factor = Some(f);
-    result
 }
 
 #[cfg(test)]
@@ -833,30 +986,27 @@ mod tests {
     #[test]
     fn subtracting_keeps_the_area_outside() {
         let sq = |x0: f64, y0: f64, s: f64| {
-            Piece::new(vec![
+            vec![
                 DVec2::new(x0, y0),
                 DVec2::new(x0 + s, y0),
                 DVec2::new(x0 + s, y0 + s),
                 DVec2::new(x0, y0 + s),
-            ])
+            ]
         };
-        let mut out = Vec::new();
-        subtract(&sq(0.0, 0.0, 2.0), &sq(0.5, 0.5, 1.0), 1e-12, 0.0, &mut out);
-        let area: f64 = out.iter().map(|p| signed_area(&p.v)).sum();
+        let mut buf = SubtractBuffers::default();
+        let mut out = PieceSet::default();
+        let sub = |a: &[DVec2], b: &[DVec2], out: &mut PieceSet, buf: &mut SubtractBuffers| {
+            out.clear();
+            subtract(a, b, 1e-12, 0.0, out, buf);
+        };
+        sub(&sq(0.0, 0.0, 2.0), &sq(0.5, 0.5, 1.0), &mut out, &mut buf);
+        let area: f64 = out.spans.iter().map(|p| signed_area(out.get(p))).sum();
         assert!((area - 3.0).abs() < 1e-12, "{area}");
-        assert_eq!(out.len(), 4);
-        out.clear();
-        subtract(
-            &sq(0.0, 0.0, 1.0),
-            &sq(-1.0, -1.0, 3.0),
-            1e-12,
-            0.0,
-            &mut out,
-        );
-        assert!(out.is_empty());
-        out.clear();
-        subtract(&sq(0.0, 0.0, 1.0), &sq(2.0, 0.0, 1.0), 1e-12, 0.0, &mut out);
-        assert_eq!(out.len(), 1);
+        assert_eq!(out.spans.len(), 4);
+        sub(&sq(0.0, 0.0, 1.0), &sq(-1.0, -1.0, 3.0), &mut out, &mut buf);
+        assert!(out.spans.is_empty());
+        sub(&sq(0.0, 0.0, 1.0), &sq(2.0, 0.0, 1.0), &mut out, &mut buf);
+        assert_eq!(out.spans.len(), 1);
     }
 
     #[test]

@@ -92,15 +92,20 @@ pub fn triangulate_with(
     );
     let diameter = (hi - lo).length().max(1e-300);
     let tol = (1e-9 * diameter).max(snap);
-    let mut input: Vec<(DVec2, DVec2, Option<Kind>)> = polygon
-        .boundary
-        .iter()
-        .map(|[a, b]| (*a, *b, None))
-        .collect();
-    input.extend(segments.iter().map(|s| (s.a, s.b, Some(s.kind))));
-    let mut arr = arrangement::build(&input, tol);
-    bulge_straight_outline_points(&mut arr, 1e-10 * diameter);
-
+    // The outline with collinear runs merged, and the segments kept clear of it by `gap`: a
+    // point of the outline between two collinear outline edges is, after rounding, a hair
+    // inside or outside their line; spade's convex hull then bridges it with a zero-area face
+    // outside the polygon, which refinement splits without end.
+    let outline = merge_collinear(&polygon.boundary);
+    let gap = (0.05 * max_area.max(0.0).sqrt()).max(tol * 10.0);
+    let mut input: Vec<(DVec2, DVec2, Option<Kind>)> =
+        outline.iter().map(|[a, b]| (*a, *b, None)).collect();
+    input.extend(
+        segments
+            .iter()
+            .filter_map(|s| keep_clear(s.a, s.b, &outline, gap).map(|(a, b)| (a, b, Some(s.kind)))),
+    );
+    let arr = arrangement::build(&input, tol);
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let handles: Vec<Option<FixedVertexHandle>> = arr
         .points
@@ -177,32 +182,94 @@ pub fn triangulate_with(
     (mesh, refused)
 }
 
-/// Pushes every outline point that lies on a straight stretch of the outline (a split point, or
-/// a T-junction of the input mesh) outward by `delta`.
-///
-/// Rounding leaves such a point a hair inside or outside the line through its neighbours. Inside,
-/// spade's convex hull bridges it with a zero-area face outside the polygon; refinement then
-/// splits the encroached outline pieces without end. Outside, the outline there is itself
-/// convex and no such face exists.
-fn bulge_straight_outline_points(arr: &mut arrangement::Arrangement<Option<Kind>>, delta: f64) {
-    // Outline edges keep the polygon on their left.
-    let mut dirs: Vec<Vec<DVec2>> = vec![Vec::new(); arr.points.len()];
-    for &(a, b, tag) in &arr.edges {
-        if tag.is_none() {
-            let d = arr.points[b as usize] - arr.points[a as usize];
-            dirs[a as usize].push(d);
-            dirs[b as usize].push(d);
+/// Merges chains of collinear boundary edges (T-junction vertices of the input mesh) into
+/// single edges. Edges keep their direction (polygon on the left).
+fn merge_collinear(boundary: &[[DVec2; 2]]) -> Vec<[DVec2; 2]> {
+    let key = |p: DVec2| (p.x.to_bits(), p.y.to_bits());
+    let mut from: std::collections::BTreeMap<(u64, u64), Vec<usize>> = Default::default();
+    let mut into: std::collections::BTreeMap<(u64, u64), usize> = Default::default();
+    for (i, [a, b]) in boundary.iter().enumerate() {
+        from.entry(key(*a)).or_default().push(i);
+        *into.entry(key(*b)).or_default() += 1;
+    }
+    let straight = |d1: DVec2, d2: DVec2| {
+        d1.perp_dot(d2).abs() <= 1e-9 * d1.length() * d2.length() && d1.dot(d2) > 0.0
+    };
+    // The edge that continues `i` straight on, if its end is a plain (degree-two) vertex.
+    let next = |i: usize| -> Option<usize> {
+        let [a, b] = boundary[i];
+        let out = from.get(&key(b))?;
+        if out.len() != 1 || into.get(&key(b)) != Some(&1) {
+            return None;
+        }
+        let j = out[0];
+        straight(b - a, boundary[j][1] - boundary[j][0]).then_some(j)
+    };
+    let mut has_prev = vec![false; boundary.len()];
+    for i in 0..boundary.len() {
+        if let Some(j) = next(i) {
+            has_prev[j] = true;
         }
     }
-    for (p, d) in arr.points.iter_mut().zip(&dirs) {
-        if let [d1, d2] = d[..]
-            && d1.perp_dot(d2).abs() <= 1e-9 * d1.length() * d2.length()
-            && d1.dot(d2) > 0.0
-        {
-            let outward = DVec2::new(d1.y, -d1.x).normalize_or_zero();
-            *p += outward * delta;
+    let mut used = vec![false; boundary.len()];
+    let mut out = Vec::new();
+    // Chains start at edges nothing continues into; then what is left are closed straight loops
+    // (impossible for a polygon) or single edges.
+    for start in (0..boundary.len())
+        .filter(|&i| !has_prev[i])
+        .chain(0..boundary.len())
+    {
+        if used[start] {
+            continue;
         }
+        used[start] = true;
+        let a = boundary[start][0];
+        let mut end = start;
+        while let Some(j) = next(end) {
+            if used[j] {
+                break;
+            }
+            used[j] = true;
+            end = j;
+        }
+        out.push([a, boundary[end][1]]);
     }
+    out
+}
+
+/// The part of segment `a-b` kept at least `gap` away from the outline (its ends are pulled in
+/// along the segment), or `None` when little is left or it runs along the outline.
+fn keep_clear(a: DVec2, b: DVec2, outline: &[[DVec2; 2]], gap: f64) -> Option<(DVec2, DVec2)> {
+    let len = a.distance(b);
+    if len <= 3.0 * gap {
+        return None;
+    }
+    let u = (b - a) / len;
+    let mid = (a + b) * 0.5;
+    if outline
+        .iter()
+        .any(|[p, q]| dist_to_segment(mid, *p, *q) < gap)
+    {
+        return None;
+    }
+    let pull = |x: DVec2, dir: DVec2| -> f64 {
+        let mut t: f64 = 0.0;
+        for [p, q] in outline {
+            let d = dist_to_segment(x, *p, *q);
+            if d < gap {
+                let e = (*q - *p).normalize_or_zero();
+                let sin = dir.perp_dot(e).abs().max(0.1);
+                t = t.max((gap - d) / sin + gap);
+            }
+        }
+        t
+    };
+    let ta = pull(a, u);
+    let tb = pull(b, -u);
+    if ta + tb >= len - gap {
+        return None;
+    }
+    Some((a + u * ta, b - u * tb))
 }
 
 fn dist_to_segment(x: DVec2, p: DVec2, q: DVec2) -> f64 {

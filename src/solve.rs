@@ -19,7 +19,7 @@
 //! channel. `B = M + rho H`. Everything is deterministic: fixed sample patterns, and every
 //! parallel loop writes its own output slot.
 
-use crate::backproject::{self, EmitterShape, Limits, Occluders, Shaft};
+use crate::backproject::{EmitterShape, Limits, Occluders, Scratch, Shaft};
 use crate::mesh::ReceiverMesh;
 use crate::scene::{LightKind, PunctualLight, Scene};
 use crate::visibility::Visibility;
@@ -470,6 +470,7 @@ impl<'a> Direct<'a> {
         let mut tally = Tally::default();
         let mut scale = vec![0.0; points.len()];
         let tree = ClusterTree::new(points);
+        let mut scratch = Scratch::default();
         for (ei, e) in self.emitters.iter().enumerate() {
             let start = Instant::now();
             let before = (tally.evaluations, tally.occluders, tally.fallbacks);
@@ -508,7 +509,7 @@ impl<'a> Direct<'a> {
                 tree: &tree,
                 f_un: &f_un,
             };
-            self.exact_cluster(&job, 0, &candidates, &mut scale, &mut tally);
+            self.exact_cluster(&job, 0, &candidates, &mut scale, &mut tally, &mut scratch);
             for (i, h) in h.iter_mut().enumerate() {
                 if f_un[i] > 0.0 {
                     *h += e.radiance * scale[i];
@@ -557,6 +558,7 @@ impl<'a> Direct<'a> {
         candidates: &[u32],
         scale: &mut [f64],
         tally: &mut Tally,
+        scratch: &mut Scratch,
     ) {
         let cluster = &job.tree.nodes[node];
         let members = &job.tree.order[cluster.start..cluster.end];
@@ -578,8 +580,8 @@ impl<'a> Direct<'a> {
         };
         match cluster.children {
             Some([left, right]) if !candidates.is_empty() => {
-                self.exact_cluster(job, left, candidates, scale, tally);
-                self.exact_cluster(job, right, candidates, scale, tally);
+                self.exact_cluster(job, left, candidates, scale, tally, scratch);
+                self.exact_cluster(job, right, candidates, scale, tally, scratch);
             }
             _ => {
                 for &i in members {
@@ -590,6 +592,7 @@ impl<'a> Direct<'a> {
                             job.f_un[i],
                             candidates,
                             tally,
+                            scratch,
                         );
                     }
                 }
@@ -606,6 +609,7 @@ impl<'a> Direct<'a> {
         f_unoccluded: f64,
         candidates: &[u32],
         tally: &mut Tally,
+        scratch: &mut Scratch,
     ) -> f64 {
         tally.evaluations += 1;
         if candidates.is_empty() {
@@ -618,7 +622,14 @@ impl<'a> Direct<'a> {
             .map(|&k| &pieces[k as usize])
             .filter(|piece| piece.polygon != at.polygon)
             .map(|piece| piece.vertices.as_slice());
-        let r = backproject::visible_form_factor(at.p, at.n, &e.shape, occluders, &self.limits);
+        let r = scratch.visible_form_factor(
+            at.p,
+            at.n,
+            &e.shape,
+            occluders,
+            &self.limits,
+            Some(f_unoccluded),
+        );
         tally.occluders += r.occluders as u64;
         tally.occluders_max = tally.occluders_max.max(r.occluders as u64);
         tally.pieces_max = tally.pieces_max.max(r.pieces as u64);
