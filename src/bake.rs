@@ -36,7 +36,7 @@ pub struct BakeOptions {
 impl Default for BakeOptions {
     fn default() -> Self {
         BakeOptions {
-            mesher: Mesher::Uniform,
+            mesher: Mesher::Discontinuity,
             budget: 20_000,
             dm_threshold: 0.01,
             solve: SolveOptions::default(),

@@ -78,7 +78,7 @@ struct BakeArgs {
     /// Output .glb: the input plus TEXCOORD_1, the lightmap PNG and MOZ_lightmap.
     output: PathBuf,
     /// Which mesher builds the receiver meshes.
-    #[arg(long, value_enum, default_value_t = Mesher::Uniform)]
+    #[arg(long, value_enum, default_value_t = Mesher::Discontinuity)]
     mesher: Mesher,
     /// Target number of mesh elements (triangles) over the whole scene.
     #[arg(long, default_value_t = 20_000)]

@@ -22,10 +22,10 @@ use spade::{
 #[serde(rename_all = "lowercase")]
 pub enum Mesher {
     /// Quality Delaunay refinement of each polygon's outline to an area cap from the budget.
-    #[default]
     Uniform,
     /// Discontinuity meshing: umbra, penumbra and contact lines as constraints, then the same
     /// refinement as uniform.
+    #[default]
     Discontinuity,
     /// A-posteriori adaptive meshing (not built yet).
     Adaptive,
