@@ -68,17 +68,20 @@ impl BakeOptions {
                 reason: reason.into(),
             })
         };
-        if self.budget == 0 {
-            return bad("--budget", "must be at least 1");
+        if !(1..=100_000_000).contains(&self.budget) {
+            return bad("--budget", "must be between 1 and 100000000");
         }
         if !(1..=8).contains(&self.supersample) {
             return bad("--supersample", "must be between 1 and 8");
         }
-        if self.padding < 2 {
-            return bad("--padding", "must be at least 2 texels");
+        if !(2..=64).contains(&self.padding) {
+            return bad("--padding", "must be between 2 and 64 texels");
         }
-        if self.solve.shadow_samples == 0 {
-            return bad("--shadow-samples", "must be at least 1");
+        if !(1..=65536).contains(&self.solve.shadow_samples) {
+            return bad("--shadow-samples", "must be between 1 and 65536");
+        }
+        if !(1..=1_000_000).contains(&self.solve.patches) {
+            return bad("--patches", "must be between 1 and 1000000");
         }
         if let Some(t) = self.texels_per_unit
             && !(t.is_finite() && t > 0.0)
@@ -168,14 +171,24 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     })
 }
 
+/// Charts and packs every instance. xatlas works in f32 and drops triangles whose area is
+/// below `f32::EPSILON`, and its density estimate clamps small scenes; so the positions it sees
+/// are centred and scaled to a total area of [`ATLAS_AREA`], and the densities scaled to match.
 fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
+    let area: f64 = scene.triangles.iter().map(|t| t.area()).sum();
+    let scale = if area > 0.0 {
+        (ATLAS_AREA / area).sqrt()
+    } else {
+        1.0
+    };
+    let center = (scene.bounds_min + scene.bounds_max) * 0.5;
     let positions: Vec<Vec<[f32; 3]>> = scene
         .instances
         .iter()
         .map(|i| {
             i.positions_world
                 .iter()
-                .map(|p| p.as_vec3().to_array())
+                .map(|p| ((*p - center) * scale).as_vec3().to_array())
                 .collect()
         })
         .collect();
@@ -188,15 +201,20 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
             indices: &i.indices,
         })
         .collect();
-    Ok(atlas::pack(
+    let mut atlas = atlas::pack(
         &inputs,
         &AtlasOptions {
-            texels_per_unit: options.texels_per_unit,
+            texels_per_unit: options.texels_per_unit.map(|t| (t as f64 / scale) as f32),
             resolution: options.resolution,
             padding: options.padding,
         },
-    )?)
+    )?;
+    atlas.texels_per_unit = (atlas.texels_per_unit as f64 * scale) as f32;
+    Ok(atlas)
 }
+
+/// Total surface area, in xatlas's units, that the scene is scaled to for charting.
+const ATLAS_AREA: f64 = 1000.0;
 
 /// The discontinuity and mesh stages: segments per polygon (empty unless discontinuity
 /// meshing) and the receiver meshes. Fills their timings and counters into `stats`.

@@ -169,28 +169,34 @@ impl Gltf {
         let item = format!("accessor {}", accessor.index());
         let elem = accessor.size();
         let count = accessor.count();
-        let total = count
-            .checked_mul(elem)
-            .ok_or_else(|| self.bad(&item, "element count overflows"))?;
-        let mut out = vec![0u8; total];
-        if let Some(view) = accessor.view() {
-            let bytes = self.view_bytes(&view, &item)?;
-            let stride = view.stride().unwrap_or(elem);
-            copy_strided(bytes, accessor.offset(), stride, elem, count, &mut out)
-                .ok_or_else(|| self.bad(&item, "elements run past the end of its bufferView"))?;
-        }
+        let mut out = match accessor.view() {
+            Some(view) => {
+                let bytes = self.view_bytes(&view, &item)?;
+                let stride = view.stride().unwrap_or(elem);
+                read_strided(bytes, accessor.offset(), stride, elem, count)
+                    .ok_or_else(|| self.bad(&item, "elements run past the end of its bufferView"))?
+            }
+            None => {
+                // All zeros (then sparse values): the size is not bounded by any buffer.
+                let total = count
+                    .checked_mul(elem)
+                    .filter(|&t| t <= 1 << 30)
+                    .ok_or_else(|| {
+                        self.bad(&item, format!("count {count} is implausibly large"))
+                    })?;
+                vec![0u8; total]
+            }
+        };
         if let Some(sparse) = accessor.sparse() {
             let n = sparse.count();
             let iv = sparse.indices();
             let isz = iv.index_type().size();
             let ibytes = self.view_bytes(&iv.view(), &format!("{item} sparse indices"))?;
-            let mut idx = vec![0u8; n * isz];
-            copy_strided(ibytes, iv.offset(), isz, isz, n, &mut idx)
+            let idx = read_strided(ibytes, iv.offset(), isz, isz, n)
                 .ok_or_else(|| self.bad(&item, "sparse indices run past their bufferView"))?;
             let vv = sparse.values();
             let vbytes = self.view_bytes(&vv.view(), &format!("{item} sparse values"))?;
-            let mut vals = vec![0u8; n * elem];
-            copy_strided(vbytes, vv.offset(), elem, elem, n, &mut vals)
+            let vals = read_strided(vbytes, vv.offset(), elem, elem, n)
                 .ok_or_else(|| self.bad(&item, "sparse values run past their bufferView"))?;
             for k in 0..n {
                 let i = read_uint(&idx[k * isz..(k + 1) * isz]) as usize;
@@ -262,28 +268,28 @@ fn read_uint(c: &[u8]) -> u32 {
     }
 }
 
-/// Copies `count` elements of `elem` bytes at `offset + k * stride` into `out`; `None` when the
-/// source is too short.
-fn copy_strided(
+/// The `count` elements of `elem` bytes at `offset + k * stride`, tightly packed; `None` when
+/// the source is too short (checked before anything is allocated).
+fn read_strided(
     src: &[u8],
     offset: usize,
     stride: usize,
     elem: usize,
     count: usize,
-    out: &mut [u8],
-) -> Option<()> {
+) -> Option<Vec<u8>> {
     if count == 0 {
-        return Some(());
+        return Some(Vec::new());
     }
     let last = offset.checked_add(stride.checked_mul(count - 1)?)?;
     if last.checked_add(elem)? > src.len() {
         return None;
     }
+    let mut out = Vec::with_capacity(count * elem);
     for k in 0..count {
         let s = offset + k * stride;
-        out[k * elem..(k + 1) * elem].copy_from_slice(&src[s..s + elem]);
+        out.extend_from_slice(&src[s..s + elem]);
     }
-    Some(())
+    Some(out)
 }
 
 /// Loads the static scene: every node of the default scene (or the first scene), with world
@@ -316,11 +322,14 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
         gscene.nodes().map(|n| (n, DMat4::IDENTITY, 0)).collect();
     stack.reverse();
     let mut lights_seen = 0;
+    let mut visited = vec![false; doc.nodes().len()];
     while let Some((node, parent, depth)) = stack.pop() {
-        if depth > 256 {
+        // glTF node graphs are strict trees: a node reached twice is a cycle or a shared child,
+        // which would otherwise multiply the work exponentially.
+        if std::mem::replace(&mut visited[node.index()], true) || depth > 1024 {
             return Err(gltf.bad(
                 format!("node {}", node.index()),
-                "node hierarchy is deeper than 256 levels (a cycle?)",
+                "is reached twice: the node hierarchy is not a tree",
             ));
         }
         let local =
@@ -414,6 +423,18 @@ fn add_primitive(
         .read_floats(&pos_acc, Dimensions::Vec3)
         .map_err(|e| gltf.bad(&item, format!("POSITION: {e}")))?;
     let vertex_count = flat.len() / 3;
+    for (semantic, acc) in prim.attributes() {
+        if acc.count() != vertex_count {
+            return Err(gltf.bad(
+                &item,
+                format!(
+                    "attribute {semantic:?} (accessor {}) has {} elements but POSITION has {vertex_count}",
+                    acc.index(),
+                    acc.count()
+                ),
+            ));
+        }
+    }
     let normal_from_local = DMat3::from_mat4(*world);
     let mirrored = normal_from_local.determinant() < 0.0;
     let mut positions_world = Vec::with_capacity(vertex_count);

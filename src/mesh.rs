@@ -372,7 +372,7 @@ where
             .into_par_iter()
             .map(|i| {
                 let p = &scene.polygons[i];
-                let expected = (p.area / max_area).ceil() as usize;
+                let expected = (p.area / max_area).ceil().min(1e9) as usize;
                 mesh_one(i, max_area, 4 * expected + 4 * p.boundary.len() + 64)
             })
             .collect()
@@ -380,7 +380,7 @@ where
     let first_area = total_area / budget;
     let first = mesh_all(first_area);
     let count: usize = first.iter().map(|m| m.triangles.len()).sum();
-    if (count as f64 - budget).abs() / budget < 0.1 {
+    if count == 0 || (count as f64 - budget).abs() / budget < 0.1 {
         first
     } else {
         mesh_all(first_area * count as f64 / budget)

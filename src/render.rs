@@ -35,7 +35,11 @@ impl Camera {
             .or_else(|| gltf.document.scenes().next())?;
         let mut stack: Vec<(gltf::Node, DMat4)> =
             scene.nodes().map(|n| (n, DMat4::IDENTITY)).collect();
+        let mut visited = vec![false; gltf.document.nodes().len()];
         while let Some((node, parent)) = stack.pop() {
+            if std::mem::replace(&mut visited[node.index()], true) {
+                continue; // not a tree: load::scene reports it
+            }
             let world = parent
                 * DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
             if let Some(cam) = node.camera()

@@ -8,6 +8,17 @@ use penumbra::solve::{self, Direct, SurfacePoint};
 use penumbra::visibility::Visibility;
 use std::f64::consts::PI;
 
+/// The sampled direct light (shadow rays), which these tests cover; the exact method has its
+/// own tests in `direct.rs`.
+fn sampled<'a>(scene: &'a Scene, vis: &'a Visibility, rays: usize) -> Direct<'a> {
+    let options = penumbra::solve::SolveOptions {
+        direct: penumbra::solve::DirectMethod::Sampled,
+        shadow_samples: rays,
+        ..Default::default()
+    };
+    Direct::with_options(scene, vis, &options)
+}
+
 fn scene_of(bytes: &[u8]) -> Scene {
     penumbra::load::scene(&parse(bytes, "fixture.glb")).unwrap()
 }
@@ -138,7 +149,7 @@ fn progressive_refinement_agrees_with_gauss_seidel() {
 fn square_occluder_profile_matches_reference() {
     let scene = scene_of(&fixtures::square_occluder());
     let vis = Visibility::new(&scene);
-    let direct = Direct::new(&scene, &vis, 4096);
+    let direct = sampled(&scene, &vis, 4096);
     let table = [
         (0.0, 0.0),
         (0.25, 0.0),
@@ -173,7 +184,7 @@ fn square_occluder_profile_matches_reference() {
 fn cornell_floor_direct_light_matches_reference() {
     let scene = scene_of(&fixtures::cornell_box());
     let vis = Visibility::new(&scene);
-    let direct = Direct::new(&scene, &vis, 4096);
+    let direct = sampled(&scene, &vis, 4096);
     let l = fixtures::CORNELL_LIGHT_RADIANCE[0];
     // The reference's unoccluded values (0.014207, 0.008280) are those of the published light
     // height 548.8 mm; at 548.7 mm the closed form (corner formula) gives these.
