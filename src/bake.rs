@@ -140,7 +140,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             &mesh_of_polygon,
             &atlas,
             options.supersample,
-            options.padding + 2,
+            u32::MAX,
         )
     });
     stats.triangles = scene.triangles.len();

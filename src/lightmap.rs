@@ -293,46 +293,48 @@ pub fn rasterize(
     map
 }
 
-/// Fills uncovered texels, ring by ring, with the mean of their already-filled 8-neighbours, so
-/// bilinear filtering and mipmaps at chart edges do not pull in black. Covered texels are never
-/// changed.
+/// Fills uncovered texels, ring by ring outward from the covered ones, with the mean of their
+/// already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole image, so that
+/// bilinear filtering and every mipmap level at chart edges see chart colours, not black).
+/// Covered texels are never changed. Each texel is visited once per ring it borders.
 pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
     let (w, h) = (map.width as usize, map.height as usize);
     let mut filled: Vec<bool> = map.coverage.iter().map(|&c| c > 0.0).collect();
+    let neighbours = |i: usize| {
+        let (x, y) = ((i % w) as i64, (i / w) as i64);
+        (-1i64..=1)
+            .flat_map(move |dy| (-1i64..=1).map(move |dx| (x + dx, y + dy)))
+            .filter(move |&(nx, ny)| {
+                (nx, ny) != (x, y) && nx >= 0 && ny >= 0 && nx < w as i64 && ny < h as i64
+            })
+            .map(move |(nx, ny)| ny as usize * w + nx as usize)
+    };
+    let mut frontier: Vec<usize> = (0..w * h).filter(|&i| filled[i]).collect();
     for _ in 0..rings {
-        let mut updates = Vec::new();
-        for y in 0..h {
-            for x in 0..w {
-                if filled[y * w + x] {
-                    continue;
-                }
-                let mut s = DVec3::ZERO;
-                let mut k = 0;
-                for dy in -1i64..=1 {
-                    for dx in -1i64..=1 {
-                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                        if nx < 0 || ny < 0 || nx >= w as i64 || ny >= h as i64 {
-                            continue;
-                        }
-                        let j = ny as usize * w + nx as usize;
-                        if filled[j] {
-                            s += map.texels[j];
-                            k += 1;
-                        }
-                    }
-                }
-                if k > 0 {
-                    updates.push((y * w + x, s / k as f64));
-                }
-            }
-        }
-        if updates.is_empty() {
+        let mut ring: Vec<usize> = frontier
+            .iter()
+            .flat_map(|&i| neighbours(i))
+            .filter(|&j| !filled[j])
+            .collect();
+        ring.sort_unstable();
+        ring.dedup();
+        if ring.is_empty() {
             break;
         }
-        for (i, v) in updates {
+        let values: Vec<DVec3> = ring
+            .iter()
+            .map(|&i| {
+                let (s, k) = neighbours(i)
+                    .filter(|&j| filled[j])
+                    .fold((DVec3::ZERO, 0), |(s, k), j| (s + map.texels[j], k + 1));
+                s / k as f64
+            })
+            .collect();
+        for (&i, v) in ring.iter().zip(values) {
             map.texels[i] = v;
             filled[i] = true;
         }
+        frontier = ring;
     }
 }
 

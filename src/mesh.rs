@@ -301,8 +301,7 @@ fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
             }
         }
     }
-    for v in 0..mesh.vertices.len() {
-        let tris = &incident[v];
+    for (v, tris) in incident.iter().enumerate() {
         if tris.len() < 2 {
             continue;
         }
@@ -335,7 +334,7 @@ fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
         }
         let first = root(&mut group, 0);
         let mut copies: Vec<(usize, u32)> = Vec::new();
-        for i in 0..tris.len() {
+        for (i, &t) in tris.iter().enumerate() {
             let r = root(&mut group, i);
             if r == first {
                 continue;
@@ -349,7 +348,7 @@ fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
                     id
                 }
             };
-            for c in mesh.triangles[tris[i]].iter_mut() {
+            for c in mesh.triangles[t].iter_mut() {
                 if *c == v as u32 {
                     *c = id;
                 }

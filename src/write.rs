@@ -238,6 +238,26 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             }
         }
     }
+    // A material that samples a texture through TEXCOORD_1 keeps it: the primitives' own
+    // TEXCOORD_1 moves to the first free set, and the material's references follow it.
+    let mut moved_uv1: BTreeMap<Option<usize>, u32> = BTreeMap::new();
+    for mat in lit_material_uses.keys() {
+        if let Some(i) = mat
+            && references_tex_coord(&root["materials"][*i], 1)
+        {
+            let highest = root["meshes"]
+                .as_array()
+                .into_iter()
+                .flatten()
+                .flat_map(|m| m["primitives"].as_array().into_iter().flatten())
+                .filter(|p| p["material"].as_u64() == Some(*i as u64))
+                .flat_map(|p| p["attributes"].as_object().into_iter().flatten())
+                .filter_map(|(name, _)| name.strip_prefix("TEXCOORD_")?.parse::<u32>().ok())
+                .max()
+                .unwrap_or(1);
+            moved_uv1.insert(*mat, highest.max(1) + 1);
+        }
+    }
     let mut material_map: BTreeMap<Option<usize>, usize> = BTreeMap::new();
     for (mat, lit) in &lit_material_uses {
         let shared = all_material_uses.get(mat).copied().unwrap_or(0) > *lit;
@@ -259,6 +279,9 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             }
         };
         let m = &mut root["materials"][index];
+        if let Some(&k) = moved_uv1.get(mat) {
+            retarget_tex_coord(m, 1, k);
+        }
         if !m["extensions"].is_object() {
             m["extensions"] = json!({});
         }
@@ -277,6 +300,8 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             for &i in insts {
                 let inst = &scene.instances[i];
                 let prim = &mut mesh_json["primitives"][inst.primitive];
+                let mat = prim["material"].as_u64().map(|x| x as usize);
+                let uv1_to = moved_uv1.get(&mat).copied();
                 rewrite_primitive(
                     gltf,
                     &mut root,
@@ -285,8 +310,8 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                     inst,
                     &atlas.meshes[i],
                     atlas,
+                    uv1_to,
                 )?;
-                let mat = prim["material"].as_u64().map(|x| x as usize);
                 if let Some(&mi) = material_map.get(&mat) {
                     prim["material"] = json!(mi);
                 }
@@ -313,6 +338,8 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
 }
 
 /// Replaces one primitive's attributes by atlas-split copies plus the lightmap UVs.
+/// `uv1_to`: move the primitive's own TEXCOORD_1 to `TEXCOORD_<k>` (its material samples it).
+#[allow(clippy::too_many_arguments)]
 fn rewrite_primitive(
     gltf: &Gltf,
     root: &mut Value,
@@ -321,13 +348,16 @@ fn rewrite_primitive(
     inst: &crate::scene::Instance,
     am: &crate::atlas::AtlasMesh,
     atlas: &Atlas,
+    uv1_to: Option<u32>,
 ) -> Result<()> {
     let attributes = prim["attributes"].as_object().cloned().unwrap_or_default();
     let mut new_attributes = serde_json::Map::new();
     for (name, acc) in &attributes {
-        if name == "TEXCOORD_1" {
-            continue; // replaced by the lightmap UVs
-        }
+        let name = match (name.as_str(), uv1_to) {
+            ("TEXCOORD_1", Some(k)) => &format!("TEXCOORD_{k}"),
+            ("TEXCOORD_1", None) => continue, // replaced by the lightmap UVs
+            _ => name,
+        };
         let Some(acc_index) = acc.as_u64() else {
             continue;
         };
@@ -385,7 +415,7 @@ fn rewrite_primitive(
             new["min"] = Value::Array(lo.iter().map(|&x| number(ct, x)).collect());
             new["max"] = Value::Array(hi.iter().map(|&x| number(ct, x)).collect());
         }
-        new_attributes.insert(name.clone(), json!(push_accessor(root, new)));
+        new_attributes.insert(name.to_string(), json!(push_accessor(root, new)));
     }
     // Lightmap UVs, normalised to [0,1].
     let (w, h) = (atlas.width as f32, atlas.height as f32);
@@ -442,6 +472,36 @@ fn rewrite_primitive(
         obj.remove("mode"); // strips and fans are now a triangle list (the default mode)
     }
     Ok(())
+}
+
+/// True when some texture reference in `v` (an object with `index` and `texCoord`) uses set
+/// `set`.
+fn references_tex_coord(v: &Value, set: u64) -> bool {
+    match v {
+        Value::Object(o) => {
+            o.get("texCoord").and_then(Value::as_u64) == Some(set) && o.contains_key("index")
+                || o.values().any(|x| references_tex_coord(x, set))
+        }
+        Value::Array(a) => a.iter().any(|x| references_tex_coord(x, set)),
+        _ => false,
+    }
+}
+
+/// Rewrites every texture reference (and `KHR_texture_transform` override) using set `from` to
+/// set `to`.
+fn retarget_tex_coord(v: &mut Value, from: u64, to: u32) {
+    match v {
+        Value::Object(o) => {
+            if o.get("texCoord").and_then(Value::as_u64) == Some(from) {
+                o.insert("texCoord".into(), json!(to));
+            }
+            for x in o.values_mut() {
+                retarget_tex_coord(x, from, to);
+            }
+        }
+        Value::Array(a) => a.iter_mut().for_each(|x| retarget_tex_coord(x, from, to)),
+        _ => {}
+    }
 }
 
 /// Assembles a GLB container: JSON chunk padded with spaces, BIN chunk padded with zeros.

@@ -3,7 +3,7 @@
 use crate::{parse, quick};
 use glam::DVec3;
 use penumbra::discontinuity::{Kind, Segment};
-use penumbra::fixtures::{self, GlbBuilder, Material, TriangleMesh};
+use penumbra::fixtures::{self, GlbBuilder, Material};
 use penumbra::mesh::Mesher;
 use penumbra::{Bake, BakeOptions};
 

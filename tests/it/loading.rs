@@ -17,7 +17,7 @@ fn edit(bytes: &[u8], f: impl FnOnce(&mut Value, &mut Vec<u8>)) -> Vec<u8> {
 
 /// Appends `data` to the binary chunk as a new buffer view; returns its index.
 fn add_view(json: &mut Value, bin: &mut Vec<u8>, data: &[u8]) -> usize {
-    while bin.len() % 4 != 0 {
+    while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
     let views = json["bufferViews"].as_array_mut().unwrap();
@@ -202,4 +202,87 @@ fn base_color_texture_mean_scales_the_reflectance() {
         "{} vs {expected}",
         scene.materials[0].rho.x
     );
+}
+
+fn tiny_png() -> Vec<u8> {
+    use image::ImageEncoder;
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(&[200u8; 12], 2, 2, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    png
+}
+
+#[test]
+fn an_existing_texcoord_1_used_by_a_texture_moves_to_a_free_set() {
+    let input = edit(&fixtures::plane_uniform(), |json, bin| {
+        let uv: Vec<u8> = [0.0f32, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0, 0.0]
+            .iter()
+            .flat_map(|f| f.to_le_bytes())
+            .collect();
+        let view = add_view(json, bin, &uv);
+        let accessors = json["accessors"].as_array_mut().unwrap();
+        accessors
+            .push(json!({"bufferView": view, "componentType": 5126, "count": 4, "type": "VEC2"}));
+        let acc = accessors.len() - 1;
+        json["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_0"] = json!(acc);
+        json["meshes"][0]["primitives"][0]["attributes"]["TEXCOORD_1"] = json!(acc);
+        let png = tiny_png();
+        let view = add_view(json, bin, &png);
+        json["images"] = json!([{"bufferView": view, "mimeType": "image/png"}]);
+        json["textures"] = json!([{"source": 0}]);
+        json["materials"][0]["occlusionTexture"] = json!({"index": 0, "texCoord": 1});
+    });
+    let dir = scratch("texcoord1");
+    std::fs::write(dir.join("in.glb"), &input).unwrap();
+    penumbra::bake_file(
+        &dir.join("in.glb"),
+        &dir.join("out.glb"),
+        None,
+        &quick(),
+        no_progress(),
+    )
+    .unwrap();
+    let out = std::fs::read(dir.join("out.glb")).unwrap();
+    gltf::Gltf::from_slice(&out).expect("valid output");
+    let (json, _) = split_glb(&out);
+    let prim = &json["meshes"][0]["primitives"][0];
+    let mat = prim["material"].as_u64().unwrap() as usize;
+    assert_eq!(json["materials"][mat]["occlusionTexture"]["texCoord"], 2);
+    assert!(prim["attributes"]["TEXCOORD_2"].is_u64(), "{prim}");
+    assert_ne!(
+        prim["attributes"]["TEXCOORD_1"],
+        prim["attributes"]["TEXCOORD_2"]
+    );
+    assert_eq!(
+        json["materials"][mat]["extensions"]["MOZ_lightmap"]["texCoord"],
+        1
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn triangle_strips_are_expanded_with_alternating_winding() {
+    let input = edit(&fixtures::plane_uniform(), |json, bin| {
+        // The quad's corners (CCW from above) as the strip 0,1,3,2: triangles (0,1,3) and, odd,
+        // (3,1,2) by glTF's strip rule; both face up.
+        let data: Vec<u8> = [0u16, 1, 3, 2]
+            .iter()
+            .flat_map(|i| i.to_le_bytes())
+            .collect();
+        let view = add_view(json, bin, &data);
+        let accessors = json["accessors"].as_array_mut().unwrap();
+        accessors
+            .push(json!({"bufferView": view, "componentType": 5123, "count": 4, "type": "SCALAR"}));
+        let acc = accessors.len() - 1;
+        json["meshes"][0]["primitives"][0]["indices"] = json!(acc);
+        json["meshes"][0]["primitives"][0]["mode"] = json!(5);
+    });
+    let b = crate::bake(&input, &quick());
+    assert_eq!(b.scene.triangles.len(), 2);
+    assert!(
+        b.scene.triangles.iter().all(|t| t.normal.y > 0.99),
+        "a strip triangle faces down"
+    );
+    assert!((b.scene.polygons[0].area - 4.0).abs() < 1e-9);
 }
