@@ -428,7 +428,8 @@ fn add_primitive(
             return Err(gltf.bad(
                 &item,
                 format!(
-                    "attribute {semantic:?} (accessor {}) has {} elements but POSITION has {vertex_count}",
+                    "attribute {} (accessor {}) has {} elements but POSITION has {vertex_count}",
+                    semantic.to_string(),
                     acc.index(),
                     acc.count()
                 ),
@@ -571,6 +572,12 @@ fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Res
         .name()
         .map(str::to_string)
         .unwrap_or_else(|| format!("material {}", m.index().unwrap_or(0)));
+    if pbr.metallic_factor() > 0.0 {
+        textures.warnings.push(format!(
+            "material {name}: metallicFactor {} is baked as a Lambertian surface of its base colour (a client shows metals with little or no diffuse light, so their lightmap barely shows)",
+            pbr.metallic_factor()
+        ));
+    }
     if !rho.is_finite() || !radiance.is_finite() || radiance.min_element() < 0.0 {
         return Err(gltf.bad(format!("material {name}"), "colour factors are not finite"));
     }

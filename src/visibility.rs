@@ -123,16 +123,7 @@ impl Visibility {
     /// True when any triangle blocks the open segment from `a` to `b`, ignoring `epsilon` at
     /// either end (callers offset `a` off its surface; `b` may lie on the emitter).
     pub fn occluded(&self, a: DVec3, b: DVec3) -> bool {
-        let d = b - a;
-        let len = d.length();
-        if self.tris.is_empty() || len <= 2.0 * self.eps {
-            return false;
-        }
-        let ray = self.ray(a, d / len, self.eps, len - self.eps);
-        let tris = &self.tris;
-        !self
-            .bvh
-            .ray_traverse_miss(ray, |r, id| tris[id].intersect(r))
+        self.occluded_skipping(a, b, [usize::MAX; 2])
     }
 
     /// Like [`Visibility::occluded`], but triangles of the polygons in `skip` never block. A
@@ -141,32 +132,28 @@ impl Visibility {
     pub fn occluded_skipping(&self, a: DVec3, b: DVec3, skip: [usize; 2]) -> bool {
         let d = b - a;
         let len = d.length();
-        if self.tris.is_empty() || len <= 2.0 * self.eps {
+        if len <= 2.0 * self.eps {
             return false;
         }
-        let ray = self.ray(a, d / len, self.eps, len - self.eps);
+        self.blocked(a, d / len, len - self.eps, skip)
+    }
+
+    /// True when nothing blocks the ray from `a` in unit direction `dir` (to infinity);
+    /// triangles of polygon `skip` never block (see [`Visibility::occluded_skipping`]).
+    pub fn unoccluded_towards(&self, a: DVec3, dir: DVec3, skip: usize) -> bool {
+        !self.blocked(a, dir, f64::from(f32::MAX), [skip, usize::MAX])
+    }
+
+    /// Any hit along `origin + t dir` for `t` in `(epsilon, tmax)`, skipping two polygons.
+    fn blocked(&self, origin: DVec3, dir: DVec3, tmax: f64, skip: [usize; 2]) -> bool {
+        if self.tris.is_empty() {
+            return false;
+        }
+        let ray = self.ray(origin, dir, self.eps, tmax);
         let skip = skip.map(|s| s as u32);
         let (tris, polys) = (&self.tris, &self.polygons);
         !self.bvh.ray_traverse_miss(ray, |r, id| {
             if polys[id] == skip[0] || polys[id] == skip[1] {
-                f32::INFINITY
-            } else {
-                tris[id].intersect(r)
-            }
-        })
-    }
-
-    /// True when nothing blocks the ray from `a` in unit direction `dir` (to infinity).
-    /// Triangles of polygon `skip` never block (see [`Visibility::occluded_skipping`]).
-    pub fn unoccluded_towards(&self, a: DVec3, dir: DVec3, skip: usize) -> bool {
-        if self.tris.is_empty() {
-            return true;
-        }
-        let ray = self.ray(a, dir, self.eps, f64::from(f32::MAX));
-        let skip = skip as u32;
-        let (tris, polys) = (&self.tris, &self.polygons);
-        self.bvh.ray_traverse_miss(ray, |r, id| {
-            if polys[id] == skip {
                 f32::INFINITY
             } else {
                 tris[id].intersect(r)

@@ -225,3 +225,30 @@ fn zero_area_triangles_are_skipped_with_a_warning() {
     gltf::Gltf::from_slice(&std::fs::read(&output).unwrap()).expect("valid output");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+#[test]
+fn node_graph_that_is_not_a_tree() {
+    // Node 0 lists the same child twice: each is reached twice (exponential blow-up otherwise).
+    let bad = edit(&fixtures::box_on_floor(), |json, _| {
+        let nodes = json["nodes"].as_array_mut().unwrap();
+        let n = nodes.len();
+        nodes.push(serde_json::json!({"name": "twice", "children": [0, 0]}));
+        json["scenes"][0]["nodes"] = serde_json::json!([n]);
+    });
+    expect_failure("not-a-tree", Some(&bad), &["in.glb", "not a tree"]);
+}
+
+#[test]
+fn attribute_shorter_than_positions() {
+    let bad = edit(&fixtures::cornell_box(), |json, _| {
+        let normal = json["meshes"][0]["primitives"][0]["attributes"]["NORMAL"]
+            .as_u64()
+            .unwrap() as usize;
+        json["accessors"][normal]["count"] = serde_json::json!(1);
+    });
+    expect_failure(
+        "attribute-count",
+        Some(&bad),
+        &["in.glb", "mesh 0", "NORMAL"],
+    );
+}
