@@ -41,6 +41,20 @@ pub struct ReceiverMesh {
     pub vertices: Vec<DVec2>,
     /// Triangles, counter-clockwise in the plane (front side up).
     pub triangles: Vec<[u32; 3]>,
+    /// The mesh edges that lie on discontinuity segments, with the kind and event id of the
+    /// segment that made each (for debugging and the significance ranking). Vertex ids are those
+    /// of the side kept by the first copy when a D0 line splits its vertices.
+    pub constraints: Vec<Constraint>,
+}
+
+/// A mesh edge on a discontinuity segment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Constraint {
+    pub a: u32,
+    pub b: u32,
+    pub kind: Kind,
+    /// [`Segment::event`] of the segment.
+    pub event: u32,
 }
 
 impl ReceiverMesh {
@@ -98,13 +112,11 @@ pub fn triangulate_with(
     // outside the polygon, which refinement splits without end.
     let outline = merge_collinear(&polygon.boundary);
     let gap = (0.05 * max_area.max(0.0).sqrt()).max(tol * 10.0);
-    let mut input: Vec<(DVec2, DVec2, Option<Kind>)> =
+    let mut input: Vec<(DVec2, DVec2, Option<(Kind, u32)>)> =
         outline.iter().map(|[a, b]| (*a, *b, None)).collect();
-    input.extend(
-        segments
-            .iter()
-            .filter_map(|s| keep_clear(s.a, s.b, &outline, gap).map(|(a, b)| (a, b, Some(s.kind)))),
-    );
+    input.extend(segments.iter().filter_map(|s| {
+        keep_clear(s.a, s.b, &outline, gap).map(|(a, b)| (a, b, Some((s.kind, s.event))))
+    }));
     let arr = arrangement::build(&input, tol);
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let handles: Vec<Option<FixedVertexHandle>> = arr
@@ -160,23 +172,57 @@ pub fn triangulate_with(
         }
         mesh.triangles.push(ids);
     }
-    let d0: Vec<(DVec2, DVec2)> = segments
-        .iter()
-        .filter(|s| s.kind == Kind::D0)
-        .map(|s| (s.a, s.b))
-        .collect();
-    if !d0.is_empty() {
-        let on_d0 = |a: DVec2, b: DVec2| {
-            d0.iter().any(|&(p, q)| {
-                dist_to_segment(a, p, q) <= 1e3 * tol && dist_to_segment(b, p, q) <= 1e3 * tol
-            })
+    // Follow each segment's arrangement edge along the final constraint edges (refinement may
+    // have split it) to tag them with the segment's kind and event.
+    constraint_edges.sort_unstable();
+    constraint_edges.dedup();
+    let mut along: Vec<Vec<u32>> = vec![Vec::new(); mesh.vertices.len()];
+    for &(a, b) in &constraint_edges {
+        along[a as usize].push(b);
+        along[b as usize].push(a);
+    }
+    for &(pa, pb, tag) in &arr.edges {
+        let Some((kind, event)) = tag else { continue };
+        let final_id = |p: u32| {
+            handles[p as usize]
+                .map(|h| remap[h.index()])
+                .filter(|&i| i != u32::MAX)
         };
-        constraint_edges.sort_unstable();
-        constraint_edges.dedup();
-        let cuts: Vec<(u32, u32)> = constraint_edges
-            .into_iter()
-            .filter(|&(a, b)| on_d0(mesh.vertices[a as usize], mesh.vertices[b as usize]))
-            .collect();
+        let (Some(mut cur), Some(end)) = (final_id(pa), final_id(pb)) else {
+            continue;
+        };
+        let target = mesh.vertices[end as usize];
+        for _ in 0..along.len() {
+            if cur == end {
+                break;
+            }
+            let here = mesh.vertices[cur as usize];
+            let dir = (target - here).normalize_or_zero();
+            let next = along[cur as usize].iter().copied().find(|&n| {
+                let step = mesh.vertices[n as usize] - here;
+                step.length() > 0.0
+                    && step.normalize().dot(dir) > 1.0 - 1e-6
+                    && mesh.vertices[n as usize].distance(target) < here.distance(target)
+            });
+            let Some(next) = next else { break };
+            mesh.constraints.push(Constraint {
+                a: cur,
+                b: next,
+                kind,
+                event,
+            });
+            cur = next;
+        }
+    }
+    let mut cuts: Vec<(u32, u32)> = mesh
+        .constraints
+        .iter()
+        .filter(|c| c.kind == Kind::D0)
+        .map(|c| (c.a.min(c.b), c.a.max(c.b)))
+        .collect();
+    if !cuts.is_empty() {
+        cuts.sort_unstable();
+        cuts.dedup();
         split_along(&mut mesh, &cuts);
     }
     (mesh, refused)
