@@ -125,23 +125,35 @@ impl<'a> Locator<'a> {
         }
         let (x, y) = Self::cell_of(self.min, self.cell, self.dims, q);
         // (distance outside in barycentric units, triangle, barycentrics) of the best candidate.
-        let mut best: Option<(f64, u32, [f64; 3])> = None;
-        let mut search = |candidates: &mut dyn Iterator<Item = u32>| {
+        type Best = Option<(f64, u32, [f64; 3])>;
+        let mut best: Best = None;
+        let search = |best: &mut Best, candidates: &mut dyn Iterator<Item = u32>| {
             for k in candidates {
                 let l = self.barycentric(k, q);
+                if !l.iter().all(|v| v.is_finite()) {
+                    continue; // a degenerate triangle
+                }
                 let outside = -(l[0].min(l[1]).min(l[2]));
                 if best.is_none_or(|b| outside < b.0) {
-                    best = Some((outside, k, l));
+                    *best = Some((outside, k, l));
                 }
-                if outside <= 0.0 {
+                if outside <= 1e-9 {
                     return true;
                 }
             }
             false
         };
-        if !search(&mut self.buckets[y * self.dims.0 + x].iter().copied()) {
-            // Rare: points just outside the mesh (rounding at the polygon's edge).
-            search(&mut (0..self.mesh.triangles.len() as u32));
+        // The point's cell, then its neighbours, then (rarely: points just outside the mesh,
+        // from rounding at the polygon's edge) everything.
+        let (nx, ny) = self.dims;
+        let cell = |cx: usize, cy: usize| self.buckets[cy * nx + cx].iter().copied();
+        if !search(&mut best, &mut cell(x, y)) {
+            let mut neighbours = (y.saturating_sub(1)..=(y + 1).min(ny - 1)).flat_map(|cy| {
+                (x.saturating_sub(1)..=(x + 1).min(nx - 1)).flat_map(move |cx| cell(cx, cy))
+            });
+            if !search(&mut best, &mut neighbours) && best.is_none_or(|b| b.0 > 1e-6) {
+                search(&mut best, &mut (0..self.mesh.triangles.len() as u32));
+            }
         }
         let Some((_, k, l)) = best else {
             return DVec3::ZERO;

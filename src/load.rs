@@ -25,6 +25,14 @@ pub struct Gltf {
     pub json: serde_json::Value,
 }
 
+/// Required extensions that change how geometry is stored or instanced, which this loader does
+/// not implement.
+pub const UNREADABLE_EXTENSIONS: [&str; 3] = [
+    "KHR_draco_mesh_compression",
+    "EXT_meshopt_compression",
+    "EXT_mesh_gpu_instancing",
+];
+
 /// Reads and parses a `.glb` or `.gltf` file and all of its buffers.
 pub fn read(path: &Path) -> Result<Gltf> {
     let bytes = std::fs::read(path).map_err(|source| Error::Read {
@@ -44,6 +52,19 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
         return Err(not_gltf("the file is empty".into()));
     }
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| not_gltf(e.to_string()))?;
+    // Extensions whose geometry this loader cannot read: baking the fallback-less data would
+    // give garbage, so say so.
+    for ext in gltf.document.extensions_required() {
+        if UNREADABLE_EXTENSIONS.contains(&ext) {
+            return Err(Error::BadItem {
+                path: path.to_path_buf(),
+                item: "extensionsRequired".into(),
+                reason: format!(
+                    "requires {ext}, which penumbra cannot read (decompress the file first, e.g. with gltf-transform)"
+                ),
+            });
+        }
+    }
     let json_bytes = if bytes.starts_with(b"glTF") {
         gltf::binary::Glb::from_slice(&bytes)
             .map_err(|e| not_gltf(e.to_string()))?

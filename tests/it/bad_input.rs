@@ -252,3 +252,16 @@ fn attribute_shorter_than_positions() {
         &["in.glb", "mesh 0", "NORMAL"],
     );
 }
+
+#[test]
+fn required_compression_extension() {
+    let bad = edit(&fixtures::cornell_box(), |json, _| {
+        json["extensionsUsed"] = serde_json::json!(["KHR_draco_mesh_compression"]);
+        json["extensionsRequired"] = serde_json::json!(["KHR_draco_mesh_compression"]);
+    });
+    expect_failure(
+        "draco",
+        Some(&bad),
+        &["in.glb", "KHR_draco_mesh_compression"],
+    );
+}
