@@ -604,23 +604,18 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<We
                 if sides.contains(&1) && sides.contains(&-1) {
                     continue;
                 }
-                let (da, db) = ((a - v).normalize(), (b - v).normalize());
                 let mut skip = vec![e];
                 skip.extend(faces.iter().filter_map(|&t| scene.triangles[t].polygon));
-                out.push(Wedge {
-                    kind: Kind::Ve,
-                    origin: v,
-                    normal: nw,
-                    half_spaces: vec![
-                        half_space(a, nw.cross(b - a), a + da),
-                        half_space(a, nw.cross(da), b),
-                        half_space(b, nw.cross(db), a),
-                    ],
-                    hull: vec![a, b, a + da * far, b + db * far],
-                    light: Light::Area(e),
-                    generator: Generator::VertexEdge { v, a, b },
+                out.push(vertex_edge_wedge(
+                    Kind::Ve,
+                    Light::Area(e),
+                    v,
+                    a,
+                    b,
+                    nw,
+                    far,
                     skip,
-                });
+                ));
             }
         }
         // EV: emitter edge x occluder silhouette vertex.
@@ -714,26 +709,52 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<We
                     let Some(nw) = (a - v).cross(b - v).try_normalize() else {
                         continue;
                     };
-                    let (da, db) = ((a - v).normalize(), (b - v).normalize());
-                    out.push(Wedge {
-                        kind: Kind::Punctual,
-                        origin: v,
-                        normal: nw,
-                        half_spaces: vec![
-                            half_space(a, nw.cross(b - a), a + da),
-                            half_space(a, nw.cross(da), b),
-                            half_space(b, nw.cross(db), a),
-                        ],
-                        hull: vec![a, b, a + da * far, b + db * far],
-                        light: Light::Punctual(li),
-                        generator: Generator::VertexEdge { v, a, b },
+                    let light = Light::Punctual(li);
+                    out.push(vertex_edge_wedge(
+                        Kind::Punctual,
+                        light,
+                        v,
+                        a,
+                        b,
+                        nw,
+                        far,
                         skip,
-                    });
+                    ));
                 }
             }
         }
     }
     out
+}
+
+/// The wedge swept by the rays from point `v` through edge `a-b`, beyond the edge (unit
+/// normal `nw` of its plane; `far` bounds its extent).
+#[allow(clippy::too_many_arguments)]
+fn vertex_edge_wedge(
+    kind: Kind,
+    light: Light,
+    v: DVec3,
+    a: DVec3,
+    b: DVec3,
+    nw: DVec3,
+    far: f64,
+    skip: Vec<usize>,
+) -> Wedge {
+    let (da, db) = ((a - v).normalize(), (b - v).normalize());
+    Wedge {
+        kind,
+        origin: v,
+        normal: nw,
+        half_spaces: vec![
+            half_space(a, nw.cross(b - a), a + da),
+            half_space(a, nw.cross(da), b),
+            half_space(b, nw.cross(db), a),
+        ],
+        hull: vec![a, b, a + da * far, b + db * far],
+        light,
+        generator: Generator::VertexEdge { v, a, b },
+        skip,
+    }
 }
 
 /// True when receiver `r` can be lit by the wedge's light at all (some of the light above its
