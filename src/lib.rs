@@ -20,6 +20,7 @@ pub mod fixtures;
 pub mod lightmap;
 pub mod load;
 pub mod mesh;
+pub mod reference;
 pub mod render;
 pub mod scene;
 pub mod solve;

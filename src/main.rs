@@ -24,6 +24,40 @@ enum Command {
     Render(RenderArgs),
     /// Debug view of one receiver polygon: outline, discontinuity segments, triangulation (SVG).
     Mesh(MeshArgs),
+    /// Monte Carlo reference irradiance for a baked glb's lightmap layout (independent path
+    /// tracer: no mesh, no radiosity), written as OpenEXR.
+    Reference(ReferenceArgs),
+}
+
+#[derive(Args)]
+struct ReferenceArgs {
+    /// A glb baked by `penumbra bake` (its TEXCOORD_1 and MOZ_lightmap give the texel layout).
+    input: PathBuf,
+    /// Output OpenEXR: irradiance H per texel (W/m², linear RGB; uncovered texels 0).
+    #[arg(long, value_name = "FILE")]
+    out: PathBuf,
+    /// Paths per texel, split evenly over its sub-samples (at least 2 per sub-sample).
+    #[arg(long, default_value_t = 256)]
+    spp: u32,
+    /// Seed of the per-texel random streams.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Most indirect bounces per path (0: direct light only) [default: unbounded, with Russian
+    /// roulette].
+    #[arg(long)]
+    bounces_max: Option<u32>,
+    /// Sub-samples per texel side (n x n per texel), as the bake's --supersample.
+    #[arg(long, default_value_t = 4)]
+    supersample: u32,
+    /// Write JSON: lightmap size, covered texels, mean and max relative standard error, time.
+    #[arg(long, value_name = "FILE")]
+    stats: Option<PathBuf>,
+    /// Worker threads [default: all cores]. The output does not depend on it.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Print nothing on success.
+    #[arg(long, short)]
+    quiet: bool,
 }
 
 #[derive(Args)]
@@ -141,6 +175,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Bake(args) => bake(args),
         Command::Render(args) => render(args),
         Command::Mesh(args) => mesh(args),
+        Command::Reference(args) => reference(args),
     }
 }
 
@@ -184,6 +219,51 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
     );
     let out = args.svg.context("--svg FILE is required (or --list)")?;
     penumbra::write::write_atomically(&out, svg.as_bytes())?;
+    Ok(())
+}
+
+fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
+    let start = std::time::Instant::now();
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = args.threads {
+        anyhow::ensure!(n > 0, "--threads must be at least 1");
+        pool = pool.num_threads(n);
+    }
+    let pool = pool.build().context("cannot start worker threads")?;
+    let gltf = penumbra::load::read(&args.input)?;
+    let options = penumbra::reference::ReferenceOptions {
+        spp: args.spp,
+        seed: args.seed,
+        bounces_max: args.bounces_max,
+        supersample: args.supersample,
+    };
+    let map = pool.install(|| penumbra::reference::reference(&gltf, &options))?;
+    map.write_exr(&args.out)?;
+    let summary = map.summary();
+    let seconds = start.elapsed().as_secs_f64();
+    if !args.quiet {
+        eprintln!(
+            "reference {} -> {}: {}x{} lightmap, {} covered texels, {} spp, \
+             mean relative standard error {:.4}, {:.2} s",
+            args.input.display(),
+            args.out.display(),
+            summary.width,
+            summary.height,
+            summary.covered_texels,
+            args.spp,
+            summary.mean_relative_std_error,
+            seconds
+        );
+    }
+    if let Some(path) = &args.stats {
+        let mut json = serde_json::to_value(&summary)?;
+        json["spp"] = args.spp.into();
+        json["seed"] = args.seed.into();
+        json["bounces_max"] = args.bounces_max.into();
+        json["supersample"] = args.supersample.into();
+        json["seconds"] = seconds.into();
+        penumbra::write::write_atomically(path, &serde_json::to_vec_pretty(&json)?)?;
+    }
     Ok(())
 }
 

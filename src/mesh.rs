@@ -112,8 +112,9 @@ pub fn triangulate_with(
     // outside the polygon, which refinement splits without end.
     let outline = merge_collinear(&polygon.boundary);
     let gap = (0.05 * max_area.max(0.0).sqrt()).max(tol * 10.0);
-    let mut input: Vec<(DVec2, DVec2, Option<(Kind, u32)>)> =
-        outline.iter().map(|[a, b]| (*a, *b, None)).collect();
+    // Tags: `None` for the outline, the segment's kind and event otherwise.
+    type Tagged = (DVec2, DVec2, Option<(Kind, u32)>);
+    let mut input: Vec<Tagged> = outline.iter().map(|[a, b]| (*a, *b, None)).collect();
     input.extend(segments.iter().filter_map(|s| {
         keep_clear(s.a, s.b, &outline, gap).map(|(a, b)| (a, b, Some((s.kind, s.event))))
     }));

@@ -8,6 +8,7 @@ mod fixtures;
 mod known_answers;
 mod loading;
 mod output;
+mod reference;
 mod stability;
 
 use penumbra::load::{self, Gltf};

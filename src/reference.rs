@@ -1,0 +1,648 @@
+//! An independent Monte Carlo reference for a baked lightmap: per texel, the irradiance `H`
+//! (W/m², linear RGB, without albedo) at the texel's surface points, estimated by path tracing.
+//!
+//! It reads only the baked glb: the lightmap layout (each lightmapped primitive's `TEXCOORD_1`
+//! and the size of its `MOZ_lightmap` image) and the geometry, through [`load::scene`] and the
+//! [`Visibility`] BVH. It uses no receiver mesh and no radiosity solution, so it checks the
+//! baker from outside.
+//!
+//! The estimator solves the rendering equation (Kajiya 1986, "The rendering equation",
+//! SIGGRAPH) for Lambertian surfaces in its irradiance form:
+//!
+//! ```text
+//! H(x) = H_direct(x) + ∫ rho(y) / pi · H(y) cos(theta) dω,   y = first hit from x along ω
+//! ```
+//!
+//! * Direct light of area emitters by next-event estimation: each emitter is sampled once per
+//!   path vertex, a point uniform by area (solid-angle density `p_l = r² / (A cos(theta_y))`),
+//!   tested with a shadow ray. Punctual lights are exact ([`solve::punctual_irradiance`]).
+//! * Indirect light by cosine-weighted hemisphere sampling (density `p_b = cos(theta_x) / pi`,
+//!   so a hit adds `rho(y) · H(y)`), continued at the hit with Russian roulette after two
+//!   bounces (survival `min(0.95, max rho)`).
+//! * The two are combined for the emitters' light by multiple importance sampling with the
+//!   balance heuristic (Veach & Guibas 1995): a light sample and an emitter hit by a hemisphere
+//!   ray both add `L_e cos(theta_x) / (p_l + p_b)`, which is at most `pi L_e`. Plain
+//!   next-event estimation (weight `L_e cos cos / r² · A`, emission never added at hits) is
+//!   unbiased too, but near the edge where two emitting faces meet (the furnace's corners) its
+//!   variance grows without bound and the sample variance no longer measures the error: its
+//!   reported standard error was several times too small there. Nothing is counted twice: the
+//!   weights of the two strategies sum to 1. Where no hemisphere ray is traced (the last
+//!   vertex under `bounces_max`, e.g. `Some(0)`: direct light only), the light sample takes the
+//!   full weight.
+//!
+//! Sampling follows the bake's supersampling footprint: texel `(x, y)` covers UV `[x, x+1] x
+//! [y, y+1]` in texel units (row 0 on top) and its `n x n` sub-samples sit at `x + (i + 0.5)/n`,
+//! `y + (j + 0.5)/n`; each lies on the first lightmapped triangle that contains it in UV space.
+//! The texel value is the mean over its covered sub-samples, each given the same number of
+//! paths (stratified sampling); its standard error is that of the stratified mean.
+//!
+//! Every texel has its own random stream, seeded from the seed and the texel index, so the
+//! result does not depend on the thread count.
+
+use crate::error::{Error, Result};
+use crate::load::{self, Gltf};
+use crate::scene::Scene;
+use crate::solve::{self, SurfacePoint};
+use crate::visibility::Visibility;
+use glam::{DVec2, DVec3};
+use gltf::accessor::Dimensions;
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::path::Path;
+
+/// What [`reference`] is told.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferenceOptions {
+    /// Paths per texel, split evenly over its covered sub-samples (at least 2 per sub-sample,
+    /// so each stratum has a variance estimate).
+    pub spp: u32,
+    /// Seed of the per-texel random streams.
+    pub seed: u64,
+    /// Most indirect bounces per path: `Some(0)` = direct light only; `None` = unbounded
+    /// (Russian roulette ends the paths).
+    pub bounces_max: Option<u32>,
+    /// Sub-samples per texel side (`n x n` per texel), as the bake's `--supersample`.
+    pub supersample: u32,
+}
+
+impl Default for ReferenceOptions {
+    fn default() -> Self {
+        ReferenceOptions {
+            spp: 256,
+            seed: 0,
+            bounces_max: None,
+            supersample: 4,
+        }
+    }
+}
+
+/// The reference irradiance over the lightmap grid. Row-major, top row first.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ReferenceMap {
+    pub width: u32,
+    pub height: u32,
+    /// Estimated irradiance H per texel, W/m² (0 for uncovered texels).
+    pub mean: Vec<DVec3>,
+    /// Standard error of `mean` per texel and channel, W/m².
+    pub std_error: Vec<DVec3>,
+    /// Fraction of each texel's sub-samples covered by a lightmapped triangle.
+    pub coverage: Vec<f32>,
+}
+
+/// A summary of a [`ReferenceMap`] (the `--stats` JSON of `penumbra reference`).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ReferenceSummary {
+    pub width: u32,
+    pub height: u32,
+    pub covered_texels: usize,
+    /// Mean over covered texels with a positive mean of the relative standard error
+    /// `sum_c stderr_c / sum_c mean_c` (channel sums).
+    pub mean_relative_std_error: f64,
+    /// Largest relative standard error of a texel.
+    pub max_relative_std_error: f64,
+}
+
+impl ReferenceMap {
+    /// Relative standard error of texel `i` (`sum_c stderr_c / sum_c mean_c`), `None` when its
+    /// mean is 0 or it is uncovered.
+    pub fn relative_std_error(&self, i: usize) -> Option<f64> {
+        let m = self.mean[i].element_sum();
+        (self.coverage[i] > 0.0 && m > 0.0).then(|| self.std_error[i].element_sum() / m)
+    }
+
+    pub fn summary(&self) -> ReferenceSummary {
+        let rel: Vec<f64> = (0..self.mean.len())
+            .filter_map(|i| self.relative_std_error(i))
+            .collect();
+        ReferenceSummary {
+            width: self.width,
+            height: self.height,
+            covered_texels: self.coverage.iter().filter(|&&c| c > 0.0).count(),
+            mean_relative_std_error: if rel.is_empty() {
+                0.0
+            } else {
+                rel.iter().sum::<f64>() / rel.len() as f64
+            },
+            max_relative_std_error: rel.iter().copied().fold(0.0, f64::max),
+        }
+    }
+
+    /// Writes `mean` (H, W/m², linear RGB) as OpenEXR, atomically.
+    pub fn write_exr(&self, path: &Path) -> Result<()> {
+        let data: Vec<f32> = self
+            .mean
+            .iter()
+            .flat_map(|t| t.as_vec3().to_array())
+            .collect();
+        let img = image::Rgb32FImage::from_raw(self.width, self.height, data)
+            .ok_or_else(|| Error::Image("reference map size mismatch".into()))?;
+        let mut bytes = std::io::Cursor::new(Vec::new());
+        image::DynamicImage::ImageRgb32F(img)
+            .write_to(&mut bytes, image::ImageFormat::OpenExr)
+            .map_err(|e| Error::Image(format!("EXR encoding failed: {e}")))?;
+        crate::write::write_atomically(path, bytes.get_ref())
+    }
+}
+
+/// The lightmap layout of a baked file: per texel, the surface points of its covered
+/// sub-samples.
+#[derive(Clone, Debug)]
+pub struct TexelLayout {
+    pub width: u32,
+    pub height: u32,
+    /// Sub-samples per texel side.
+    pub supersample: u32,
+    /// Per texel (row-major, top row first), its covered sub-samples: the world point on the
+    /// triangle, the polygon's normal, and the polygon.
+    pub samples: Vec<Vec<SurfacePoint>>,
+}
+
+impl TexelLayout {
+    /// Fraction of texel `i`'s sub-samples that are covered.
+    pub fn coverage(&self, i: usize) -> f32 {
+        self.samples[i].len() as f32 / (self.supersample * self.supersample) as f32
+    }
+}
+
+fn bad(gltf: &Gltf, item: String, reason: &str) -> Error {
+    Error::BadItem {
+        path: gltf.path.clone(),
+        item,
+        reason: reason.into(),
+    }
+}
+
+/// Reads the lightmap layout of a baked glb: the `TEXCOORD_1` triangles of every primitive
+/// whose material has `MOZ_lightmap`, rasterized into the grid of the lightmap image with `n x n`
+/// sub-samples per texel, as the bake does. `scene` must be `load::scene(gltf)` and `vis` its
+/// BVH (for the rays' start points). All lightmapped materials must share one lightmap size.
+pub fn texel_layout(
+    gltf: &Gltf,
+    scene: &Scene,
+    vis: &Visibility,
+    supersample: u32,
+) -> Result<TexelLayout> {
+    if !(1..=8).contains(&supersample) {
+        return Err(Error::Option {
+            option: "--supersample",
+            reason: "must be between 1 and 8".into(),
+        });
+    }
+    // UV triangles (normalized) with their scene triangle.
+    let mut tris: Vec<([DVec2; 3], usize)> = Vec::new();
+    let mut size: Option<(u32, u32)> = None;
+    let mut sizes = std::collections::BTreeMap::new();
+    for inst in &scene.instances {
+        let prim = gltf
+            .document
+            .meshes()
+            .nth(inst.mesh)
+            .and_then(|m| m.primitives().nth(inst.primitive))
+            .ok_or_else(|| bad(gltf, format!("mesh {}", inst.mesh), "missing primitive"))?;
+        let Some(moz) = inst
+            .gltf_material
+            .and_then(|m| gltf.json["materials"][m]["extensions"]["MOZ_lightmap"].as_object())
+        else {
+            continue;
+        };
+        let set = moz.get("texCoord").and_then(|v| v.as_u64()).unwrap_or(1) as u32;
+        let item = format!("mesh {} primitive {}", inst.mesh, inst.primitive);
+        let acc = prim
+            .get(&gltf::Semantic::TexCoords(set))
+            .ok_or_else(|| bad(gltf, item.clone(), "MOZ_lightmap without its TEXCOORD set"))?;
+        let flat = gltf.read_floats(&acc, Dimensions::Vec2)?;
+        let uv: Vec<DVec2> = flat
+            .chunks_exact(2)
+            .map(|c| DVec2::new(c[0], c[1]))
+            .collect();
+        let texture = moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize;
+        let dims = match sizes.get(&texture) {
+            Some(&d) => d,
+            None => {
+                let d = texture_size(gltf, texture)?;
+                sizes.insert(texture, d);
+                d
+            }
+        };
+        if size.is_some_and(|s| s != dims) {
+            return Err(bad(
+                gltf,
+                format!("texture {texture}"),
+                "lightmaps of different sizes: one reference grid cannot cover them",
+            ));
+        }
+        size = Some(dims);
+        for k in 0..inst.indices.len() / 3 {
+            let t = inst.first_triangle + k;
+            if scene.triangles[t].polygon.is_none() {
+                continue;
+            }
+            let ids = &inst.indices[3 * k..3 * k + 3];
+            if ids.iter().any(|&i| i as usize >= uv.len()) {
+                return Err(bad(gltf, item, "TEXCOORD_1 is shorter than POSITION"));
+            }
+            tris.push((ids_to_uv(ids, &uv), t));
+        }
+    }
+    let (w, h) = size.ok_or_else(|| {
+        bad(
+            gltf,
+            "materials".into(),
+            "no material has MOZ_lightmap: is this a baked file?",
+        )
+    })?;
+    let (wf, hf) = (w as f64, h as f64);
+    let n = supersample as usize;
+    let mut samples: Vec<Vec<SurfacePoint>> = vec![Vec::new(); w as usize * h as usize];
+    let mut claimed = vec![0u64; w as usize * h as usize];
+    for (uvn, t) in &tris {
+        let uv = uvn.map(|q| DVec2::new(q.x * wf, q.y * hf));
+        let area = (uv[1] - uv[0]).perp_dot(uv[2] - uv[0]);
+        if area == 0.0 || !area.is_finite() {
+            continue;
+        }
+        let tri = &scene.triangles[*t];
+        let Some(poly) = tri.polygon else { continue };
+        let frame = scene.polygons[poly].frame;
+        let lo = uv[0].min(uv[1]).min(uv[2]);
+        let hi = uv[0].max(uv[1]).max(uv[2]);
+        let x0 = lo.x.floor().max(0.0) as usize;
+        let x1 = (hi.x.floor().max(0.0) as usize).min(w as usize - 1);
+        let y0 = lo.y.floor().max(0.0) as usize;
+        let y1 = (hi.y.floor().max(0.0) as usize).min(h as usize - 1);
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                let idx = y * w as usize + x;
+                for s in 0..n * n {
+                    let bit = 1u64 << s;
+                    if claimed[idx] & bit != 0 {
+                        continue;
+                    }
+                    let q = DVec2::new(
+                        x as f64 + ((s % n) as f64 + 0.5) / n as f64,
+                        y as f64 + ((s / n) as f64 + 0.5) / n as f64,
+                    );
+                    let l1 = (q - uv[0]).perp_dot(uv[2] - uv[0]) / area;
+                    let l2 = (uv[1] - uv[0]).perp_dot(q - uv[0]) / area;
+                    let l0 = 1.0 - l1 - l2;
+                    if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
+                        continue;
+                    }
+                    claimed[idx] |= bit;
+                    let p = tri.p[0] * l0 + tri.p[1] * l1 + tri.p[2] * l2;
+                    // Onto the polygon's plane exactly.
+                    let p = p - frame.n * frame.n.dot(p - frame.origin);
+                    samples[idx].push(SurfacePoint::new(p, frame.n, poly, vis));
+                }
+            }
+        }
+    }
+    // Sub-sample order within a texel follows triangle order; sort by sub-sample is not needed
+    // for the estimate, but keep it deterministic (it is: triangles come in scene order).
+    Ok(TexelLayout {
+        width: w,
+        height: h,
+        supersample,
+        samples,
+    })
+}
+
+fn ids_to_uv(ids: &[u32], uv: &[DVec2]) -> [DVec2; 3] {
+    [0, 1, 2].map(|c| uv[ids[c] as usize])
+}
+
+/// Width and height of a texture's image (decoded header only).
+fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
+    let tex = gltf
+        .document
+        .textures()
+        .nth(texture)
+        .ok_or_else(|| bad(gltf, format!("texture {texture}"), "does not exist"))?;
+    let bytes = match tex.source().source() {
+        gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, "lightmap")?.to_vec(),
+        gltf::image::Source::Uri { uri, .. } => load::read_uri(&gltf.path, uri, "lightmap")?,
+    };
+    let (w, h) = image::ImageReader::new(std::io::Cursor::new(bytes))
+        .with_guessed_format()
+        .map_err(|e| bad(gltf, format!("texture {texture}"), &e.to_string()))?
+        .into_dimensions()
+        .map_err(|e| bad(gltf, format!("texture {texture}"), &e.to_string()))?;
+    if w == 0 || h == 0 || w > 16384 || h > 16384 {
+        return Err(bad(
+            gltf,
+            format!("texture {texture}"),
+            "lightmap size must be 1 to 16384 texels",
+        ));
+    }
+    Ok((w, h))
+}
+
+/// SplitMix64 (Steele, Lea & Flood 2014): a small, fast generator, one stream per texel.
+struct SplitMix64(u64);
+
+impl SplitMix64 {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        mix64(self.0)
+    }
+    /// Uniform in [0, 1).
+    fn next_f64(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+fn mix64(mut z: u64) -> u64 {
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// One area emitter for next-event estimation: its triangles with a cumulative area table.
+struct Emitter {
+    polygon: usize,
+    /// W/(m² sr), front face.
+    radiance: DVec3,
+    normal: DVec3,
+    triangles: Vec<[DVec3; 3]>,
+    /// Cumulative triangle areas; the last is the total area.
+    cdf: Vec<f64>,
+}
+
+impl Emitter {
+    fn area(&self) -> f64 {
+        *self.cdf.last().unwrap_or(&0.0)
+    }
+
+    /// A point uniform by area.
+    fn sample(&self, rng: &mut SplitMix64) -> DVec3 {
+        let a = rng.next_f64() * self.area();
+        let k = self
+            .cdf
+            .partition_point(|&c| c <= a)
+            .min(self.cdf.len() - 1);
+        let t = &self.triangles[k];
+        let (u, v) = (rng.next_f64(), rng.next_f64());
+        let su = u.sqrt();
+        t[0] * (1.0 - su) + t[1] * (su * (1.0 - v)) + t[2] * (su * v)
+    }
+}
+
+/// The path tracer.
+struct Tracer<'a> {
+    scene: &'a Scene,
+    vis: &'a Visibility,
+    emitters: Vec<Emitter>,
+    /// Per polygon, its index in `emitters`.
+    emitter_of: Vec<Option<usize>>,
+    bounces_max: Option<u32>,
+}
+
+impl<'a> Tracer<'a> {
+    fn new(scene: &'a Scene, vis: &'a Visibility, bounces_max: Option<u32>) -> Tracer<'a> {
+        let emitters = scene
+            .emitters()
+            .filter_map(|id| {
+                let poly = &scene.polygons[id];
+                let triangles: Vec<[DVec3; 3]> = poly
+                    .triangles
+                    .iter()
+                    .map(|&t| scene.triangles[t].p)
+                    .collect();
+                let mut sum = 0.0;
+                let cdf: Vec<f64> = poly
+                    .triangles
+                    .iter()
+                    .map(|&t| {
+                        sum += scene.triangles[t].area();
+                        sum
+                    })
+                    .collect();
+                (sum > 0.0).then(|| Emitter {
+                    polygon: id,
+                    radiance: scene.materials[poly.material].radiance,
+                    normal: poly.frame.n,
+                    triangles,
+                    cdf,
+                })
+            })
+            .collect::<Vec<Emitter>>();
+        let mut emitter_of = vec![None; scene.polygons.len()];
+        for (k, e) in emitters.iter().enumerate() {
+            emitter_of[e.polygon] = Some(k);
+        }
+        Tracer {
+            scene,
+            vis,
+            emitters,
+            emitter_of,
+            bounces_max,
+        }
+    }
+
+    /// Irradiance from the punctual lights (exact, no randomness), W/m².
+    fn punctual(&self, at: &SurfacePoint) -> DVec3 {
+        self.scene
+            .lights
+            .iter()
+            .map(|l| solve::punctual_irradiance(l, self.vis, at).0)
+            .sum()
+    }
+
+    /// One next-event estimate of the irradiance from the area emitters at `at`, W/m²: one
+    /// point per emitter, `L_e cos(theta_x) / (p_l + p_b)` when visible (`mis`: a hemisphere
+    /// ray from `at` will also look for the emitters), else `L_e cos cos / r² · A`.
+    fn area_direct(&self, at: &SurfacePoint, mis: bool, rng: &mut SplitMix64) -> DVec3 {
+        let mut h = DVec3::ZERO;
+        for e in &self.emitters {
+            if e.polygon == at.polygon {
+                continue;
+            }
+            let y = e.sample(rng);
+            let d = y - at.p;
+            let r2 = d.length_squared();
+            if r2 <= 0.0 {
+                continue;
+            }
+            let r = r2.sqrt();
+            let cos_x = at.n.dot(d) / r;
+            let cos_y = -e.normal.dot(d) / r;
+            if cos_x <= 0.0 || cos_y <= 0.0 {
+                continue;
+            }
+            if self
+                .vis
+                .occluded_skipping(at.ray_origin, y, [at.polygon, e.polygon])
+            {
+                continue;
+            }
+            let p_l = r2 / (e.area() * cos_y);
+            let p_b = if mis { cos_x / PI } else { 0.0 };
+            h += e.radiance * (cos_x / (p_l + p_b));
+        }
+        h
+    }
+
+    /// One sample of the irradiance at `at`, without its punctual direct part (the caller adds
+    /// that once: it is exact). W/m².
+    fn sample(&self, at: &SurfacePoint, rng: &mut SplitMix64) -> DVec3 {
+        // Whether a hemisphere ray leaves the vertex at this depth.
+        let traces = |depth: u32| self.bounces_max.is_none_or(|b| depth < b);
+        let mut total = self.area_direct(at, traces(0), rng);
+        let mut throughput = DVec3::ONE;
+        let mut at = *at;
+        let mut depth = 0u32;
+        while traces(depth) {
+            let dir = cosine_direction(at.n, rng);
+            let Some(hit) = self.vis.first_hit(at.ray_origin, dir, f64::MAX) else {
+                break;
+            };
+            let tri = &self.scene.triangles[hit.triangle];
+            let cos_y = -tri.normal.dot(dir);
+            if cos_y <= 0.0 {
+                break; // the back of a one-sided surface neither emits nor reflects
+            }
+            let Some(poly) = tri.polygon else { break };
+            if let Some(e) = self.emitter_of[poly] {
+                // The emitter's light found by the hemisphere ray, MIS-weighted.
+                let e = &self.emitters[e];
+                let p_l = hit.t * hit.t / (e.area() * cos_y);
+                let cos_x = at.n.dot(dir);
+                total += throughput * e.radiance * (cos_x / (p_l + cos_x / PI));
+            }
+            let rho = self.scene.materials[tri.material].rho;
+            if rho.max_element() <= 0.0 {
+                break;
+            }
+            throughput *= rho;
+            depth += 1;
+            let frame = self.scene.polygons[poly].frame;
+            let p = at.ray_origin + dir * hit.t;
+            let p = p - frame.n * frame.n.dot(p - frame.origin);
+            let next = SurfacePoint::new(p, frame.n, poly, self.vis);
+            total +=
+                throughput * (self.area_direct(&next, traces(depth), rng) + self.punctual(&next));
+            if depth >= 2 {
+                let q = rho.max_element().min(0.95);
+                if rng.next_f64() >= q {
+                    break;
+                }
+                throughput /= q;
+            }
+            at = next;
+        }
+        total
+    }
+}
+
+/// A cosine-weighted direction about the unit normal `n` (pdf `cos(theta) / pi`).
+fn cosine_direction(n: DVec3, rng: &mut SplitMix64) -> DVec3 {
+    let (u1, u2) = (rng.next_f64(), rng.next_f64());
+    let r = u1.sqrt();
+    let phi = 2.0 * PI * u2;
+    let (a, b) = n.any_orthonormal_pair();
+    (a * (r * phi.cos()) + b * (r * phi.sin()) + n * (1.0 - u1).max(0.0).sqrt()).normalize()
+}
+
+/// The reference irradiance map of a baked glb (see the module docs): loads the scene from the
+/// file itself, reads the layout with [`texel_layout`], and path-traces every covered texel in
+/// parallel over rows.
+pub fn reference(gltf: &Gltf, options: &ReferenceOptions) -> Result<ReferenceMap> {
+    if !(1..=1_000_000).contains(&options.spp) {
+        return Err(Error::Option {
+            option: "--spp",
+            reason: "must be between 1 and 1000000".into(),
+        });
+    }
+    let scene = load::scene(gltf)?;
+    let vis = Visibility::new(&scene);
+    let layout = texel_layout(gltf, &scene, &vis, options.supersample)?;
+    Ok(reference_with(&scene, &vis, &layout, options))
+}
+
+/// [`reference`] on an already loaded scene and layout.
+pub fn reference_with(
+    scene: &Scene,
+    vis: &Visibility,
+    layout: &TexelLayout,
+    options: &ReferenceOptions,
+) -> ReferenceMap {
+    let tracer = Tracer::new(scene, vis, options.bounces_max);
+    let w = layout.width as usize;
+    let rows: Vec<Vec<(DVec3, DVec3)>> = (0..layout.height as usize)
+        .into_par_iter()
+        .map(|y| {
+            (0..w)
+                .map(|x| {
+                    let i = y * w + x;
+                    let mut rng = SplitMix64(mix64(
+                        options.seed ^ mix64(i as u64 ^ 0xA076_1D64_78BD_642F),
+                    ));
+                    texel(&tracer, &layout.samples[i], options.spp, &mut rng)
+                })
+                .collect()
+        })
+        .collect();
+    let (mean, std_error) = rows.into_iter().flatten().unzip();
+    ReferenceMap {
+        width: layout.width,
+        height: layout.height,
+        mean,
+        std_error,
+        coverage: (0..layout.samples.len())
+            .map(|i| layout.coverage(i))
+            .collect(),
+    }
+}
+
+/// Mean and standard error of one texel: `spp` paths split evenly over the sub-samples (at least
+/// 2 each); stratified mean `(1/m) sum_s mean_s`, variance `(1/m²) sum_s var_s / n`.
+fn texel(
+    tracer: &Tracer,
+    points: &[SurfacePoint],
+    spp: u32,
+    rng: &mut SplitMix64,
+) -> (DVec3, DVec3) {
+    let m = points.len();
+    if m == 0 {
+        return (DVec3::ZERO, DVec3::ZERO);
+    }
+    let per = (spp as usize).div_ceil(m).max(2);
+    let mut mean = DVec3::ZERO;
+    let mut var = DVec3::ZERO;
+    for at in points {
+        let exact = tracer.punctual(at);
+        // Welford's running mean and sum of squared deviations.
+        let mut mu = DVec3::ZERO;
+        let mut m2 = DVec3::ZERO;
+        for k in 0..per {
+            let v = tracer.sample(at, rng);
+            let d = v - mu;
+            mu += d / (k + 1) as f64;
+            m2 += d * (v - mu);
+        }
+        mean += mu + exact;
+        var += m2 / ((per - 1) * per) as f64;
+    }
+    let mf = m as f64;
+    (mean / mf, (var / (mf * mf)).max(DVec3::ZERO).map(f64::sqrt))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cosine_directions_are_unit_and_above_the_surface() {
+        let mut rng = SplitMix64(3);
+        let n = DVec3::new(0.3, -0.8, 0.2).normalize();
+        let mut mean_cos = 0.0;
+        for _ in 0..20000 {
+            let d = cosine_direction(n, &mut rng);
+            assert!((d.length() - 1.0).abs() < 1e-12);
+            assert!(d.dot(n) >= 0.0);
+            mean_cos += d.dot(n);
+        }
+        // E[cos] under pdf cos/pi is 2/3.
+        assert!((mean_cos / 20000.0 - 2.0 / 3.0).abs() < 0.01);
+    }
+}
