@@ -193,14 +193,20 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
     };
     let (scene, segments, meshes) = penumbra::bake::meshes(&gltf, &options)?;
     if args.list {
+        use std::io::Write;
+        let mut out = std::io::stdout().lock();
         for (i, p) in scene.polygons.iter().enumerate() {
-            println!(
+            let line = writeln!(
+                out,
                 "{i}\t{}\tarea {:.6}\t{} segments\t{} triangles",
                 scene.materials[p.material].name,
                 p.area,
                 segments.get(i).map_or(0, |s| s.len()),
                 meshes[i].triangles.len()
             );
+            if line.is_err() {
+                break; // the reader went away (e.g. `| head`): not an error
+            }
         }
         return Ok(());
     }
