@@ -96,13 +96,7 @@ impl BakeOptions {
         if !(0.0..=1.0).contains(&self.dm_threshold) {
             return bad("--dm-threshold", "must be between 0 and 1");
         }
-        match self.mesher {
-            Mesher::Uniform | Mesher::Discontinuity => Ok(()),
-            Mesher::Adaptive => bad(
-                "--mesher",
-                "the adaptive mesher is not built yet; use --mesher uniform",
-            ),
-        }
+        Ok(())
     }
 }
 
@@ -213,6 +207,10 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
     Ok(atlas)
 }
 
+/// The adaptive mesher splits elements whose direct light varies by more than this fraction of
+/// the brightest vertex.
+const ADAPTIVE_TOLERANCE: f64 = 0.01;
+
 /// Total surface area, in xatlas's units, that the scene is scaled to for charting.
 const ATLAS_AREA: f64 = 1000.0;
 
@@ -251,7 +249,16 @@ fn mesh_scene(
             stats.discontinuity = Some(dm_stats);
             (segments, meshes)
         }
-        Mesher::Adaptive => unreachable!("rejected by BakeOptions::check"),
+        Mesher::Adaptive => {
+            // Refine on the direct light, which carries the sharp features.
+            let direct = crate::solve::Direct::with_options(scene, vis, &options.solve);
+            let meshes = stage(&mut t.mesh, "mesh", progress, || {
+                mesh::adaptive(scene, options.budget, ADAPTIVE_TOLERANCE, |meshes| {
+                    crate::solve::direct_light(scene, vis, &direct, meshes, &|_, _, _| {})
+                })
+            });
+            (Vec::new(), meshes)
+        }
     }
 }
 

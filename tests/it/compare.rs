@@ -63,21 +63,27 @@ fn compare(name: &str, bytes: &[u8], budget: usize) -> (f64, f64) {
     };
     o.solve.bounces = Some(0);
     let d = crate::bake(bytes, &o);
-    let u = crate::bake(
-        bytes,
-        &BakeOptions {
-            mesher: Mesher::Uniform,
-            ..o.clone()
-        },
-    );
+    let with = |mesher| BakeOptions {
+        mesher,
+        ..o.clone()
+    };
+    let u = crate::bake(bytes, &with(Mesher::Uniform));
+    let a = crate::bake(bytes, &with(Mesher::Adaptive));
     let (dr, dmax, n) = shadow_error(&d, 120);
     let (ur, umax, _) = shadow_error(&u, 120);
+    let (ar, amax, _) = shadow_error(&a, 120);
     println!(
-        "{name} budget {budget}: shadowed points {n}; RMS uniform {ur:.5} discontinuity {dr:.5} (ratio {:.2}); max uniform {umax:.4} discontinuity {dmax:.4} (ratio {:.2}); elements {} vs {}",
+        "{name} budget {budget}: shadowed points {n}; RMS uniform {ur:.5} adaptive {ar:.5} discontinuity {dr:.5} (uniform/discontinuity {:.2}); max uniform {umax:.4} adaptive {amax:.4} discontinuity {dmax:.4} (ratio {:.2}); elements {} / {} / {}",
         ur / dr,
         umax / dmax,
         u.stats.elements,
+        a.stats.elements,
         d.stats.elements
+    );
+    assert!(
+        a.stats.elements <= budget + budget / 10,
+        "adaptive overshoots the budget: {}",
+        a.stats.elements
     );
     (ur / dr, umax / dmax)
 }
