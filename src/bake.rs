@@ -19,8 +19,8 @@ pub struct BakeOptions {
     pub mesher: Mesher,
     /// Target number of mesh elements (triangles) over the whole scene.
     pub budget: usize,
-    /// Discontinuity pieces whose light carries less than this share of the unoccluded
-    /// irradiance where they lie are dropped (0..1).
+    /// Discontinuity pieces where their light's unoccluded irradiance is below this fraction
+    /// (0..1) of the brightest piece's are dropped.
     pub dm_threshold: f64,
     pub solve: SolveOptions,
     /// Lightmap texels per scene unit; `None`: derived from `resolution`.

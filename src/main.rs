@@ -117,8 +117,8 @@ struct BakeArgs {
     /// Target number of mesh elements (triangles) over the whole scene.
     #[arg(long, default_value_t = 20_000)]
     budget: usize,
-    /// Discontinuity meshing: drop wedge pieces whose light carries less than this share
-    /// (0..1) of the unoccluded irradiance where they lie.
+    /// Discontinuity meshing: drop wedge pieces where their light's unoccluded irradiance is
+    /// below this fraction (0..1) of the brightest piece's.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
     /// Direct light of area emitters: `exact` (backprojection: the visible part of each emitter)
