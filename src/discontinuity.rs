@@ -544,8 +544,8 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<We
     let tol = 1e-9 * extent;
     let far = 4.0 * extent;
     let mut out = Vec::new();
-    // Area emitters, strongest first is not needed: significance is judged per piece. Emitters
-    // carrying less than `threshold` of the strongest one's power are skipped outright.
+    // Area emitters in scene order (significance is judged per piece later). Emitters carrying
+    // less than `threshold` of the strongest one's power are skipped outright.
     let power = |p: usize| {
         let poly = &scene.polygons[p];
         scene.materials[poly.material].radiance.element_sum() * poly.area
