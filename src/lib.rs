@@ -1,32 +1,71 @@
 //! penumbra: a discontinuity-meshing radiosity preprocessor and lightmap baker.
 //!
-//! The pipeline, one module per stage, in the order [`bake`] calls them:
+//! The pipeline, one module per stage, in the order [`bake()`] calls them:
 //!
 //! ```text
-//! load ──► scene ──► visibility ──► mesh ──► solve ──► atlas ──► lightmap ──► write
+//! load ──► scene ──► visibility ──► discontinuity ──► mesh ──► solve ──► atlas ──► lightmap ──► write
 //! ```
 //!
 //! Units: lengths in scene units (glTF: metres); radiance in W/(m² sr), irradiance and exitance in
 //! W/m² (or the scene's own photometric equivalents, consistently). The lightmap stores irradiance
 //! `H`, linear, without albedo.
 
-pub mod atlas;
-pub mod backproject;
-pub mod bake;
-pub mod debug;
-pub mod discontinuity;
-pub mod error;
-pub mod fixtures;
-pub mod lightmap;
+// The stages, in pipeline order.
+
+/// Reading glTF and building the scene.
 pub mod load;
-pub mod mesh;
-pub mod reference;
-pub mod render;
+
+/// Planar receiver polygons, materials, emitters, lights.
 pub mod scene;
-pub mod solve;
-pub mod stats;
+
+/// BVH ray queries.
 pub mod visibility;
+
+/// Umbra, penumbra and contact segments per receiver.
+pub mod discontinuity;
+
+/// Receiver meshes: uniform, discontinuity, adaptive.
+pub mod mesh;
+
+/// Direct and indirect light at the mesh vertices.
+pub mod solve;
+
+/// Exact visible emitter parts (used by `solve`).
+pub mod backproject;
+
+/// UV atlas (xatlas).
+pub mod atlas;
+
+/// Texels from the receiver meshes.
+pub mod lightmap;
+
+/// The lightmapped glb.
 pub mod write;
+
+// The pipeline driver and its bookkeeping.
+
+/// [`bake()`]: the stages in order.
+pub mod bake;
+
+/// Errors.
+pub mod error;
+
+/// `--stats` and progress.
+pub mod stats;
+
+// Tools around the pipeline.
+
+/// Debug views (SVG).
+pub mod debug;
+
+/// Generated test scenes.
+pub mod fixtures;
+
+/// Monte Carlo reference for a baked lightmap.
+pub mod reference;
+
+/// Pictures of a baked glb.
+pub mod render;
 
 pub use bake::{Bake, BakeOptions, bake, bake_file};
 pub use error::{Error, Result};
