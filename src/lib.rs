@@ -55,6 +55,9 @@ pub mod stats;
 
 // Tools around the pipeline.
 
+/// Meshers measured against each other (error sweeps and charts).
+pub mod compare;
+
 /// Debug views (SVG).
 pub mod debug;
 

@@ -2,57 +2,13 @@
 //! mesh interpolant against the exact direct light, in the shadowed regions of the floor.
 
 use crate::discontinuity::dm;
-use glam::DVec2;
 use penumbra::fixtures;
-use penumbra::lightmap::Locator;
 use penumbra::mesh::Mesher;
-use penumbra::solve::{Direct, SurfacePoint};
-use penumbra::visibility::Visibility;
 use penumbra::{Bake, BakeOptions};
-use std::f64::consts::PI;
 
-/// RMS and max error (relative to the floor's peak) of the direct light in the shadowed part of
-/// the largest upward polygon, over a stratified grid of points.
 fn shadow_error(b: &Bake, points_per_side: usize) -> (f64, f64, usize) {
-    let scene = &b.scene;
-    let vis = Visibility::new(scene);
-    let direct = Direct::new(scene, &vis, 64);
-    let floor = (0..scene.polygons.len())
-        .filter(|&i| scene.polygons[i].frame.n.y > 0.99)
-        .max_by(|&i, &j| scene.polygons[i].area.total_cmp(&scene.polygons[j].area))
-        .unwrap();
-    let poly = &scene.polygons[floor];
-    let mi = b.meshes.iter().position(|m| m.polygon == floor).unwrap();
-    let loc = Locator::new(&b.meshes[mi], &b.solution.irradiance[mi]);
-    let mut errors = Vec::new();
-    let mut peak: f64 = 0.0;
-    for t in &poly.triangles_plane {
-        for i in 0..points_per_side {
-            for j in 0..points_per_side - i {
-                let (u, v) = (
-                    (i as f64 + 1.0 / 3.0) / points_per_side as f64,
-                    (j as f64 + 1.0 / 3.0) / points_per_side as f64,
-                );
-                let q: DVec2 = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
-                let p = poly.frame.world_from_plane(q);
-                let exact = direct
-                    .irradiance(&SurfacePoint::new(p, poly.frame.n, floor, &vis))
-                    .x;
-                let unoccluded: f64 = direct
-                    .emitters
-                    .iter()
-                    .map(|e| PI * e.radiance.x * e.form_factor(p, poly.frame.n))
-                    .sum();
-                peak = peak.max(exact);
-                if exact < 0.995 * unoccluded {
-                    errors.push((loc.value(q).x - exact).abs());
-                }
-            }
-        }
-    }
-    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len().max(1) as f64).sqrt();
-    let max = errors.iter().copied().fold(0.0, f64::max);
-    (rms / peak, max / peak, errors.len())
+    let e = penumbra::compare::shadow_error(b, points_per_side).expect("a floor");
+    (e.rms, e.max, e.points)
 }
 
 fn compare(name: &str, bytes: &[u8], budget: usize) -> (f64, f64) {
