@@ -145,35 +145,15 @@ pub fn triangulate_with(
             .exclude_outer_faces(segments.is_empty());
         cdt.refine(params);
     }
-    let mut mesh = ReceiverMesh {
-        polygon: id,
-        ..Default::default()
-    };
-    let mut remap = vec![u32::MAX; cdt.num_vertices()];
-    let mut constraint_edges = Vec::new();
-    for face in cdt.inner_faces() {
-        let pos = face.positions().map(|p| DVec2::new(p.x, p.y));
-        let centroid = (pos[0] + pos[1] + pos[2]) / 3.0;
-        if !polygon.contains(centroid) {
-            continue;
-        }
-        let ids = face.vertices().map(|v| {
-            let i = v.fix().index();
-            if remap[i] == u32::MAX {
-                remap[i] = mesh.vertices.len() as u32;
-                mesh.vertices
-                    .push(DVec2::new(v.position().x, v.position().y));
-            }
-            remap[i]
-        });
-        for e in face.adjacent_edges() {
-            if e.is_constraint_edge() {
-                let [a, b] = e.vertices().map(|v| remap[v.fix().index()]);
-                constraint_edges.push((a.min(b), a.max(b)));
-            }
-        }
-        mesh.triangles.push(ids);
-    }
+    let (mut mesh, remap) = inside_faces(id, polygon, &cdt);
+    let mut constraint_edges: Vec<(u32, u32)> = cdt
+        .undirected_edges()
+        .filter(|e| e.is_constraint_edge())
+        .filter_map(|e| {
+            let [a, b] = e.vertices().map(|v| remap[v.fix().index()]);
+            (a != u32::MAX && b != u32::MAX).then_some((a.min(b), a.max(b)))
+        })
+        .collect();
     // Follow each segment's arrangement edge along the final constraint edges (refinement may
     // have split it) to tag them with the segment's kind and event.
     constraint_edges.sort_unstable();
@@ -523,6 +503,16 @@ pub fn triangulate_points(id: usize, polygon: &Polygon, points: &[DVec2]) -> Rec
     for p in points {
         let _ = cdt.insert(Point2::new(p.x, p.y));
     }
+    inside_faces(id, polygon, &cdt).0
+}
+
+/// The faces of `cdt` inside the polygon (centroid test against its own triangles, nonzero
+/// area) as a mesh, and the map from spade vertex index to mesh vertex (`u32::MAX`: unused).
+fn inside_faces(
+    id: usize,
+    polygon: &Polygon,
+    cdt: &ConstrainedDelaunayTriangulation<Point2<f64>>,
+) -> (ReceiverMesh, Vec<u32>) {
     let mut mesh = ReceiverMesh {
         polygon: id,
         ..Default::default()
@@ -546,7 +536,7 @@ pub fn triangulate_points(id: usize, polygon: &Polygon, points: &[DVec2]) -> Rec
         });
         mesh.triangles.push(ids);
     }
-    mesh
+    (mesh, remap)
 }
 
 /// The a-posteriori adaptive mesher, the classic alternative to discontinuity meshing (e.g.

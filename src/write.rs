@@ -166,12 +166,12 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                 "application/octet-stream"
             };
             let view = push_view(&mut root, &mut bin, &data, None, None);
-            let img = root["images"][i]
-                .as_object_mut()
-                .expect("image is an object");
-            img.remove("uri");
-            img.insert("bufferView".into(), json!(view));
-            img.insert("mimeType".into(), json!(mime));
+            // `uri` was read from this image, so it is an object.
+            if let Some(img) = root["images"][i].as_object_mut() {
+                img.remove("uri");
+                img.insert("bufferView".into(), json!(view));
+                img.insert("mimeType".into(), json!(mime));
+            }
         }
     }
 
