@@ -1445,6 +1445,52 @@ pub fn instanced() -> Vec<u8> {
     b.to_glb()
 }
 
+/// An `n` × `n` grid of boxes on a floor under one square area light: the scene that scales,
+/// for stability tests and benchmarks (not written to `fixtures/`).
+///
+/// * `floor`: [-h, h]² at y = 0 facing up, `h = 0.1 n + 0.5` m, reflectance 0.5 grey.
+/// * `light`: [-0.5, 0.5]² at y = 2 facing down, emitting 5 W/(m² sr) white, reflectance 0.
+/// * `boxes`: one mesh of `n²` closed cuboids 0.1 m wide and 0.2 m tall, at a pitch of 0.2 m
+///   (the box at grid cell `(i, j)` spans x from `0.2 (i - n/2)`, z from `0.2 (j - n/2)`),
+///   12 triangles each, no vertex normals, reflectance 0.5 grey. Their tops are coplanar and
+///   their edges aligned, so discontinuity lines cross and overlap along whole rows, and each
+///   box's bottom face lies on the floor (a contact outline).
+///
+/// `12 n² + 4` triangles in all.
+pub fn box_grid(n: usize) -> Vec<u8> {
+    let mut g = GlbBuilder::new();
+    let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
+    let half = 0.1 * n as f64 + 0.5;
+    g.add_mesh_node(
+        "floor",
+        &horizontal_rect([-half, half], [-half, half], 0.0, true),
+        grey,
+    );
+    let light = g.add_material(Material::diffuse("light", [0.0; 3]).emitting([5.0; 3]));
+    g.add_mesh_node(
+        "light",
+        &horizontal_rect([-0.5, 0.5], [-0.5, 0.5], 2.0, false),
+        light,
+    );
+    let mut boxes = TriangleMesh {
+        positions: vec![],
+        normals: None,
+        texcoords: None,
+        indices: vec![],
+    };
+    for i in 0..n {
+        for j in 0..n {
+            let x = (i as f64 - n as f64 / 2.0) * 0.2;
+            let z = (j as f64 - n as f64 / 2.0) * 0.2;
+            let mut c = cuboid([x, 0.0, z], [x + 0.1, 0.2, z + 0.1]);
+            c.normals = None;
+            boxes.append(&c);
+        }
+    }
+    g.add_mesh_node("boxes", &boxes, grey);
+    g.to_glb()
+}
+
 /// Every generated scene as `(file stem, glb bytes)`, in a fixed order; `make_fixtures` writes
 /// each to `fixtures/<stem>.glb`.
 pub fn all() -> Vec<(&'static str, Vec<u8>)> {

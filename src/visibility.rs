@@ -4,10 +4,16 @@
 //! Triangles are stored in f32 relative to the scene's centre, so precision does not depend on
 //! where the scene sits. The binary BVH2 is used rather than obvhs's 8-wide CWBVH, which misses
 //! hits very close to the ray origin (see DESIGN). Offsets scale with the scene's extent.
+//!
+//! For benchmarks only, [`record_rays`] makes every ray query remember the ray as the BVH sees
+//! it, so that a bake's rays can be replayed against other traversal loops
+//! ([`take_recorded_rays`]); it is off unless switched on, and never changes an answer.
 
 use crate::scene::Scene;
-use glam::{DVec3, Vec3A};
+use glam::{DVec3, Vec3, Vec3A};
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::Bvh2, ray::Ray, ray::RayHit, triangle::Triangle};
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// A BVH over the scene's triangles.
 pub struct Visibility {
@@ -90,6 +96,12 @@ impl Visibility {
         self.eps
     }
 
+    /// The point that BVH coordinates are relative to (the centre of the scene's bounding
+    /// box): a [`RecordedRay`]'s origin is `p_world - center`, in f32.
+    pub fn center(&self) -> DVec3 {
+        self.center
+    }
+
     fn ray(&self, origin: DVec3, dir: DVec3, tmin: f64, tmax: f64) -> Ray {
         Ray::new(
             Vec3A::from((origin - self.center).as_vec3()),
@@ -107,10 +119,13 @@ impl Visibility {
         let ray = self.ray(origin, dir, self.eps, tmax);
         let mut hit = RayHit::none();
         let tris = &self.tris;
-        if self
+        let found = self
             .bvh
-            .ray_traverse(ray, &mut hit, |r, id| tris[id].intersect(r))
-        {
+            .ray_traverse(ray, &mut hit, |r, id| tris[id].intersect(r));
+        if RECORDING.load(Ordering::Relaxed) {
+            record(&ray, Query::FirstHit, [u32::MAX; 2], found);
+        }
+        if found {
             Some(Hit {
                 t: hit.t as f64,
                 triangle: self.ids[hit.primitive_id as usize],
@@ -135,30 +150,48 @@ impl Visibility {
         if len <= 2.0 * self.eps {
             return false;
         }
-        self.blocked(a, d / len, len - self.eps, skip)
+        self.blocked(a, d / len, len - self.eps, skip, Query::Segment)
     }
 
     /// True when nothing blocks the ray from `a` in unit direction `dir` (to infinity);
     /// triangles of polygon `skip` never block (see [`Visibility::occluded_skipping`]).
     pub fn unoccluded_towards(&self, a: DVec3, dir: DVec3, skip: usize) -> bool {
-        !self.blocked(a, dir, f64::from(f32::MAX), [skip, usize::MAX])
+        !self.blocked(
+            a,
+            dir,
+            f64::from(f32::MAX),
+            [skip, usize::MAX],
+            Query::Towards,
+        )
     }
 
     /// Any hit along `origin + t dir` for `t` in `(epsilon, tmax)`, skipping two polygons.
-    fn blocked(&self, origin: DVec3, dir: DVec3, tmax: f64, skip: [usize; 2]) -> bool {
+    /// `query`: which public query asks (for the benchmark recorder).
+    fn blocked(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        tmax: f64,
+        skip: [usize; 2],
+        query: Query,
+    ) -> bool {
         if self.tris.is_empty() {
             return false;
         }
         let ray = self.ray(origin, dir, self.eps, tmax);
         let skip = skip.map(|s| s as u32);
         let (tris, polys) = (&self.tris, &self.polygons);
-        !self.bvh.ray_traverse_miss(ray, |r, id| {
+        let blocked = !self.bvh.ray_traverse_miss(ray, |r, id| {
             if polys[id] == skip[0] || polys[id] == skip[1] {
                 f32::INFINITY
             } else {
                 tris[id].intersect(r)
             }
-        })
+        });
+        if RECORDING.load(Ordering::Relaxed) {
+            record(&ray, query, skip, blocked);
+        }
+        blocked
     }
 
     /// Appends to `out` the scene triangles whose bounding boxes overlap the box `[min, max]`
@@ -166,6 +199,9 @@ impl Visibility {
     /// duplicates. Conservative: every triangle that meets the box is listed, and some that do
     /// not.
     pub fn triangles_overlapping(&self, min: DVec3, max: DVec3, out: &mut Vec<usize>) {
+        if RECORDING.load(Ordering::Relaxed) {
+            COUNTS[Query::Box as usize].fetch_add(1, Ordering::Relaxed);
+        }
         if !self.tris.is_empty() {
             let pad = DVec3::splat(self.eps);
             let query = Aabb::new(
@@ -222,6 +258,173 @@ impl Visibility {
         }
         best
     }
+}
+
+// The ray recorder (benchmarks only).
+
+/// Which [`Visibility`] query cast a ray.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Query {
+    /// [`Visibility::first_hit`]: closest hit (`Bvh2::ray_traverse`).
+    FirstHit,
+    /// [`Visibility::occluded`] and [`Visibility::occluded_skipping`]: any hit on a segment
+    /// (`Bvh2::ray_traverse_miss`).
+    Segment,
+    /// [`Visibility::unoccluded_towards`]: any hit on a ray to infinity
+    /// (`Bvh2::ray_traverse_miss` with `tmax = f32::MAX`).
+    Towards,
+    /// [`Visibility::triangles_overlapping`]: a box query, counted but not recorded.
+    Box,
+}
+
+impl Query {
+    /// Every query kind, in the order of [`RayCounts::by_query`].
+    pub const ALL: [Query; 4] = [Query::FirstHit, Query::Segment, Query::Towards, Query::Box];
+
+    /// True for the closest-hit query; the others stop at any hit.
+    pub fn closest_hit(self) -> bool {
+        self == Query::FirstHit
+    }
+}
+
+/// One ray query as the BVH saw it: in f32, relative to [`Visibility::center`], direction of
+/// unit length, hits counted for `t` in `(tmin, tmax)`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecordedRay {
+    pub origin: Vec3,
+    pub dir: Vec3,
+    pub tmin: f32,
+    pub tmax: f32,
+    /// Polygons whose triangles never block (`u32::MAX`: none). Always none for
+    /// [`Query::FirstHit`].
+    pub skip: [u32; 2],
+    pub query: Query,
+    /// The answer the query gave: a hit (closest-hit) or blocked (any-hit).
+    pub hit: bool,
+}
+
+/// Rays cast per query kind since recording was switched on (every ray, including those past
+/// the recorder's cap).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RayCounts {
+    /// Indexed like [`Query::ALL`].
+    pub by_query: [u64; 4],
+}
+
+impl RayCounts {
+    /// Rays of every kind (box queries left out).
+    pub fn rays(&self) -> u64 {
+        self.by_query[..3].iter().sum()
+    }
+
+    /// The rays of one kind.
+    pub fn of(&self, q: Query) -> u64 {
+        self.by_query[q as usize]
+    }
+
+    /// Counts since `earlier`.
+    pub fn since(&self, earlier: &RayCounts) -> RayCounts {
+        RayCounts {
+            by_query: std::array::from_fn(|i| self.by_query[i] - earlier.by_query[i]),
+        }
+    }
+}
+
+/// Checked by every query: is the recorder on?
+static RECORDING: AtomicBool = AtomicBool::new(false);
+static COUNTS: [AtomicU64; 4] = [const { AtomicU64::new(0) }; 4];
+static RECORDER: Mutex<Recorder> = Mutex::new(Recorder {
+    rays: Vec::new(),
+    cap: 0,
+    stride: 1,
+    seen: 0,
+});
+
+/// The recorded sample: every `stride`-th ray, in arrival order.
+struct Recorder {
+    rays: Vec<RecordedRay>,
+    cap: usize,
+    stride: u64,
+    seen: u64,
+}
+
+impl Recorder {
+    fn new(cap: usize) -> Recorder {
+        Recorder {
+            rays: Vec::with_capacity(cap.min(1 << 24)),
+            cap: cap.max(2),
+            stride: 1,
+            seen: 0,
+        }
+    }
+
+    /// Keeps `ray` if it falls on the stride; when full, drops every other kept ray and
+    /// doubles the stride.
+    fn offer(&mut self, ray: RecordedRay) {
+        self.seen += 1;
+        if !self.seen.is_multiple_of(self.stride) {
+            return;
+        }
+        self.rays.push(ray);
+        if self.rays.len() >= self.cap {
+            let mut k = 0u64;
+            self.rays.retain(|_| {
+                k += 1;
+                k.is_multiple_of(2)
+            });
+            self.stride *= 2;
+        }
+    }
+}
+
+/// **Benchmarks only.** Switches the ray recorder on, process-wide, and clears it: from now on
+/// every ray query of every [`Visibility`] is counted by kind ([`recorded_counts`]) and kept
+/// as a [`RecordedRay`], up to `cap` of them. When the buffer fills, every other kept ray is
+/// dropped and from then on only every second (fourth, ...) ray is kept, so the sample stays
+/// spread evenly over the whole run, in order. Answers never change; queries slow down (one
+/// lock per ray) while it is on. With several threads the order of the rays, and so the
+/// sample, is not deterministic.
+pub fn record_rays(cap: usize) {
+    *RECORDER.lock().unwrap_or_else(|e| e.into_inner()) = Recorder::new(cap);
+    for c in &COUNTS {
+        c.store(0, Ordering::Relaxed);
+    }
+    RECORDING.store(true, Ordering::SeqCst);
+}
+
+/// **Benchmarks only.** The rays cast per query kind since [`record_rays`], while recording is
+/// on or after [`take_recorded_rays`].
+pub fn recorded_counts() -> RayCounts {
+    RayCounts {
+        by_query: std::array::from_fn(|i| COUNTS[i].load(Ordering::Relaxed)),
+    }
+}
+
+/// **Benchmarks only.** Switches the recorder off and returns the recorded rays with the
+/// counts of every ray cast since [`record_rays`].
+pub fn take_recorded_rays() -> (Vec<RecordedRay>, RayCounts) {
+    RECORDING.store(false, Ordering::SeqCst);
+    let mut r = RECORDER.lock().unwrap_or_else(|e| e.into_inner());
+    (std::mem::take(&mut r.rays), recorded_counts())
+}
+
+/// Counts one ray and keeps it if it falls on the sample's stride.
+#[cold]
+#[inline(never)]
+fn record(ray: &Ray, query: Query, skip: [u32; 2], hit: bool) {
+    COUNTS[query as usize].fetch_add(1, Ordering::Relaxed);
+    RECORDER
+        .lock()
+        .unwrap_or_else(|e| e.into_inner())
+        .offer(RecordedRay {
+            origin: ray.origin.into(),
+            dir: ray.direction.into(),
+            tmin: ray.tmin,
+            tmax: ray.tmax,
+            skip,
+            query,
+            hit,
+        });
 }
 
 #[cfg(test)]
@@ -321,6 +524,75 @@ mod tests {
             total += got.len();
         }
         assert!(total > 200, "too few hits to be a test: {total}");
+    }
+
+    #[test]
+    fn recording_keeps_answers_and_the_rays_as_cast() {
+        let mut rng = SplitMix(11);
+        let offset = DVec3::new(300.0, 20.0, -40.0);
+        let scene = random_scene(&mut rng, 200, offset);
+        let vis = Visibility::new(&scene);
+        let queries: Vec<(DVec3, DVec3)> = (0..500)
+            .map(|_| (rng.vec(-7.0, 7.0) + offset, rng.vec(-7.0, 7.0) + offset))
+            .collect();
+        // Polygons that do not exist tag this test's segment rays: the recorder is
+        // process-wide and other tests may cast rays meanwhile.
+        const TAG: [usize; 2] = [123_456_789, 987_654_321];
+        let answer = |(a, b): &(DVec3, DVec3)| {
+            let d = (*b - *a).normalize();
+            let blocked = vis.occluded_skipping(*a, *b, TAG);
+            (blocked, vis.first_hit(*a, d, 5.0).is_some())
+        };
+        let off: Vec<_> = queries.iter().map(answer).collect();
+        let cap = 1 << 20;
+        record_rays(cap);
+        let on: Vec<_> = queries.iter().map(answer).collect();
+        let (rays, counts) = take_recorded_rays();
+        assert_eq!(on, off, "recording changed an answer");
+        assert!(counts.of(Query::Segment) >= 500 && counts.of(Query::FirstHit) >= 500);
+        let mine: Vec<&RecordedRay> = rays
+            .iter()
+            .filter(|r| r.skip == TAG.map(|t| t as u32))
+            .collect();
+        if (counts.rays() as usize) < cap {
+            assert_eq!(mine.len(), 500);
+        }
+        assert!(!mine.is_empty());
+        for r in mine {
+            assert_eq!(r.query, Query::Segment);
+            assert!((r.dir.length() - 1.0).abs() < 1e-6 && r.tmin == vis.epsilon() as f32);
+            // The same ray through the API, from world coordinates, gives the same answer.
+            let o = vis.center() + r.origin.as_dvec3();
+            let b = o + r.dir.as_dvec3() * (r.tmax as f64 + vis.epsilon());
+            assert_eq!(vis.occluded_skipping(o, b, TAG), r.hit, "{r:?}");
+        }
+        // Off again: nothing more is counted.
+        queries.iter().for_each(|q| {
+            answer(q);
+        });
+        assert_eq!(recorded_counts(), counts);
+    }
+
+    #[test]
+    fn a_full_recorder_keeps_an_even_sample() {
+        let ray = |i: usize| RecordedRay {
+            origin: Vec3::splat(i as f32),
+            dir: Vec3::X,
+            tmin: 0.0,
+            tmax: 1.0,
+            skip: [u32::MAX; 2],
+            query: Query::Segment,
+            hit: false,
+        };
+        let mut r = Recorder::new(8);
+        for i in 1..=100 {
+            r.offer(ray(i));
+        }
+        // Full at 8 (keeps 2, 4, 6, 8; stride 2), at 16 (4, 8, 12, 16; stride 4), at 32, at
+        // 64 (16, 32, 48, 64; stride 16), then 80 and 96.
+        let kept: Vec<f32> = r.rays.iter().map(|r| r.origin.x).collect();
+        assert_eq!(kept, [16.0, 32.0, 48.0, 64.0, 80.0, 96.0]);
+        assert_eq!(r.stride, 16);
     }
 
     #[test]

@@ -184,40 +184,9 @@ fn nearly_coincident_occluders() {
     agrees_with_fine_uniform("coincident occluders", &g.to_glb(), 0.02);
 }
 
-/// An n x n grid of boxes (0.1 wide at a pitch of 0.2) with coplanar tops and aligned edges.
-pub fn box_grid(n: usize) -> Vec<u8> {
-    let mut g = GlbBuilder::new();
-    let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
-    let half = 0.1 * n as f64 + 0.5;
-    g.add_mesh_node(
-        "floor",
-        &fixtures::horizontal_rect([-half, half], [-half, half], 0.0, true),
-        grey,
-    );
-    let light = g.add_material(Material::diffuse("light", [0.0; 3]).emitting([5.0; 3]));
-    g.add_mesh_node(
-        "light",
-        &fixtures::horizontal_rect([-0.5, 0.5], [-0.5, 0.5], 2.0, false),
-        light,
-    );
-    let mut boxes = TriangleMesh {
-        positions: vec![],
-        normals: None,
-        texcoords: None,
-        indices: vec![],
-    };
-    for i in 0..n {
-        for j in 0..n {
-            let x = (i as f64 - n as f64 / 2.0) * 0.2;
-            let z = (j as f64 - n as f64 / 2.0) * 0.2;
-            let mut c = fixtures::cuboid([x, 0.0, z], [x + 0.1, 0.2, z + 0.1]);
-            c.normals = None;
-            boxes.append(&c);
-        }
-    }
-    g.add_mesh_node("boxes", &boxes, grey);
-    g.to_glb()
-}
+/// The generator lives in the library (benchmarks use it too); `crate::stability::box_grid`
+/// stays for the other test modules.
+pub use penumbra::fixtures::box_grid;
 
 #[test]
 fn box_grid_with_coplanar_tops_and_aligned_edges() {
