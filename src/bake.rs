@@ -291,11 +291,7 @@ pub fn bake_file(
     result.stats.timings_s.load += read_time;
     let mut write_time = 0.0;
     stage(&mut write_time, "write", progress, || -> Result<()> {
-        let (rgb, intensity) = result.lightmap.to_rgb8();
-        let png = encode_png(&rgb, result.lightmap.width, result.lightmap.height)?;
-        result.stats.lightmap_intensity = intensity;
-        let image = LightmapImage { png, intensity };
-        write::glb(&gltf, &result.scene, &result.atlas, &image, output)?;
+        write_glb(&gltf, &mut result, output)?;
         if let Some(exr) = exr {
             write_exr(&result.lightmap, exr)?;
         }
@@ -304,6 +300,16 @@ pub fn bake_file(
     result.stats.timings_s.write = write_time;
     result.stats.timings_s.total = start.elapsed().as_secs_f64();
     Ok(result)
+}
+
+/// Writes a bake's result as a lightmapped glb (8-bit lightmap, its scale in
+/// `stats.lightmap_intensity`) to `output`, atomically.
+pub fn write_glb(gltf: &Gltf, bake: &mut Bake, output: &Path) -> Result<()> {
+    let (rgb, intensity) = bake.lightmap.to_rgb8();
+    let png = encode_png(&rgb, bake.lightmap.width, bake.lightmap.height)?;
+    bake.stats.lightmap_intensity = intensity;
+    let image = LightmapImage { png, intensity };
+    write::glb(gltf, &bake.scene, &bake.atlas, &image, output)
 }
 
 /// Encodes 8-bit RGB as PNG.

@@ -39,4 +39,6 @@ pub enum Error {
     },
     #[error("{0}")]
     Image(String),
+    #[error("compare: {0}")]
+    Compare(String),
 }

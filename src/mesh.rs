@@ -196,10 +196,21 @@ pub fn triangulate_with(
             cur = next;
         }
     }
+    // Cut along the lines where the light jumps (D0 contacts, punctual lights' hard shadows),
+    // and at their vertices also along every other discontinuity line that leaves them: where
+    // an occluder's edge touches the receiver (a box corner on the floor) the umbra and
+    // penumbra lines start at the contact, the penumbra there is zero wide, and one vertex
+    // value cannot be both the lit and the shadowed limit.
+    let jumps = |k: Kind| matches!(k, Kind::D0 | Kind::Punctual);
+    let mut on_jump = vec![false; mesh.vertices.len()];
+    for c in mesh.constraints.iter().filter(|c| jumps(c.kind)) {
+        on_jump[c.a as usize] = true;
+        on_jump[c.b as usize] = true;
+    }
     let mut cuts: Vec<(u32, u32)> = mesh
         .constraints
         .iter()
-        .filter(|c| c.kind == Kind::D0)
+        .filter(|c| jumps(c.kind) || on_jump[c.a as usize] || on_jump[c.b as usize])
         .map(|c| (c.a.min(c.b), c.a.max(c.b)))
         .collect();
     if !cuts.is_empty() {

@@ -87,6 +87,17 @@ pub struct ReferenceMap {
     pub std_error: Vec<DVec3>,
     /// Fraction of each texel's sub-samples covered by a lightmapped triangle.
     pub coverage: Vec<f32>,
+    /// Per texel, the fraction of its direct light (area emitters and punctual lights, by
+    /// luminance) that is not blocked: 1 fully lit, 0 in umbra. `None` where no emitter would
+    /// light the texel even unblocked (it faces away from all of them), or it is uncovered.
+    /// Estimated from the same next-event samples as `mean` (ratio of the unweighted estimates
+    /// `L cos cos / r² · A` with and without their shadow rays), so exact 1 and 0 mean no sample
+    /// was blocked / none was free.
+    pub visibility: Vec<Option<f32>>,
+    /// Per texel, the shortest distance to another surface along its first-bounce hemisphere
+    /// rays (scene units; infinite when no ray hit, or no hemisphere rays were traced because
+    /// `bounces_max` is `Some(0)`). Small values mark contact regions.
+    pub nearest_surface: Vec<f32>,
 }
 
 /// A summary of a [`ReferenceMap`] (the `--stats` JSON of `penumbra reference`).
@@ -450,8 +461,16 @@ impl<'a> Tracer<'a> {
 
     /// One next-event estimate of the irradiance from the area emitters at `at`, W/m²: one
     /// point per emitter, `L_e cos(theta_x) / (p_l + p_b)` when visible (`mis`: a hemisphere
-    /// ray from `at` will also look for the emitters), else `L_e cos cos / r² · A`.
-    fn area_direct(&self, at: &SurfacePoint, mis: bool, rng: &mut SplitMix64) -> DVec3 {
+    /// ray from `at` will also look for the emitters), else `L_e cos cos / r² · A`. `probe`
+    /// (first path vertex only) adds the luminance of `L_e cos cos / r² · A` to its unoccluded
+    /// sum, and to its visible sum when the shadow ray is free.
+    fn area_direct(
+        &self,
+        at: &SurfacePoint,
+        mis: bool,
+        rng: &mut SplitMix64,
+        mut probe: Option<&mut Probe>,
+    ) -> DVec3 {
         let mut h = DVec3::ZERO;
         for e in &self.emitters {
             if e.polygon == at.polygon {
@@ -469,11 +488,18 @@ impl<'a> Tracer<'a> {
             if cos_x <= 0.0 || cos_y <= 0.0 {
                 continue;
             }
+            let plain = luminance(e.radiance) * cos_x * cos_y / r2 * e.area();
+            if let Some(probe) = probe.as_deref_mut() {
+                probe.unoccluded += plain;
+            }
             if self
                 .vis
                 .occluded_skipping(at.ray_origin, y, [at.polygon, e.polygon])
             {
                 continue;
+            }
+            if let Some(probe) = probe.as_deref_mut() {
+                probe.visible += plain;
             }
             let p_l = r2 / (e.area() * cos_y);
             let p_b = if mis { cos_x / PI } else { 0.0 };
@@ -483,11 +509,11 @@ impl<'a> Tracer<'a> {
     }
 
     /// One sample of the irradiance at `at`, without its punctual direct part (the caller adds
-    /// that once: it is exact). W/m².
-    fn sample(&self, at: &SurfacePoint, rng: &mut SplitMix64) -> DVec3 {
+    /// that once: it is exact). W/m². `probe` gathers what the first vertex saw.
+    fn sample(&self, at: &SurfacePoint, rng: &mut SplitMix64, probe: &mut Probe) -> DVec3 {
         // Whether a hemisphere ray leaves the vertex at this depth.
         let traces = |depth: u32| self.bounces_max.is_none_or(|b| depth < b);
-        let mut total = self.area_direct(at, traces(0), rng);
+        let mut total = self.area_direct(at, traces(0), rng, Some(&mut *probe));
         let mut throughput = DVec3::ONE;
         let mut at = *at;
         let mut depth = 0u32;
@@ -496,6 +522,9 @@ impl<'a> Tracer<'a> {
             let Some(hit) = self.vis.first_hit(at.ray_origin, dir, f64::MAX) else {
                 break;
             };
+            if depth == 0 {
+                probe.nearest = probe.nearest.min(hit.t);
+            }
             let tri = &self.scene.triangles[hit.triangle];
             let cos_y = -tri.normal.dot(dir);
             if cos_y <= 0.0 {
@@ -519,8 +548,8 @@ impl<'a> Tracer<'a> {
             let p = at.ray_origin + dir * hit.t;
             let p = p - frame.n * frame.n.dot(p - frame.origin);
             let next = SurfacePoint::new(p, frame.n, poly, self.vis);
-            total +=
-                throughput * (self.area_direct(&next, traces(depth), rng) + self.punctual(&next));
+            total += throughput
+                * (self.area_direct(&next, traces(depth), rng, None) + self.punctual(&next));
             if depth >= 2 {
                 let q = rho.max_element().min(0.95);
                 if rng.next_f64() >= q {
@@ -532,6 +561,29 @@ impl<'a> Tracer<'a> {
         }
         total
     }
+}
+
+/// What the first vertex of a texel's paths saw: luminance sums of the plain next-event
+/// estimates with and without their shadow rays, and the nearest first-bounce hit.
+struct Probe {
+    unoccluded: f64,
+    visible: f64,
+    nearest: f64,
+}
+
+impl Default for Probe {
+    fn default() -> Self {
+        Probe {
+            unoccluded: 0.0,
+            visible: 0.0,
+            nearest: f64::INFINITY,
+        }
+    }
+}
+
+/// Rec. 709 luminance of linear RGB.
+fn luminance(c: DVec3) -> f64 {
+    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
 /// A cosine-weighted direction about the unit normal `n` (pdf `cos(theta) / pi`).
@@ -568,7 +620,7 @@ pub fn reference_with(
 ) -> ReferenceMap {
     let tracer = Tracer::new(scene, vis, options.bounces_max);
     let w = layout.width as usize;
-    let rows: Vec<Vec<(DVec3, DVec3)>> = (0..layout.height as usize)
+    let rows: Vec<Vec<Texel>> = (0..layout.height as usize)
         .into_par_iter()
         .map(|y| {
             (0..w)
@@ -582,49 +634,78 @@ pub fn reference_with(
                 .collect()
         })
         .collect();
-    let (mean, std_error) = rows.into_iter().flatten().unzip();
+    let texels: Vec<Texel> = rows.into_iter().flatten().collect();
     ReferenceMap {
         width: layout.width,
         height: layout.height,
-        mean,
-        std_error,
+        mean: texels.iter().map(|t| t.mean).collect(),
+        std_error: texels.iter().map(|t| t.std_error).collect(),
         coverage: (0..layout.samples.len())
             .map(|i| layout.coverage(i))
             .collect(),
+        visibility: texels.iter().map(|t| t.visibility).collect(),
+        nearest_surface: texels.iter().map(|t| t.nearest_surface).collect(),
     }
+}
+
+/// One texel's estimate (see [`ReferenceMap`] for the fields).
+struct Texel {
+    mean: DVec3,
+    std_error: DVec3,
+    visibility: Option<f32>,
+    nearest_surface: f32,
 }
 
 /// Mean and standard error of one texel: `spp` paths split evenly over the sub-samples (at least
 /// 2 each); stratified mean `(1/m) sum_s mean_s`, variance `(1/m²) sum_s var_s / n`.
-fn texel(
-    tracer: &Tracer,
-    points: &[SurfacePoint],
-    spp: u32,
-    rng: &mut SplitMix64,
-) -> (DVec3, DVec3) {
+fn texel(tracer: &Tracer, points: &[SurfacePoint], spp: u32, rng: &mut SplitMix64) -> Texel {
     let m = points.len();
     if m == 0 {
-        return (DVec3::ZERO, DVec3::ZERO);
+        return Texel {
+            mean: DVec3::ZERO,
+            std_error: DVec3::ZERO,
+            visibility: None,
+            nearest_surface: f32::INFINITY,
+        };
     }
     let per = (spp as usize).div_ceil(m).max(2);
     let mut mean = DVec3::ZERO;
     let mut var = DVec3::ZERO;
+    // Direct light with and without shadows, per sub-sample means, for the visibility.
+    let (mut unoccluded, mut visible) = (0.0, 0.0);
+    let mut nearest = f64::INFINITY;
     for at in points {
         let exact = tracer.punctual(at);
         // Welford's running mean and sum of squared deviations.
         let mut mu = DVec3::ZERO;
         let mut m2 = DVec3::ZERO;
+        let mut probe = Probe::default();
         for k in 0..per {
-            let v = tracer.sample(at, rng);
+            let v = tracer.sample(at, rng, &mut probe);
             let d = v - mu;
             mu += d / (k + 1) as f64;
             m2 += d * (v - mu);
         }
         mean += mu + exact;
         var += m2 / ((per - 1) * per) as f64;
+        let punctual_unoccluded: f64 = tracer
+            .scene
+            .lights
+            .iter()
+            .filter_map(|l| solve::punctual_unoccluded(l, at))
+            .map(luminance)
+            .sum();
+        unoccluded += probe.unoccluded / per as f64 + punctual_unoccluded;
+        visible += probe.visible / per as f64 + luminance(exact);
+        nearest = nearest.min(probe.nearest);
     }
     let mf = m as f64;
-    (mean / mf, (var / (mf * mf)).max(DVec3::ZERO).map(f64::sqrt))
+    Texel {
+        mean: mean / mf,
+        std_error: (var / (mf * mf)).max(DVec3::ZERO).map(f64::sqrt),
+        visibility: (unoccluded > 0.0).then(|| (visible / unoccluded).clamp(0.0, 1.0) as f32),
+        nearest_surface: nearest as f32,
+    }
 }
 
 #[cfg(test)]

@@ -6,6 +6,7 @@
 //! what a client would see, not the baker's internal state.
 
 use crate::error::{Error, Result};
+use crate::lightmap::Lightmap;
 use crate::load::{self, Gltf};
 use crate::scene::Scene;
 use crate::visibility::Visibility;
@@ -86,28 +87,21 @@ struct LightmapBinding {
     intensity: f64,
 }
 
-/// A decoded lightmap texture (linear values 0..1).
-struct Texture {
-    w: usize,
-    h: usize,
-    rgb: Vec<[f32; 3]>,
+/// What a lightmapped surface shows.
+#[derive(Clone, Copy, Debug)]
+pub enum Shading<'a> {
+    /// `albedo/pi x H` with H from the file's own lightmap texture (as a client shows it).
+    Lightmap,
+    /// `albedo/pi x H` with H from this float map over the same texel grid (e.g. a reference
+    /// or another bake of the same layout), sampled bilinearly like the texture.
+    Irradiance(&'a Lightmap),
+    /// This map's value as the displayed colour itself (false colour), no albedo or emission;
+    /// surfaces without a lightmap show dark grey.
+    Colour(&'a Lightmap),
 }
 
-impl Texture {
-    /// Bilinear sample at normalized UV with clamp-to-edge, as the output's sampler says.
-    fn sample(&self, uv: DVec2) -> DVec3 {
-        let x = (uv.x * self.w as f64 - 0.5).clamp(0.0, self.w as f64 - 1.0);
-        let y = (uv.y * self.h as f64 - 0.5).clamp(0.0, self.h as f64 - 1.0);
-        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-        let (x1, y1) = ((x0 + 1).min(self.w - 1), (y0 + 1).min(self.h - 1));
-        let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-        let t = |x: usize, y: usize| DVec3::from(self.rgb[y * self.w + x].map(f64::from));
-        (t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx) * (1.0 - fy)
-            + (t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx) * fy
-    }
-}
-
-/// Renders a baked glb. `exposure`: radiance that maps to white; `None`: automatic.
+/// Renders a baked glb as a client shows it. `exposure`: radiance that maps to white;
+/// `None`: automatic.
 pub fn render(
     gltf: &Gltf,
     camera: Option<Camera>,
@@ -115,6 +109,20 @@ pub fn render(
     height: u32,
     exposure: Option<f64>,
 ) -> Result<image::RgbImage> {
+    let radiance = render_radiance(gltf, camera, width, height, Shading::Lightmap)?;
+    let scale = exposure.unwrap_or_else(|| auto_exposure(&radiance));
+    Ok(tone_map(&radiance, width, height, scale))
+}
+
+/// Per pixel (row-major, top row first) the radiance the camera sees (or the false colour,
+/// for [`Shading::Colour`]), linear RGB.
+pub fn render_radiance(
+    gltf: &Gltf,
+    camera: Option<Camera>,
+    width: u32,
+    height: u32,
+    shading: Shading<'_>,
+) -> Result<Vec<DVec3>> {
     let scene = load::scene(gltf)?;
     let vis = Visibility::new(&scene);
     let camera = camera.unwrap_or_else(|| Camera::auto(&scene));
@@ -124,7 +132,7 @@ pub fn render(
         reason: reason.into(),
     };
     // Lightmap bindings per instance, decoded textures per texture index.
-    let mut textures: BTreeMap<usize, Texture> = BTreeMap::new();
+    let mut textures: BTreeMap<usize, Lightmap> = BTreeMap::new();
     let mut bindings: Vec<Option<LightmapBinding>> = Vec::new();
     for inst in &scene.instances {
         let prim = gltf
@@ -164,10 +172,14 @@ pub fn render(
             let img = image::load_from_memory(&bytes)
                 .map_err(|e| bad(format!("texture {texture}"), &e.to_string()))?
                 .to_rgb32f();
-            e.insert(Texture {
-                w: img.width() as usize,
-                h: img.height() as usize,
-                rgb: img.pixels().map(|p| p.0).collect(),
+            e.insert(Lightmap {
+                width: img.width(),
+                height: img.height(),
+                texels: img
+                    .pixels()
+                    .map(|p| DVec3::from(p.0.map(f64::from)))
+                    .collect(),
+                coverage: Vec::new(),
             });
         }
         bindings.push(Some(LightmapBinding {
@@ -191,33 +203,49 @@ pub fn render(
             let tri = &scene.triangles[hit.triangle];
             let mat = &scene.materials[tri.material];
             let p = camera.eye + dir * hit.t;
-            let mut l = if tri.normal.dot(dir) < 0.0 {
-                mat.radiance
-            } else {
-                DVec3::ZERO
-            };
-            if let Some(b) = &bindings[tri.instance] {
+            let uv = bindings[tri.instance].as_ref().map(|b| {
                 let inst = &scene.instances[tri.instance];
                 let k = tri.local_index;
                 let ids = &inst.indices[3 * k..3 * k + 3];
                 let bary = barycentric(&tri.p, p);
                 let uv: DVec2 = (0..3).map(|c| b.uv1[ids[c] as usize] * bary[c]).sum();
-                let h = textures[&b.texture].sample(uv) * b.intensity;
+                (b, uv)
+            });
+            if let Shading::Colour(map) = shading {
+                return uv.map_or(DVec3::splat(0.02), |(_, uv)| sample_map(map, uv));
+            }
+            let mut l = if tri.normal.dot(dir) < 0.0 {
+                mat.radiance
+            } else {
+                DVec3::ZERO
+            };
+            if let Some((b, uv)) = uv {
+                let h = match shading {
+                    Shading::Irradiance(map) => sample_map(map, uv),
+                    _ => sample_map(&textures[&b.texture], uv) * b.intensity,
+                };
                 l += mat.rho / std::f64::consts::PI * h;
             }
             l
         })
         .collect();
-    let scale = exposure.unwrap_or_else(|| {
-        // Auto exposure: the 97th percentile of the luminance of what was hit maps to 0.9.
-        let mut lum: Vec<f64> = radiance
-            .iter()
-            .map(|c| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z)
-            .filter(|&v| v > 0.0)
-            .collect();
-        lum.sort_by(|a, b| a.total_cmp(b));
-        lum.get(lum.len() * 97 / 100).copied().unwrap_or(1.0) / 0.9
-    });
+    Ok(radiance)
+}
+
+/// The exposure of [`render`]'s automatic mode: the 97th percentile of the luminance of what
+/// was hit maps to 0.9.
+pub fn auto_exposure(radiance: &[DVec3]) -> f64 {
+    let mut lum: Vec<f64> = radiance
+        .iter()
+        .map(|c| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z)
+        .filter(|&v| v > 0.0)
+        .collect();
+    lum.sort_by(|a, b| a.total_cmp(b));
+    lum.get(lum.len() * 97 / 100).copied().unwrap_or(1.0) / 0.9
+}
+
+/// Linear RGB divided by `scale`, clamped and sRGB-encoded to 8 bits.
+pub fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> image::RgbImage {
     let mut img = image::RgbImage::new(width, height);
     for (i, c) in radiance.iter().enumerate() {
         let v = (*c / scale)
@@ -225,7 +253,24 @@ pub fn render(
             .map(|x| (linear_to_srgb(x.clamp(0.0, 1.0)) * 255.0).round() as u8);
         img.put_pixel(i as u32 % width, i as u32 / width, image::Rgb(v));
     }
-    Ok(img)
+    img
+}
+
+/// Bilinear sample of a float map at normalized UV with clamp-to-edge, as the output's sampler
+/// says.
+pub fn sample_map(map: &Lightmap, uv: DVec2) -> DVec3 {
+    let (w, h) = (map.width as usize, map.height as usize);
+    if w == 0 || h == 0 {
+        return DVec3::ZERO;
+    }
+    let x = (uv.x * w as f64 - 0.5).clamp(0.0, w as f64 - 1.0);
+    let y = (uv.y * h as f64 - 0.5).clamp(0.0, h as f64 - 1.0);
+    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
+    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
+    let t = |x: usize, y: usize| map.texels[y * w + x];
+    (t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx) * (1.0 - fy)
+        + (t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx) * fy
 }
 
 fn barycentric(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {

@@ -903,42 +903,49 @@ impl Cluster {
     }
 }
 
-/// Irradiance from one punctual light at a receiving point, and the rays it cast. Point and spot: `I cos(theta) / d^2` with glTF's
-/// range window and spot falloff; directional: `E cos(theta)`.
+/// Irradiance from one punctual light at a receiving point, and the rays it cast: the
+/// unoccluded irradiance of [`punctual_unoccluded`] if one shadow ray towards the light is free.
 pub fn punctual_irradiance(
     light: &PunctualLight,
     vis: &Visibility,
     at: &SurfacePoint,
 ) -> (DVec3, u64) {
-    let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
+    let Some(e) = punctual_unoccluded(light, at) else {
+        return (DVec3::ZERO, 0);
+    };
+    let lit = match light.kind {
+        LightKind::Directional => {
+            vis.unoccluded_towards(at.ray_origin, -light.direction, at.polygon)
+        }
+        LightKind::Point | LightKind::Spot { .. } => {
+            !vis.occluded_skipping(at.ray_origin, light.position, [at.polygon, NO_POLYGON])
+        }
+    };
+    (if lit { e } else { DVec3::ZERO }, 1)
+}
+
+/// Irradiance from one punctual light at a receiving point if nothing blocked it, W/m²:
+/// point and spot `I cos(theta) / d^2` with glTF's range window and spot falloff; directional
+/// `E cos(theta)`. `None` when the light cannot reach the point (behind it, outside the range
+/// or the cone).
+pub fn punctual_unoccluded(light: &PunctualLight, at: &SurfacePoint) -> Option<DVec3> {
+    let (p, n) = (at.p, at.n);
     match light.kind {
         LightKind::Directional => {
-            let to_light = -light.direction;
-            let cos = n.dot(to_light);
-            if cos <= 0.0 {
-                return (DVec3::ZERO, 0);
-            }
-            let lit = vis.unoccluded_towards(p_ray, to_light, at.polygon);
-            (
-                if lit {
-                    light.intensity * cos
-                } else {
-                    DVec3::ZERO
-                },
-                1,
-            )
+            let cos = n.dot(-light.direction);
+            (cos > 0.0).then(|| light.intensity * cos)
         }
         LightKind::Point | LightKind::Spot { .. } => {
             let d = light.position - p;
             let dist2 = d.length_squared();
             let dist = dist2.sqrt();
             if dist <= 0.0 {
-                return (DVec3::ZERO, 0);
+                return None;
             }
             let to_light = d / dist;
             let cos = n.dot(to_light);
             if cos <= 0.0 {
-                return (DVec3::ZERO, 0);
+                return None;
             }
             let mut atten = 1.0 / dist2;
             if let Some(range) = light.range.filter(|r| *r > 0.0) {
@@ -956,18 +963,7 @@ pub fn punctual_irradiance(
                 let a = (cd * scale + offset).clamp(0.0, 1.0);
                 atten *= a * a;
             }
-            if atten <= 0.0 {
-                return (DVec3::ZERO, 0);
-            }
-            let lit = !vis.occluded_skipping(p_ray, light.position, [at.polygon, NO_POLYGON]);
-            (
-                if lit {
-                    light.intensity * (cos * atten)
-                } else {
-                    DVec3::ZERO
-                },
-                1,
-            )
+            (atten > 0.0).then(|| light.intensity * (cos * atten))
         }
     }
 }
