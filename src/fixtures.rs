@@ -34,6 +34,9 @@ use std::f64::consts::PI;
 use glam::{DMat3, DMat4, DQuat, DVec3};
 use serde_json::{Map, Value, json};
 
+/// The failure sweep: scenes where each meshing method is known to break down.
+pub mod failure;
+
 /// glTF `bufferView.target` for vertex attributes.
 const ARRAY_BUFFER: u32 = 34962;
 /// glTF `bufferView.target` for indices.
