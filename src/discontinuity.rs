@@ -29,6 +29,10 @@ use std::collections::BTreeMap;
 /// count as touching, and the mesher merges segments closer than this.
 pub const TOLERANCE: f64 = 1e-6;
 
+/// A surface parallel to a receiver and closer to its front than this (relative to the scene's
+/// extent) is treated as lying on it: its outline is a contact (D0) line.
+pub const NEAR_CONTACT: f64 = 1e-3;
+
 /// What made a discontinuity segment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
 pub enum Kind {
@@ -388,30 +392,49 @@ impl PolygonIndex {
     }
 }
 
-/// Contact segments on receiver `r`: other triangles touching, crossing or lying in its plane.
+/// Contact segments on receiver `r`: other triangles touching, crossing or lying in its plane,
+/// or hovering in front of it within [`NEAR_CONTACT`].
 fn contacts(scene: &Scene, index: &PolygonIndex, r: usize, tol: f64) -> Vec<(DVec3, DVec3)> {
     let poly = &scene.polygons[r];
     let frame = &poly.frame;
+    let near = NEAR_CONTACT * scene.extent();
     let corners: Vec<DVec3> = poly
         .triangles
         .iter()
         .flat_map(|&t| scene.triangles[t].p)
         .collect();
     let mut out = Vec::new();
-    for other in index.query(&corners) {
+    let in_front: Vec<DVec3> = corners
+        .iter()
+        .flat_map(|&c| [c, c + frame.n * near])
+        .collect();
+    for other in index.query(&in_front) {
         if other == r {
             continue;
         }
-        for &t in &scene.polygons[other].triangles {
+        let op = &scene.polygons[other];
+        let height = |p: DVec3| frame.n.dot(p - frame.origin);
+        let flat = op.triangles.iter().all(|&t| {
+            scene.triangles[t]
+                .p
+                .iter()
+                .all(|&p| (-tol..=near).contains(&height(p)))
+        });
+        let mut raw = Vec::new();
+        if flat {
+            // Coplanar: its outline is where a different surface starts. Hovering just in
+            // front (a light fitted a hair below a ceiling): it hides the whole hemisphere but
+            // a sliver, so the light jumps across its outline as at a contact.
+            raw.extend(
+                op.boundary
+                    .iter()
+                    .map(|[a, b]| (op.frame.world_from_plane(*a), op.frame.world_from_plane(*b))),
+            );
+        }
+        for &t in op.triangles.iter().filter(|_| !flat) {
             let tri = &scene.triangles[t];
-            let d = tri.p.map(|p| frame.n.dot(p - frame.origin));
-            let mut raw = Vec::new();
-            if d.iter().all(|x| x.abs() <= tol) {
-                // Coplanar: its edges are where a different surface starts.
-                for e in 0..3 {
-                    raw.push((tri.p[e], tri.p[(e + 1) % 3]));
-                }
-            } else if d.iter().any(|&x| x <= tol) && d.iter().any(|&x| x >= -tol) {
+            let d = tri.p.map(height);
+            if d.iter().any(|&x| x <= tol) && d.iter().any(|&x| x >= -tol) {
                 let mut pts = Vec::new();
                 for e in 0..3 {
                     let (i, j) = (e, (e + 1) % 3);
@@ -437,20 +460,20 @@ fn contacts(scene: &Scene, index: &PolygonIndex, r: usize, tol: f64) -> Vec<(DVe
                     raw.push((best.1, best.2));
                 }
             }
-            for (a, b) in raw {
-                // Project onto the plane, then keep the part inside the polygon and off its
-                // outline (a contact along the outline adds nothing).
-                let a = a - frame.n * frame.n.dot(a - frame.origin);
-                let b = b - frame.n * frame.n.dot(b - frame.origin);
-                for (p, q) in clip_segment_to_polygon(scene, r, a, b, &[], tol) {
-                    if !on_outline(
-                        poly,
-                        frame.plane_from_world(p),
-                        frame.plane_from_world(q),
-                        10.0 * tol,
-                    ) {
-                        out.push((p, q));
-                    }
+        }
+        for (a, b) in raw {
+            // Project onto the plane, then keep the part inside the polygon and off its
+            // outline (a contact along the outline adds nothing).
+            let a = a - frame.n * frame.n.dot(a - frame.origin);
+            let b = b - frame.n * frame.n.dot(b - frame.origin);
+            for (p, q) in clip_segment_to_polygon(scene, r, a, b, &[], tol) {
+                if !on_outline(
+                    poly,
+                    frame.plane_from_world(p),
+                    frame.plane_from_world(q),
+                    10.0 * tol,
+                ) {
+                    out.push((p, q));
                 }
             }
         }

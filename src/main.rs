@@ -27,6 +27,67 @@ enum Command {
     /// Monte Carlo reference irradiance for a baked glb's lightmap layout (independent path
     /// tracer: no mesh, no radiosity), written as OpenEXR.
     Reference(ReferenceArgs),
+    /// Speed against accuracy: bake with every method over a sweep of element budgets, measure
+    /// each lightmap against a Monte Carlo reference (overall and by region), and write
+    /// report.json/.md, log-log charts (SVG and PNG), a picture strip and a failure sweep.
+    Compare(CompareArgs),
+}
+
+#[derive(Args)]
+struct CompareArgs {
+    /// Input glTF scene (.glb or .gltf). Never modified.
+    input: PathBuf,
+    /// Output directory (created if missing).
+    #[arg(long, value_name = "DIR")]
+    out: PathBuf,
+    /// Element budgets of the sweep, comma-separated.
+    #[arg(long, value_delimiter = ',', default_value = "250,1000,4000,16000")]
+    budgets: Vec<usize>,
+    /// Methods (mesher-direct), comma-separated, from: uniform-exact, uniform-sampled,
+    /// adaptive-exact, adaptive-sampled, discontinuity-exact, discontinuity-sampled [default:
+    /// all].
+    #[arg(long, value_delimiter = ',', value_parser = parse_method)]
+    methods: Vec<penumbra::compare::Method>,
+    /// Lightmap width and height (every bake and the reference share one layout).
+    #[arg(long, default_value_t = 256)]
+    resolution: u32,
+    /// Reference paths per texel.
+    #[arg(long, default_value_t = 1024)]
+    spp: u32,
+    /// Seed of the reference's random streams.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// The budget whose bakes the pictures show (the nearest of --budgets).
+    #[arg(long, default_value_t = 1000)]
+    picture_budget: usize,
+    /// Width of each picture in the strip, pixels.
+    #[arg(long, default_value_t = 300)]
+    picture_width: u32,
+    /// Texels nearer than this many texel widths to another surface count as contact.
+    #[arg(long, default_value_t = 3.0)]
+    contact_texels: f64,
+    /// Skip the failure sweep (the built-in scenes that break each method).
+    #[arg(long)]
+    no_failure_sweep: bool,
+    /// Worker threads [default: all cores]. Errors do not depend on it; times do.
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Print nothing on success.
+    #[arg(long, short)]
+    quiet: bool,
+}
+
+fn parse_method(s: &str) -> Result<penumbra::compare::Method, String> {
+    penumbra::compare::Method::all()
+        .into_iter()
+        .find(|m| m.name() == s)
+        .ok_or_else(|| {
+            let names: Vec<String> = penumbra::compare::Method::all()
+                .iter()
+                .map(|m| m.name())
+                .collect();
+            format!("unknown method {s:?}; one of {}", names.join(", "))
+        })
 }
 
 #[derive(Args)]
@@ -91,7 +152,8 @@ struct RenderArgs {
     /// Output PNG.
     #[arg(long, value_name = "FILE")]
     out: PathBuf,
-    /// `gltf`: the file's first camera (falls back to `auto`); `auto`: frame the bounding box.
+    /// `gltf`: the file's first camera (falls back to `auto`); `auto`: frame the bounding box;
+    /// any other value: the perspective camera (or its node) of that name.
     #[arg(long, default_value = "gltf")]
     camera: String,
     /// Image width in pixels (the height follows the camera's aspect, 1:1 by default).
@@ -176,6 +238,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(args) => render(args),
         Command::Mesh(args) => mesh(args),
         Command::Reference(args) => reference(args),
+        Command::Compare(args) => compare(args),
     }
 }
 
@@ -230,12 +293,7 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
 
 fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
-    let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(n) = args.threads {
-        anyhow::ensure!(n > 0, "--threads must be at least 1");
-        pool = pool.num_threads(n);
-    }
-    let pool = pool.build().context("cannot start worker threads")?;
+    let pool = pool(args.threads)?;
     let gltf = penumbra::load::read(&args.input)?;
     let options = penumbra::reference::ReferenceOptions {
         spp: args.spp,
@@ -273,12 +331,85 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+fn compare(args: CompareArgs) -> anyhow::Result<()> {
+    let pool = pool(args.threads)?;
+    let defaults = penumbra::compare::CompareOptions::default();
+    let options = penumbra::compare::CompareOptions {
+        budgets: args.budgets,
+        methods: if args.methods.is_empty() {
+            defaults.methods
+        } else {
+            args.methods
+        },
+        resolution: args.resolution,
+        spp: args.spp,
+        seed: args.seed,
+        picture_budget: args.picture_budget,
+        picture_width: args.picture_width,
+        contact_texels: args.contact_texels,
+        ..defaults
+    };
+    let failure: Vec<penumbra::compare::FailureInput> = if args.no_failure_sweep {
+        Vec::new()
+    } else {
+        penumbra::fixtures::failure::scenes()
+            .into_iter()
+            .map(|f| penumbra::compare::FailureInput {
+                name: f.name.to_string(),
+                description: format!("{} {}", f.description, f.stresses),
+                glb: f.glb,
+            })
+            .collect()
+    };
+    let quiet = args.quiet;
+    let log = |line: &str| {
+        if !quiet {
+            eprintln!("{line}");
+        }
+    };
+    let report = pool
+        .install(|| penumbra::compare::compare(&args.input, &args.out, &options, &failure, &log))?;
+    if !quiet {
+        eprintln!(
+            "compared {} -> {}: {} runs, {:.0} s",
+            args.input.display(),
+            args.out.display(),
+            report.scene.runs.len()
+                + report
+                    .failure_sweep
+                    .iter()
+                    .map(|s| s.runs.len())
+                    .sum::<usize>(),
+            report.seconds
+        );
+    }
+    Ok(())
+}
+
+/// A worker pool of `threads` threads (all cores when `None`).
+fn pool(threads: Option<usize>) -> anyhow::Result<rayon::ThreadPool> {
+    let mut pool = rayon::ThreadPoolBuilder::new();
+    if let Some(n) = threads {
+        anyhow::ensure!(n > 0, "--threads must be at least 1");
+        pool = pool.num_threads(n);
+    }
+    pool.build().context("cannot start worker threads")
+}
+
 fn render(args: RenderArgs) -> anyhow::Result<()> {
     let gltf = penumbra::load::read(&args.input)?;
+    use penumbra::render::Camera;
     let camera = match args.camera.as_str() {
-        "gltf" => penumbra::render::Camera::from_gltf(&gltf),
+        "gltf" => Camera::from_gltf(&gltf),
         "auto" => None,
-        other => anyhow::bail!("--camera must be gltf or auto, not {other:?}"),
+        name => Some(Camera::named(&gltf, name).with_context(|| {
+            format!(
+                "{}: no perspective camera called {name:?} (cameras: {:?}); \
+                 --camera gltf takes the first, auto frames the scene",
+                args.input.display(),
+                Camera::names(&gltf)
+            )
+        })?),
     };
     anyhow::ensure!(
         (1..=16384).contains(&args.width),
@@ -293,12 +424,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
 }
 
 fn bake(args: BakeArgs) -> anyhow::Result<()> {
-    let mut pool = rayon::ThreadPoolBuilder::new();
-    if let Some(n) = args.threads {
-        anyhow::ensure!(n > 0, "--threads must be at least 1");
-        pool = pool.num_threads(n);
-    }
-    let pool = pool.build().context("cannot start worker threads")?;
+    let pool = pool(args.threads)?;
     let options = BakeOptions {
         mesher: args.mesher,
         budget: args.budget,

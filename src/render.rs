@@ -30,6 +30,27 @@ pub struct Camera {
 impl Camera {
     /// The first perspective camera of the default scene, if any.
     pub fn from_gltf(gltf: &Gltf) -> Option<Camera> {
+        Self::find(gltf, None)
+    }
+
+    /// The perspective camera of the default scene whose camera or node is called `name`.
+    pub fn named(gltf: &Gltf, name: &str) -> Option<Camera> {
+        Self::find(gltf, Some(name))
+    }
+
+    /// Names of the default scene's perspective cameras (camera name, else node name).
+    pub fn names(gltf: &Gltf) -> Vec<String> {
+        gltf.document
+            .nodes()
+            .filter_map(|n| {
+                let cam = n.camera()?;
+                matches!(cam.projection(), gltf::camera::Projection::Perspective(_))
+                    .then(|| cam.name().or(n.name()).unwrap_or("").to_string())
+            })
+            .collect()
+    }
+
+    fn find(gltf: &Gltf, name: Option<&str>) -> Option<Camera> {
         let scene = gltf
             .document
             .default_scene()
@@ -45,6 +66,7 @@ impl Camera {
                 * DMat4::from_cols_array_2d(&node.transform().matrix().map(|c| c.map(f64::from)));
             if let Some(cam) = node.camera()
                 && let gltf::camera::Projection::Perspective(p) = cam.projection()
+                && name.is_none_or(|n| cam.name() == Some(n) || node.name() == Some(n))
             {
                 let forward = world.transform_vector3(DVec3::NEG_Z).normalize();
                 let up0 = world.transform_vector3(DVec3::Y).normalize();

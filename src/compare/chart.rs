@@ -48,7 +48,6 @@ pub fn svg(panels: &[Panel], columns: usize) -> Result<String> {
 
 /// The panels as a PNG (text in DejaVu Sans, bundled), `columns` panels per row.
 pub fn png(panels: &[Panel], columns: usize) -> Result<Vec<u8>> {
-    super::pictures::register_font()?;
     let (w, h) = grid_size(panels.len(), columns);
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {
@@ -70,6 +69,8 @@ fn draw<DB: DrawingBackend>(
     panels: &[Panel],
     columns: usize,
 ) -> Result<()> {
+    // Text is laid out with the bundled font's metrics, for SVG too.
+    super::pictures::register_font()?;
     root.fill(&WHITE).map_err(chart_error)?;
     let columns = columns.clamp(1, panels.len().max(1));
     let rows = panels.len().div_ceil(columns).max(1);

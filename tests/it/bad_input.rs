@@ -265,3 +265,71 @@ fn required_compression_extension() {
         &["in.glb", "KHR_draco_mesh_compression"],
     );
 }
+
+/// `render --camera NAME` picks the glTF camera of that name; an unknown name is an error that
+/// names the file and lists the cameras, with nothing written.
+#[test]
+fn render_camera_by_name() {
+    let dir = scratch("render-camera");
+    let (input, baked) = (dir.join("cornell.glb"), dir.join("baked.glb"));
+    std::fs::write(&input, fixtures::cornell_box()).unwrap();
+    assert_eq!(bake_cli(&input, &baked).code, Some(0));
+    let render = |camera: &str, out: &Path| {
+        penumbra(&[
+            "render".as_ref(),
+            baked.as_os_str(),
+            "--out".as_ref(),
+            out.as_os_str(),
+            "--camera".as_ref(),
+            camera.as_ref(),
+            "--width".as_ref(),
+            "32".as_ref(),
+        ])
+    };
+    let (named, first) = (dir.join("named.png"), dir.join("first.png"));
+    assert_eq!(render("camera", &named).code, Some(0));
+    assert_eq!(render("gltf", &first).code, Some(0));
+    assert_eq!(
+        std::fs::read(&named).unwrap(),
+        std::fs::read(&first).unwrap()
+    );
+    let missing = dir.join("missing.png");
+    let run = render("nope", &missing);
+    assert_eq!(run.code, Some(1), "{}", run.stderr);
+    assert!(
+        run.stderr.contains("baked.glb")
+            && run.stderr.contains("\"nope\"")
+            && run.stderr.contains("\"camera\""),
+        "{}",
+        run.stderr
+    );
+    assert!(!missing.exists());
+}
+
+/// `compare` on a missing file fails naming it, before baking anything; an unknown method is
+/// a usage error.
+#[test]
+fn compare_bad_input() {
+    let dir = scratch("compare-bad");
+    let out = dir.join("out");
+    let run = penumbra(&[
+        "compare".as_ref(),
+        dir.join("nothing.glb").as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--quiet".as_ref(),
+    ]);
+    assert_eq!(run.code, Some(1), "{}", run.stderr);
+    assert!(run.stderr.contains("nothing.glb"), "{}", run.stderr);
+    assert!(!out.join("report.json").exists());
+    let run = penumbra(&[
+        "compare".as_ref(),
+        dir.join("nothing.glb").as_os_str(),
+        "--out".as_ref(),
+        out.as_os_str(),
+        "--methods".as_ref(),
+        "uniform-magic".as_ref(),
+    ]);
+    assert_eq!(run.code, Some(2), "{}", run.stderr);
+    assert!(run.stderr.contains("uniform-magic"), "{}", run.stderr);
+}

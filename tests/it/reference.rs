@@ -192,6 +192,45 @@ fn square_occluder_direct_matches_exact_profile() {
     let (within3, max) = report("square occluder", &z);
     assert!(within3 > 0.97, "fraction within 3 stderr {within3}");
     assert!(max < 8.0, "max |z| {max}");
+
+    // Its emitter visibility (the region classifier of `penumbra compare`) against the exact
+    // visible fraction of the direct light: exactly 1 in the lit floor, 0 in the umbra, and
+    // within the binomial noise of the estimate in the penumbra.
+    let (mut lit, mut umbra, mut penumbra) = (0, 0, 0);
+    for (i, pts) in r.layout.samples.iter().enumerate() {
+        if exact[i].is_none() {
+            continue;
+        }
+        let visible: f64 = pts.iter().map(|sp| direct.irradiance(sp).x).sum();
+        let unoccluded: f64 = pts
+            .iter()
+            .map(|sp| {
+                direct
+                    .emitters
+                    .iter()
+                    .map(|e| std::f64::consts::PI * e.radiance.x * e.form_factor(sp.p, sp.n))
+                    .sum::<f64>()
+            })
+            .sum();
+        let want = visible / unoccluded;
+        let got = r.map.visibility[i].expect("the light faces the floor") as f64;
+        if want > 1.0 - 1e-9 {
+            lit += 1;
+            assert_eq!(got, 1.0, "texel {i}: lit, yet some shadow ray was blocked");
+        } else if want < 1e-9 {
+            umbra += 1;
+            assert_eq!(got, 0.0, "texel {i}: umbra, yet some shadow ray was free");
+        } else {
+            penumbra += 1;
+            let sigma = (want * (1.0 - want) / options.spp as f64).sqrt();
+            assert!(
+                (got - want).abs() < 5.0 * sigma + 0.02,
+                "texel {i}: visibility {got} against {want}"
+            );
+        }
+    }
+    println!("visibility: {lit} lit, {penumbra} penumbra, {umbra} umbra texels");
+    assert!(lit > 5 && umbra > 5 && penumbra > 5);
 }
 
 /// The result depends on the seed and the texel, not on the thread count.
