@@ -136,39 +136,13 @@ fn spade_five_segment_repro_meshes() {
 /// shadow lines, the worst error was 46% of the peak.
 #[test]
 fn contact_corners_keep_lit_and_shadowed_limits() {
-    for light in ["point", "area"] {
+    for (light, glb) in [
+        ("point", box_with_side_lamp()),
+        ("area", fixtures::box_on_floor()),
+    ] {
         let mut o = dm();
         o.solve.bounces = Some(0);
-        let mut g = GlbBuilder::new();
-        let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
-        g.add_mesh_node(
-            "floor",
-            &fixtures::horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
-            grey,
-        );
-        let top = [
-            [-0.5, 1.0, -0.5],
-            [-0.5, 1.0, 0.5],
-            [0.5, 1.0, 0.5],
-            [0.5, 1.0, -0.5],
-        ];
-        g.add_mesh_node("box", &fixtures::block(top, 0.0, true), grey);
-        if light == "point" {
-            let l = g.add_light(fixtures::Light::point("lamp", 10.0));
-            g.add_node(
-                fixtures::Node::new("lamp")
-                    .with_transform(fixtures::Transform::translation([2.0, 2.0, 0.3]))
-                    .with_light(l),
-            );
-        } else {
-            let lamp = g.add_material(Material::diffuse("lamp", [0.0; 3]).emitting([5.0; 3]));
-            g.add_mesh_node(
-                "lamp",
-                &fixtures::horizontal_rect([1.5, 2.0], [0.0, 0.5], 2.0, false),
-                lamp,
-            );
-        }
-        let b = crate::bake(&g.to_glb(), &o);
+        let b = crate::bake(&glb, &o);
         let f = floor(&b);
         let mi = b.meshes.iter().position(|m| m.polygon == f).unwrap();
         let m = &b.meshes[mi];
@@ -214,11 +188,8 @@ fn contact_corners_keep_lit_and_shadowed_limits() {
     }
 }
 
-#[test]
-fn contact_lines_do_not_leak_light() {
-    let mut o = dm();
-    o.solve.bounces = Some(0);
-    // A box standing on a floor (no shared vertices), lit by a point light off to the side.
+/// A 1 m box standing on a 4 m floor (no shared vertices), lit by a point light off to the side.
+fn box_with_side_lamp() -> Vec<u8> {
     let mut g = GlbBuilder::new();
     let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
     g.add_mesh_node(
@@ -239,7 +210,14 @@ fn contact_lines_do_not_leak_light() {
             .with_transform(fixtures::Transform::translation([2.0, 2.0, 0.3]))
             .with_light(light),
     );
-    let b = crate::bake(&g.to_glb(), &o);
+    g.to_glb()
+}
+
+#[test]
+fn contact_lines_do_not_leak_light() {
+    let mut o = dm();
+    o.solve.bounces = Some(0);
+    let b = crate::bake(&box_with_side_lamp(), &o);
     let f = floor(&b);
     assert!(b.segments[f].iter().any(|s| s.kind == Kind::D0));
     let mi = b.meshes.iter().position(|m| m.polygon == f).unwrap();
