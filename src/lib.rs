@@ -55,13 +55,14 @@ pub mod stats;
 
 // Tools around the pipeline.
 
-/// Meshers measured against each other (error sweeps and charts).
+/// `penumbra compare`: every method against the Monte Carlo reference over a budget sweep, by
+/// region; report, charts, picture strip, failure sweep.
 pub mod compare;
 
 /// Debug views (SVG).
 pub mod debug;
 
-/// Generated test scenes.
+/// Generated test scenes, and the failure-sweep family.
 pub mod fixtures;
 
 /// Monte Carlo reference for a baked lightmap.
