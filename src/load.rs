@@ -75,6 +75,10 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
     };
     let json: serde_json::Value =
         serde_json::from_slice(&json_bytes).map_err(|e| not_gltf(e.to_string()))?;
+    if !json.is_object() {
+        // gltf's parser already insists on it; the writer edits this object in place.
+        return Err(not_gltf("the JSON root is not an object".into()));
+    }
     let mut blob = gltf.blob;
     let document = gltf.document;
     let mut buffers = Vec::new();
