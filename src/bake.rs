@@ -3,6 +3,7 @@
 use crate::atlas::{self, Atlas, AtlasInput, AtlasOptions};
 use crate::discontinuity::{self, DmOptions, Segment};
 use crate::error::{Error, Result};
+use crate::files::{self, Staged};
 use crate::lightmap::{self, Lightmap};
 use crate::load::{self, Gltf};
 use crate::mesh::{self, Mesher, ReceiverMesh};
@@ -11,7 +12,7 @@ use crate::solve::{self, Solution, SolveOptions};
 use crate::stats::{Progress, Stats, stage};
 use crate::visibility::Visibility;
 use crate::write::{self, LightmapImage};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// Everything a bake can be told.
 #[derive(Clone, Debug)]
@@ -115,12 +116,30 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         Visibility::new(&scene)
     });
     let (segments, meshes) = mesh_scene(&scene, &vis, options, &mut stats, progress);
+    if meshes.iter().all(|m| m.triangles.is_empty()) {
+        return Err(Error::EmptyScene {
+            path: gltf.path.clone(),
+        });
+    }
     let t = &mut stats.timings_s;
     let solution = stage(&mut t.solve, "solve", progress, || {
         solve::radiosity(&scene, &vis, &meshes, &options.solve, progress)
     });
     let atlas = stage(&mut t.atlas, "atlas", progress, || {
         pack_atlas(&scene, options)
+    })
+    .map_err(|error| match error {
+        // The atlas numbers its inputs as the scene's instances: name the glTF item instead.
+        atlas::AtlasError::InvalidInput { mesh, reason }
+        | atlas::AtlasError::AddMesh { mesh, reason } => Error::BadItem {
+            path: gltf.path.clone(),
+            item: gltf.instance_item(&scene.instances[mesh]),
+            reason: format!("atlas: {reason}"),
+        },
+        error => Error::Atlas {
+            path: gltf.path.clone(),
+            error,
+        },
     })?;
     let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
     for (i, m) in meshes.iter().enumerate() {
@@ -153,6 +172,25 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         stats
             .warnings
             .push("the scene has no emitters (no emissive material, no KHR_lights_punctual light): the lightmap is black".into());
+    } else if solution
+        .irradiance
+        .iter()
+        .flatten()
+        .all(|h| h.max_element() <= 0.0)
+    {
+        stats.warnings.push(
+            "no surface receives any light (every emitter faces away from the receivers, or is blocked): the lightmap is black".into(),
+        );
+    }
+    stats.converged =
+        options.solve.bounces.is_some() || stats.solve.unshot_fraction <= options.solve.tolerance;
+    if !stats.converged {
+        stats.warnings.push(format!(
+            "the indirect solve stopped on its shot limit with {:.1}% of the reflected power not yet \
+             distributed (the tolerance is {}%): the indirect light is too dark",
+            100.0 * stats.solve.unshot_fraction,
+            100.0 * options.solve.tolerance
+        ));
     }
     Ok(Bake {
         scene,
@@ -168,7 +206,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
 /// Charts and packs every instance. xatlas works in f32 and drops triangles whose area is
 /// below `f32::EPSILON`, and its density estimate clamps small scenes; so the positions it sees
 /// are centred and scaled to a total area of [`ATLAS_AREA`], and the densities scaled to match.
-fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
+fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::AtlasError> {
     let area: f64 = scene.triangles.iter().map(|t| t.area()).sum();
     let scale = if area > 0.0 {
         (ATLAS_AREA / area).sqrt()
@@ -275,65 +313,84 @@ pub fn meshes(
     Ok((scene, segments, meshes))
 }
 
-/// Reads `input`, bakes, and writes the lightmapped glb to `output` (temporary file + rename).
-/// `exr`: also write the float lightmap there. Returns the bake with write timings filled in.
+/// Where [`bake_file`] writes: the lightmapped glb, and optionally the float lightmap and the
+/// statistics.
+#[derive(Clone, Debug, Default)]
+pub struct OutputFiles {
+    /// The lightmapped glb.
+    pub glb: PathBuf,
+    /// The float lightmap (irradiance H, W/m², linear RGB) as OpenEXR.
+    pub exr: Option<PathBuf>,
+    /// `--stats` JSON.
+    pub stats: Option<PathBuf>,
+}
+
+impl OutputFiles {
+    /// Just the glb.
+    pub fn glb(path: impl Into<PathBuf>) -> OutputFiles {
+        OutputFiles {
+            glb: path.into(),
+            ..OutputFiles::default()
+        }
+    }
+}
+
+/// Reads `input`, bakes, and writes the outputs. Every output is checked against the input
+/// (and against the files a `.gltf` reads) before the bake starts, and all are written to
+/// temporary files before any is renamed into place ([`files`]). Returns the bake with its
+/// write timings filled in.
 pub fn bake_file(
     input: &Path,
-    output: &Path,
-    exr: Option<&Path>,
+    outputs: &OutputFiles,
     options: &BakeOptions,
     progress: &Progress<'_>,
 ) -> Result<Bake> {
     let start = std::time::Instant::now();
     let mut read_time = 0.0;
     let gltf = stage(&mut read_time, "read", progress, || load::read(input))?;
+    let mut named: Vec<(&'static str, &Path)> = vec![("OUT", &outputs.glb)];
+    if let Some(exr) = &outputs.exr {
+        named.push(("--exr", exr));
+    }
+    if let Some(stats) = &outputs.stats {
+        named.push(("--stats", stats));
+    }
+    let paths = files::check_outputs(&gltf.files_read(), &named)?;
     let mut result = bake(&gltf, options, progress)?;
     result.stats.timings_s.load += read_time;
     let mut write_time = 0.0;
-    stage(&mut write_time, "write", progress, || -> Result<()> {
-        write_glb(&gltf, &mut result, output)?;
-        if let Some(exr) = exr {
-            write_exr(&result.lightmap, exr)?;
+    let staged = stage(&mut write_time, "write", progress, || -> Result<Staged> {
+        let mut staged = Staged::new();
+        staged.add(&paths[0], &glb_bytes(&gltf, &mut result)?)?;
+        if outputs.exr.is_some() {
+            let map = &result.lightmap;
+            staged.add(
+                &paths[1],
+                &write::exr_bytes(&map.texels, map.width, map.height)?,
+            )?;
         }
-        Ok(())
+        Ok(staged)
     })?;
+    let mut staged = staged;
     result.stats.timings_s.write = write_time;
     result.stats.timings_s.total = start.elapsed().as_secs_f64();
+    if outputs.stats.is_some() {
+        let json = serde_json::to_vec_pretty(&result.stats).map_err(|e| Error::Write {
+            path: paths[paths.len() - 1].clone(),
+            source: e.into(),
+        })?;
+        staged.add(&paths[paths.len() - 1], &json)?;
+    }
+    staged.commit()?;
     Ok(result)
 }
 
-/// Writes a bake's result as a lightmapped glb (8-bit lightmap, its scale in
-/// `stats.lightmap_intensity`) to `output`, atomically.
-pub fn write_glb(gltf: &Gltf, bake: &mut Bake, output: &Path) -> Result<()> {
+/// A bake's result as lightmapped glb bytes (8-bit lightmap, its scale in
+/// `stats.lightmap_intensity`).
+pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake) -> Result<Vec<u8>> {
     let (rgb, intensity) = bake.lightmap.to_rgb8();
-    let png = encode_png(&rgb, bake.lightmap.width, bake.lightmap.height)?;
+    let png = write::png_bytes(&rgb, bake.lightmap.width, bake.lightmap.height)?;
     bake.stats.lightmap_intensity = intensity;
     let image = LightmapImage { png, intensity };
-    write::glb(gltf, &bake.scene, &bake.atlas, &image, output)
-}
-
-/// Encodes 8-bit RGB as PNG.
-pub fn encode_png(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
-    use image::ImageEncoder;
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
-        .map_err(|e| Error::Image(format!("PNG encoding failed: {e}")))?;
-    Ok(png)
-}
-
-/// Writes the float lightmap (irradiance H, W/m², linear RGB) as OpenEXR, atomically.
-pub fn write_exr(map: &Lightmap, path: &Path) -> Result<()> {
-    let data: Vec<f32> = map
-        .texels
-        .iter()
-        .flat_map(|t| t.as_vec3().to_array())
-        .collect();
-    let img = image::Rgb32FImage::from_raw(map.width, map.height, data)
-        .ok_or_else(|| Error::Image("lightmap size mismatch".into()))?;
-    let mut bytes = std::io::Cursor::new(Vec::new());
-    image::DynamicImage::ImageRgb32F(img)
-        .write_to(&mut bytes, image::ImageFormat::OpenExr)
-        .map_err(|e| Error::Image(format!("EXR encoding failed: {e}")))?;
-    write::write_atomically(path, bytes.get_ref())
+    write::build(gltf, &bake.scene, &bake.atlas, &image)
 }

@@ -401,7 +401,7 @@ fn measure(
             ));
             let lightmap = if budget == picture_budget {
                 let path = bakes_dir.join(format!("{}.glb", method.name()));
-                crate::bake::write_glb(gltf, &mut b, &path)?;
+                crate::files::write_atomically(&path, &crate::bake::glb_bytes(gltf, &mut b)?)?;
                 let lightmap = b.lightmap.clone();
                 pictures.push((method, b, path));
                 lightmap
@@ -545,7 +545,7 @@ pub fn compare(
         .map(|(method, _, _)| format!("bakes/{}.glb", method.name()))
         .collect();
     let write = |file: &str, bytes: &[u8]| {
-        crate::write::write_atomically(&out_dir.join(file), bytes).map(|_| file.to_string())
+        crate::files::write_atomically(&out_dir.join(file), bytes).map(|_| file.to_string())
     };
     files.push("reference.exr".into());
     m.reference.write_exr(&out_dir.join("reference.exr"))?;

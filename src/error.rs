@@ -22,7 +22,7 @@ pub enum Error {
         item: String,
         reason: String,
     },
-    #[error("{path}: the scene has no static triangles to bake")]
+    #[error("{path}: the scene has no static triangles to bake (none, or all of zero area)")]
     EmptyScene { path: PathBuf },
     #[error("cannot write {path}")]
     Write {
@@ -30,8 +30,13 @@ pub enum Error {
         #[source]
         source: std::io::Error,
     },
-    #[error("atlas: {0}")]
-    Atlas(#[from] crate::atlas::AtlasError),
+    #[error("{path}: atlas: {error}")]
+    Atlas {
+        path: PathBuf,
+        error: crate::atlas::AtlasError,
+    },
+    #[error("{what}: {reason}")]
+    Output { what: &'static str, reason: String },
     #[error("invalid option {option}: {reason}")]
     Option {
         option: &'static str,
@@ -41,4 +46,19 @@ pub enum Error {
     Image(String),
     #[error("compare: {0}")]
     Compare(String),
+}
+
+impl Error {
+    /// Places an item error inside an enclosing item (`mesh 0 primitive 1: POSITION`), so a
+    /// message names the file once and the item from the outside in. Other errors pass through.
+    pub fn within(self, outer: &str) -> Error {
+        match self {
+            Error::BadItem { path, item, reason } => Error::BadItem {
+                path,
+                item: format!("{outer}, {item}"),
+                reason,
+            },
+            other => other,
+        }
+    }
 }

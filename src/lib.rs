@@ -53,6 +53,9 @@ pub mod error;
 /// `--stats` and progress.
 pub mod stats;
 
+/// Output files: never the input, written together or not at all, cleaned up on signals.
+pub mod files;
+
 // Tools around the pipeline.
 
 /// `penumbra compare`: every method against the Monte Carlo reference over a budget sweep, by
@@ -71,5 +74,5 @@ pub mod reference;
 /// Pictures of a baked glb.
 pub mod render;
 
-pub use bake::{Bake, BakeOptions, bake, bake_file};
+pub use bake::{Bake, BakeOptions, OutputFiles, bake, bake_file};
 pub use error::{Error, Result};

@@ -12,6 +12,8 @@ use gltf::mesh::Mode;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+mod validate;
+
 /// A parsed glTF file with its buffer data, kept whole so the writer can preserve everything.
 pub struct Gltf {
     /// The file it came from (for messages and relative URIs).
@@ -51,6 +53,26 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
     if bytes.is_empty() {
         return Err(not_gltf("the file is empty".into()));
     }
+    // The JSON first, checked where the gltf crate would panic (see `validate`).
+    let json_bytes = if bytes.starts_with(b"glTF") {
+        gltf::binary::Glb::from_slice(&bytes)
+            .map_err(|e| not_gltf(e.to_string()))?
+            .json
+            .into_owned()
+    } else {
+        bytes.clone()
+    };
+    let json: serde_json::Value =
+        serde_json::from_slice(&json_bytes).map_err(|e| not_gltf(e.to_string()))?;
+    if !json.is_object() {
+        // The writer edits this object in place.
+        return Err(not_gltf("the JSON root is not an object".into()));
+    }
+    validate::indices(&json).map_err(|e| Error::BadItem {
+        path: path.to_path_buf(),
+        item: e.item,
+        reason: e.reason,
+    })?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| not_gltf(e.to_string()))?;
     // Extensions whose geometry this loader cannot read: baking the fallback-less data would
     // give garbage, so say so.
@@ -64,20 +86,6 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
                 ),
             });
         }
-    }
-    let json_bytes = if bytes.starts_with(b"glTF") {
-        gltf::binary::Glb::from_slice(&bytes)
-            .map_err(|e| not_gltf(e.to_string()))?
-            .json
-            .into_owned()
-    } else {
-        bytes.clone()
-    };
-    let json: serde_json::Value =
-        serde_json::from_slice(&json_bytes).map_err(|e| not_gltf(e.to_string()))?;
-    if !json.is_object() {
-        // gltf's parser already insists on it; the writer edits this object in place.
-        return Err(not_gltf("the JSON root is not an object".into()));
     }
     let mut blob = gltf.blob;
     let document = gltf.document;
@@ -161,6 +169,41 @@ fn percent_decode(uri: &str) -> String {
 }
 
 impl Gltf {
+    /// Every file a bake of this glTF reads: the file itself, and the external buffers and
+    /// images its URIs name (an output must be none of them).
+    pub fn files_read(&self) -> Vec<PathBuf> {
+        let dir = self.path.parent().unwrap_or_else(|| Path::new("."));
+        let buffers = self.document.buffers().filter_map(|b| match b.source() {
+            gltf::buffer::Source::Uri(uri) => Some(uri.to_string()),
+            gltf::buffer::Source::Bin => None,
+        });
+        let images = self.document.images().filter_map(|i| match i.source() {
+            gltf::image::Source::Uri { uri, .. } => Some(uri.to_string()),
+            gltf::image::Source::View { .. } => None,
+        });
+        let mut files = vec![self.path.clone()];
+        for uri in buffers.chain(images) {
+            if !uri.starts_with("data:") {
+                files.push(dir.join(percent_decode(&uri)));
+            }
+        }
+        files
+    }
+
+    /// Names an instance's glTF item: `mesh 2 "chair" primitive 0 (node 7)`.
+    pub fn instance_item(&self, instance: &Instance) -> String {
+        let name = self
+            .document
+            .meshes()
+            .nth(instance.mesh)
+            .and_then(|m| m.name().map(|n| format!(" \"{n}\"")))
+            .unwrap_or_default();
+        format!(
+            "mesh {}{name} primitive {} (node {})",
+            instance.mesh, instance.primitive, instance.node
+        )
+    }
+
     fn bad(&self, item: impl Into<String>, reason: impl Into<String>) -> Error {
         Error::BadItem {
             path: self.path.clone(),
@@ -198,6 +241,20 @@ impl Gltf {
             Some(view) => {
                 let bytes = self.view_bytes(&view, &item)?;
                 let stride = view.stride().unwrap_or(elem);
+                // glTF: at most 252 bytes, whole components, and elements that do not overlap.
+                let component = accessor.data_type().size();
+                if view.stride().is_some()
+                    && (stride < elem || stride > 252 || !stride.is_multiple_of(component))
+                {
+                    return Err(self.bad(
+                        format!("{item}, bufferView {}", view.index()),
+                        format!(
+                            "byteStride {stride} is invalid for {elem}-byte elements (it must be \
+                             at least the element size, at most 252, and a multiple of the \
+                             {component}-byte component size)"
+                        ),
+                    ));
+                }
                 read_strided(bytes, accessor.offset(), stride, elem, count)
                     .ok_or_else(|| self.bad(&item, "elements run past the end of its bufferView"))?
             }
@@ -328,9 +385,10 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
         scene.materials.push(material(gltf, &m, &mut textures)?);
     }
     let default_material = scene.materials.len();
+    // glTF's default material is white (base colour 1): as any albedo, clamped.
     scene.materials.push(Material {
         name: "default material".into(),
-        rho: DVec3::ONE,
+        rho: DVec3::splat(MAX_ALBEDO),
         radiance: DVec3::ZERO,
     });
     scene.warnings.append(&mut textures.warnings);
@@ -399,6 +457,12 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
             path: gltf.path.clone(),
         });
     }
+    if scene.instances.iter().any(|i| i.gltf_material.is_none()) {
+        scene.warnings.push(format!(
+            "primitives without a material use glTF's default white material, baked with albedo {MAX_ALBEDO}"
+        ));
+    }
+    check_extent(gltf, &scene)?;
     let degenerate = scene
         .triangles
         .iter()
@@ -410,6 +474,87 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
         ));
     }
     Ok(scene)
+}
+
+/// The largest albedo a surface is given: an albedo of 1 reflects everything it receives, so
+/// the bounces in a closed room never converge.
+pub const MAX_ALBEDO: f64 = 0.99;
+
+/// The largest scene a bake takes, in scene units across (the bounding box diagonal): every
+/// tolerance is relative to it, and the lightmap atlas and the BVH work in f32.
+pub const MAX_EXTENT: f64 = 1e9;
+
+/// The largest ratio of the scene's extent to its typical (median) triangle. The geometric
+/// tolerances are about 1e-6 of the extent; past this ratio most triangles would fall below
+/// them and vanish from the bake. A stray vertex far from everything else is the usual cause.
+pub const MAX_EXTENT_RATIO: f64 = 1e6;
+
+/// Refuses scenes whose extent no bake can resolve ([`MAX_EXTENT`], [`MAX_EXTENT_RATIO`]),
+/// naming the vertex farthest from the middle of the scene.
+fn check_extent(gltf: &Gltf, scene: &Scene) -> Result<()> {
+    let extent = (scene.bounds_max - scene.bounds_min).length();
+    let mut sizes: Vec<f64> = scene
+        .triangles
+        .iter()
+        .filter(|t| t.polygon.is_some())
+        .map(|t| {
+            (0..3)
+                .map(|k| (t.p[k] - t.p[(k + 1) % 3]).length())
+                .fold(0.0, f64::max)
+        })
+        .collect();
+    if sizes.is_empty() {
+        return Ok(()); // nothing to bake: reported as such later
+    }
+    let mid = sizes.len() / 2;
+    let typical = *sizes.select_nth_unstable_by(mid, f64::total_cmp).1;
+    if extent.is_finite() && extent <= MAX_EXTENT && extent <= MAX_EXTENT_RATIO * typical {
+        return Ok(());
+    }
+    // The middle of the scene: the per-axis median of the triangle centroids.
+    let mut axes = [Vec::new(), Vec::new(), Vec::new()];
+    for t in &scene.triangles {
+        let c = (t.p[0] + t.p[1] + t.p[2]) / 3.0;
+        for (a, v) in axes.iter_mut().zip(c.to_array()) {
+            a.push(v);
+        }
+    }
+    let middle = DVec3::from_array(axes.map(|mut a| {
+        let mid = a.len() / 2;
+        *a.select_nth_unstable_by(mid, f64::total_cmp).1
+    }));
+    let mut far = (0, 0, middle, 0.0);
+    for (i, inst) in scene.instances.iter().enumerate() {
+        for (v, p) in inst.positions_world.iter().enumerate() {
+            let d = (*p - middle).length();
+            if d > far.3 {
+                far = (i, v, *p, d);
+            }
+        }
+    }
+    let (i, v, p, d) = far;
+    Err(gltf.bad(
+        gltf.instance_item(&scene.instances[i]),
+        format!(
+            "vertex {v} at {} lies {d:.3e} units from the middle of the scene, whose triangles \
+             are typically {typical:.3e} units long: the scene would span {extent:.3e} units, \
+             beyond what a bake resolves (at most {MAX_EXTENT:e} units, and {MAX_EXTENT_RATIO:e} \
+             times its typical triangle)",
+            short(p)
+        ),
+    ))
+}
+
+/// A vector for messages: `(1.5, -3.4e38, 0)`, in 4 significant digits.
+fn short(v: DVec3) -> String {
+    let f = |x: f64| {
+        if x != 0.0 && !(1e-3..1e6).contains(&x.abs()) {
+            format!("{x:.3e}")
+        } else {
+            format!("{}", (x * 1e4).round() / 1e4)
+        }
+    };
+    format!("({}, {}, {})", f(v.x), f(v.y), f(v.z))
 }
 
 fn name_suffix(name: Option<&str>) -> String {
@@ -446,7 +591,7 @@ fn add_primitive(
         .ok_or_else(|| gltf.bad(&item, "has no POSITION attribute"))?;
     let flat = gltf
         .read_floats(&pos_acc, Dimensions::Vec3)
-        .map_err(|e| gltf.bad(&item, format!("POSITION: {e}")))?;
+        .map_err(|e| e.within(&format!("{item}: POSITION")))?;
     let vertex_count = flat.len() / 3;
     for (semantic, acc) in prim.attributes() {
         if acc.count() != vertex_count {
@@ -484,7 +629,7 @@ fn add_primitive(
     let raw: Vec<u32> = match prim.indices() {
         Some(acc) => gltf
             .read_indices(&acc)
-            .map_err(|e| gltf.bad(&item, format!("indices: {e}")))?,
+            .map_err(|e| e.within(&format!("{item}: indices")))?,
         None => (0..vertex_count as u32).collect(),
     };
     if let Some(&bad) = raw.iter().find(|&&i| i as usize >= vertex_count) {
@@ -604,11 +749,24 @@ fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Res
         ));
     }
     if !rho.is_finite() || !radiance.is_finite() || radiance.min_element() < 0.0 {
-        return Err(gltf.bad(format!("material {name}"), "colour factors are not finite"));
+        return Err(gltf.bad(
+            format!("material {name}"),
+            "colour factors are not finite, or the emission is negative",
+        ));
+    }
+    let clamped = rho.clamp(DVec3::ZERO, DVec3::splat(MAX_ALBEDO));
+    if clamped != rho {
+        textures.warnings.push(format!(
+            "material {name}: albedo {} is outside [0, {MAX_ALBEDO}], clamped to {} \
+             (a surface that reflects all light it receives is not physical, and the bounces \
+             would not converge)",
+            short(rho),
+            short(clamped)
+        ));
     }
     Ok(Material {
         name,
-        rho: rho.clamp(DVec3::ZERO, DVec3::ONE),
+        rho: clamped,
         radiance,
     })
 }

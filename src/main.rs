@@ -2,9 +2,11 @@
 
 use anyhow::Context;
 use clap::{Args, Parser, Subcommand};
+use penumbra::files::write_atomically;
+use penumbra::load::Gltf;
 use penumbra::mesh::Mesher;
 use penumbra::solve::{DirectMethod, SolveOptions};
-use penumbra::{BakeOptions, bake_file};
+use penumbra::{BakeOptions, OutputFiles, bake_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
 
@@ -226,7 +228,10 @@ struct BakeArgs {
 
 fn main() {
     let cli = Cli::parse();
-    if let Err(e) = run(cli) {
+    if let Err(e) = penumbra::files::clean_up_on_signals()
+        .map_err(anyhow::Error::from)
+        .and_then(|_| run(cli))
+    {
         eprintln!("error: {e:#}");
         std::process::exit(1);
     }
@@ -287,7 +292,8 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         800.0,
     );
     let out = args.svg.context("--svg FILE is required (or --list)")?;
-    penumbra::write::write_atomically(&out, svg.as_bytes())?;
+    let out = check_outputs(&gltf, &[("--svg", &out)])?;
+    write_atomically(&out[0], svg.as_bytes())?;
     Ok(())
 }
 
@@ -295,6 +301,11 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
     let pool = pool(args.threads)?;
     let gltf = penumbra::load::read(&args.input)?;
+    let mut named = vec![("--out", args.out.as_path())];
+    if let Some(stats) = &args.stats {
+        named.push(("--stats", stats));
+    }
+    let paths = check_outputs(&gltf, &named)?;
     let options = penumbra::reference::ReferenceOptions {
         spp: args.spp,
         seed: args.seed,
@@ -302,7 +313,8 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
         supersample: args.supersample,
     };
     let map = pool.install(|| penumbra::reference::reference(&gltf, &options))?;
-    map.write_exr(&args.out)?;
+    let mut staged = penumbra::files::Staged::new();
+    staged.add(&paths[0], &map.exr_bytes()?)?;
     let summary = map.summary();
     let seconds = start.elapsed().as_secs_f64();
     if !args.quiet {
@@ -319,15 +331,16 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
             seconds
         );
     }
-    if let Some(path) = &args.stats {
+    if args.stats.is_some() {
         let mut json = serde_json::to_value(&summary)?;
         json["spp"] = args.spp.into();
         json["seed"] = args.seed.into();
         json["bounces_max"] = args.bounces_max.into();
         json["supersample"] = args.supersample.into();
         json["seconds"] = seconds.into();
-        penumbra::write::write_atomically(path, &serde_json::to_vec_pretty(&json)?)?;
+        staged.add(&paths[1], &serde_json::to_vec_pretty(&json)?)?;
     }
+    staged.commit()?;
     Ok(())
 }
 
@@ -386,6 +399,15 @@ fn compare(args: CompareArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Checks a command's outputs against its input (and each other); returns them with links
+/// resolved.
+fn check_outputs(
+    gltf: &Gltf,
+    outputs: &[(&'static str, &std::path::Path)],
+) -> anyhow::Result<Vec<PathBuf>> {
+    Ok(penumbra::files::check_outputs(&gltf.files_read(), outputs)?)
+}
+
 /// A worker pool of `threads` threads (all cores when `None`).
 fn pool(threads: Option<usize>) -> anyhow::Result<rayon::ThreadPool> {
     let mut pool = rayon::ThreadPoolBuilder::new();
@@ -419,7 +441,8 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let img = penumbra::render::render(&gltf, camera, args.width, height, args.exposure)?;
     let mut png = std::io::Cursor::new(Vec::new());
     img.write_to(&mut png, image::ImageFormat::Png)?;
-    penumbra::write::write_atomically(&args.out, png.get_ref())?;
+    let out = check_outputs(&gltf, &[("--out", &args.out)])?;
+    write_atomically(&out[0], png.get_ref())?;
     Ok(())
 }
 
@@ -446,8 +469,11 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
     let result = pool.install(|| {
         bake_file(
             &args.input,
-            &args.output,
-            args.exr.as_deref(),
+            &OutputFiles {
+                glb: args.output.clone(),
+                exr: args.exr.clone(),
+                stats: args.stats.clone(),
+            },
             &options,
             &progress,
         )
@@ -467,10 +493,6 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             result.stats.lightmap_height,
             result.stats.timings_s.total
         );
-    }
-    if let Some(path) = &args.stats {
-        let json = serde_json::to_vec_pretty(&result.stats)?;
-        penumbra::write::write_atomically(path, &json)?;
     }
     Ok(())
 }

@@ -138,20 +138,14 @@ impl ReferenceMap {
         }
     }
 
+    /// `mean` (H, W/m², linear RGB) as OpenEXR bytes.
+    pub fn exr_bytes(&self) -> Result<Vec<u8>> {
+        crate::write::exr_bytes(&self.mean, self.width, self.height)
+    }
+
     /// Writes `mean` (H, W/m², linear RGB) as OpenEXR, atomically.
     pub fn write_exr(&self, path: &Path) -> Result<()> {
-        let data: Vec<f32> = self
-            .mean
-            .iter()
-            .flat_map(|t| t.as_vec3().to_array())
-            .collect();
-        let img = image::Rgb32FImage::from_raw(self.width, self.height, data)
-            .ok_or_else(|| Error::Image("reference map size mismatch".into()))?;
-        let mut bytes = std::io::Cursor::new(Vec::new());
-        image::DynamicImage::ImageRgb32F(img)
-            .write_to(&mut bytes, image::ImageFormat::OpenExr)
-            .map_err(|e| Error::Image(format!("EXR encoding failed: {e}")))?;
-        crate::write::write_atomically(path, bytes.get_ref())
+        crate::files::write_atomically(path, &self.exr_bytes()?)
     }
 }
 

@@ -37,6 +37,9 @@ pub struct Stats {
     /// Discontinuity meshing counters (only with `--mesher discontinuity`).
     pub discontinuity: Option<crate::discontinuity::DmStats>,
     pub solve: crate::solve::SolveStats,
+    /// False when the indirect solve stopped on its shot limit before its tolerance (also a
+    /// warning).
+    pub converged: bool,
     pub lightmap_width: u32,
     pub lightmap_height: u32,
     pub texels_per_unit: f32,

@@ -7,8 +7,9 @@
 //! binary chunk and external images are embedded, so the output stands alone. xatlas splits
 //! vertices at chart seams, so each lightmapped primitive gets new accessors for all of its
 //! attributes, remapped through the atlas's vertex cross-reference. A mesh placed by several
-//! nodes is copied so that each placement has its own lightmap space. The file is written to a
-//! temporary file beside the output and renamed into place, so a failure never leaves a half file.
+//! nodes is copied so that each placement has its own lightmap space. The bytes are built here;
+//! [`crate::files`] writes them (temporary file, then rename), so a failure never leaves a half
+//! file.
 
 use crate::atlas::Atlas;
 use crate::error::{Error, Result};
@@ -16,7 +17,6 @@ use crate::load::Gltf;
 use crate::scene::Scene;
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
-use std::path::Path;
 
 /// The lightmap as it goes into the file.
 pub struct LightmapImage {
@@ -111,18 +111,6 @@ fn number(ct: u64, x: f64) -> Value {
     } else {
         json!(x as i64)
     }
-}
-
-/// Writes the lightmapped glb to `out` (temporary file + rename).
-pub fn glb(
-    gltf: &Gltf,
-    scene: &Scene,
-    atlas: &Atlas,
-    image: &LightmapImage,
-    out: &Path,
-) -> Result<()> {
-    let bytes = build(gltf, scene, atlas, image)?;
-    write_atomically(out, &bytes)
 }
 
 /// Builds the output glb bytes.
@@ -529,24 +517,24 @@ pub fn to_glb(root: &Value, mut bin: Vec<u8>) -> Vec<u8> {
     out
 }
 
-/// Writes `bytes` to a temporary file beside `path`, then renames it into place.
-pub fn write_atomically(path: &Path, bytes: &[u8]) -> Result<()> {
-    let err = |source| Error::Write {
-        path: path.to_path_buf(),
-        source,
-    };
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".into());
-    let tmp = dir.join(format!(".{name}.penumbra-{}.tmp", std::process::id()));
-    let result = std::fs::write(&tmp, bytes).and_then(|_| std::fs::rename(&tmp, path));
-    if result.is_err() {
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result.map_err(err)
+/// Encodes 8-bit RGB as PNG.
+pub fn png_bytes(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
+    use image::ImageEncoder;
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
+        .map_err(|e| Error::Image(format!("PNG encoding failed: {e}")))?;
+    Ok(png)
+}
+
+/// Encodes float RGB texels (row-major, `width x height`) as OpenEXR.
+pub fn exr_bytes(texels: &[glam::DVec3], width: u32, height: u32) -> Result<Vec<u8>> {
+    let data: Vec<f32> = texels.iter().flat_map(|t| t.as_vec3().to_array()).collect();
+    let img = image::Rgb32FImage::from_raw(width, height, data)
+        .ok_or_else(|| Error::Image("EXR image size mismatch".into()))?;
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    image::DynamicImage::ImageRgb32F(img)
+        .write_to(&mut bytes, image::ImageFormat::OpenExr)
+        .map_err(|e| Error::Image(format!("EXR encoding failed: {e}")))?;
+    Ok(bytes.into_inner())
 }

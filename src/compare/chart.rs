@@ -55,7 +55,7 @@ pub fn png(panels: &[Panel], columns: usize) -> Result<Vec<u8>> {
         draw(&root, panels, columns)?;
         root.present().map_err(chart_error)?;
     }
-    crate::bake::encode_png(&rgb, w, h)
+    crate::write::png_bytes(&rgb, w, h)
 }
 
 fn grid_size(n: usize, columns: usize) -> (u32, u32) {

@@ -376,5 +376,5 @@ pub fn strip(columns: &[Column], footer: &[String]) -> Result<RgbImage> {
 
 /// Encodes an RGB image as PNG.
 pub fn png(img: &RgbImage) -> Result<Vec<u8>> {
-    crate::bake::encode_png(img.as_raw(), img.width(), img.height())
+    crate::write::png_bytes(img.as_raw(), img.width(), img.height())
 }

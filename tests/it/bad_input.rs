@@ -8,12 +8,12 @@ use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-struct Run {
-    code: Option<i32>,
-    stderr: String,
+pub struct Run {
+    pub code: Option<i32>,
+    pub stderr: String,
 }
 
-fn penumbra(args: &[&std::ffi::OsStr]) -> Run {
+pub fn penumbra(args: &[&std::ffi::OsStr]) -> Run {
     let out = Command::new(env!("CARGO_BIN_EXE_penumbra"))
         .args(args)
         .output()
@@ -24,7 +24,7 @@ fn penumbra(args: &[&std::ffi::OsStr]) -> Run {
     }
 }
 
-fn bake_cli(input: &Path, output: &Path) -> Run {
+pub fn bake_cli(input: &Path, output: &Path) -> Run {
     penumbra(&[
         "bake".as_ref(),
         input.as_os_str(),
@@ -41,7 +41,7 @@ fn bake_cli(input: &Path, output: &Path) -> Run {
 
 /// Bakes `input_bytes` from a scratch dir and expects a clean failure whose message contains
 /// every one of `needles`.
-fn expect_failure(name: &str, input_bytes: Option<&[u8]>, needles: &[&str]) {
+pub fn expect_failure(name: &str, input_bytes: Option<&[u8]>, needles: &[&str]) {
     let dir = scratch(name);
     let input = dir.join("in.glb");
     if let Some(b) = input_bytes {
@@ -83,7 +83,7 @@ fn expect_failure(name: &str, input_bytes: Option<&[u8]>, needles: &[&str]) {
     let _ = std::fs::remove_dir_all(dir);
 }
 
-fn edit(bytes: &[u8], f: impl FnOnce(&mut Value, &mut Vec<u8>)) -> Vec<u8> {
+pub fn edit(bytes: &[u8], f: impl FnOnce(&mut Value, &mut Vec<u8>)) -> Vec<u8> {
     let (mut json, mut bin) = split_glb(bytes);
     f(&mut json, &mut bin);
     penumbra::write::to_glb(&json, bin)

@@ -48,8 +48,7 @@ fn gltf_with_an_external_buffer_bakes_into_a_standalone_glb() {
     let out = dir.join("out.glb");
     let b = penumbra::bake_file(
         &dir.join("cornell.gltf"),
-        &out,
-        None,
+        &penumbra::OutputFiles::glb(&out),
         &quick(),
         no_progress(),
     )
@@ -91,8 +90,7 @@ fn mirrored_node_keeps_its_front_face_and_winding() {
     std::fs::write(dir.join("in.glb"), &input).unwrap();
     penumbra::bake_file(
         &dir.join("in.glb"),
-        &dir.join("out.glb"),
-        None,
+        &penumbra::OutputFiles::glb(dir.join("out.glb")),
         &quick(),
         no_progress(),
     )
@@ -237,8 +235,7 @@ fn an_existing_texcoord_1_used_by_a_texture_moves_to_a_free_set() {
     std::fs::write(dir.join("in.glb"), &input).unwrap();
     penumbra::bake_file(
         &dir.join("in.glb"),
-        &dir.join("out.glb"),
-        None,
+        &penumbra::OutputFiles::glb(dir.join("out.glb")),
         &quick(),
         no_progress(),
     )

@@ -20,8 +20,15 @@ fn bake_to_file(input: &[u8], dir: &Path, threads: usize) -> Vec<u8> {
         .num_threads(threads)
         .build()
         .unwrap();
-    pool.install(|| penumbra::bake_file(&inp, &out, None, &quick(), no_progress()))
-        .expect("bake succeeds");
+    pool.install(|| {
+        penumbra::bake_file(
+            &inp,
+            &penumbra::OutputFiles::glb(&out),
+            &quick(),
+            no_progress(),
+        )
+    })
+    .expect("bake succeeds");
     std::fs::read(&out).unwrap()
 }
 

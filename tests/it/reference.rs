@@ -21,7 +21,13 @@ fn baked(bytes: &[u8], name: &str) -> Gltf {
         resolution: Some(64),
         ..Default::default()
     };
-    penumbra::bake_file(&input, &output, None, &options, no_progress()).expect("bake succeeds");
+    penumbra::bake_file(
+        &input,
+        &penumbra::OutputFiles::glb(&output),
+        &options,
+        no_progress(),
+    )
+    .expect("bake succeeds");
     load::read(&output).expect("baked file reads")
 }
 

@@ -1,0 +1,295 @@
+//! Checks of the glTF JSON that must hold before the `gltf` crate sees it.
+//!
+//! `gltf-json` (1.4) indexes `accessors` with a primitive's `POSITION` value while validating,
+//! without a bounds check, and our writer edits the JSON by the indices it finds there; both
+//! panic on an index past the end of its array. So every index field of the core specification
+//! (and of `KHR_lights_punctual`) is checked here first: an unsigned integer, at most
+//! `u32::MAX`, and less than the length of the array it points into. Each error names the item
+//! (`meshes[0].primitives[1].attributes.POSITION`) and the array.
+
+use serde_json::Value;
+
+/// A problem found: the item's JSON path, and what is wrong with it.
+pub struct Invalid {
+    pub item: String,
+    pub reason: String,
+}
+
+/// Checks every index of `root` against the array it points into.
+pub fn indices(root: &Value) -> Result<(), Invalid> {
+    let len = |key: &str| root.get(key).and_then(Value::as_array).map_or(0, Vec::len);
+    let lights = root
+        .pointer("/extensions/KHR_lights_punctual/lights")
+        .and_then(Value::as_array)
+        .map_or(0, Vec::len);
+    let mut c = Checker { errors: None };
+
+    c.index(root.get("scene"), "scene", "scenes", len("scenes"));
+    for (i, scene) in items(root, "scenes") {
+        for (k, n) in items(scene, "nodes") {
+            c.index(
+                Some(n),
+                &format!("scenes[{i}].nodes[{k}]"),
+                "nodes",
+                len("nodes"),
+            );
+        }
+    }
+    for (i, node) in items(root, "nodes") {
+        let at = format!("nodes[{i}]");
+        for (k, n) in items(node, "children") {
+            c.index(
+                Some(n),
+                &format!("{at}.children[{k}]"),
+                "nodes",
+                len("nodes"),
+            );
+        }
+        c.index(
+            node.get("mesh"),
+            &format!("{at}.mesh"),
+            "meshes",
+            len("meshes"),
+        );
+        c.index(
+            node.get("skin"),
+            &format!("{at}.skin"),
+            "skins",
+            len("skins"),
+        );
+        c.index(
+            node.get("camera"),
+            &format!("{at}.camera"),
+            "cameras",
+            len("cameras"),
+        );
+        c.index(
+            node.pointer("/extensions/KHR_lights_punctual/light"),
+            &format!("{at}.extensions.KHR_lights_punctual.light"),
+            "KHR_lights_punctual lights",
+            lights,
+        );
+    }
+    for (i, mesh) in items(root, "meshes") {
+        for (p, prim) in items(mesh, "primitives") {
+            let at = format!("meshes[{i}].primitives[{p}]");
+            if let Some(attrs) = prim.get("attributes").and_then(Value::as_object) {
+                for (name, a) in attrs {
+                    let item = format!("{at}.attributes.{name}");
+                    c.index(Some(a), &item, "accessors", len("accessors"));
+                }
+            }
+            c.index(
+                prim.get("indices"),
+                &format!("{at}.indices"),
+                "accessors",
+                len("accessors"),
+            );
+            let item = format!("{at}.material");
+            c.index(prim.get("material"), &item, "materials", len("materials"));
+            for (t, target) in items(prim, "targets") {
+                if let Some(attrs) = target.as_object() {
+                    for (name, a) in attrs {
+                        let item = format!("{at}.targets[{t}].{name}");
+                        c.index(Some(a), &item, "accessors", len("accessors"));
+                    }
+                }
+            }
+        }
+    }
+    for (i, acc) in items(root, "accessors") {
+        let at = format!("accessors[{i}]");
+        let views = len("bufferViews");
+        c.index(
+            acc.get("bufferView"),
+            &format!("{at}.bufferView"),
+            "bufferViews",
+            views,
+        );
+        for part in ["indices", "values"] {
+            c.index(
+                acc.pointer(&format!("/sparse/{part}/bufferView")),
+                &format!("{at}.sparse.{part}.bufferView"),
+                "bufferViews",
+                views,
+            );
+        }
+    }
+    for (i, view) in items(root, "bufferViews") {
+        let item = format!("bufferViews[{i}].buffer");
+        c.index(view.get("buffer"), &item, "buffers", len("buffers"));
+    }
+    for (i, image) in items(root, "images") {
+        let item = format!("images[{i}].bufferView");
+        c.index(
+            image.get("bufferView"),
+            &item,
+            "bufferViews",
+            len("bufferViews"),
+        );
+    }
+    for (i, tex) in items(root, "textures") {
+        let at = format!("textures[{i}]");
+        c.index(
+            tex.get("sampler"),
+            &format!("{at}.sampler"),
+            "samplers",
+            len("samplers"),
+        );
+        c.index(
+            tex.get("source"),
+            &format!("{at}.source"),
+            "images",
+            len("images"),
+        );
+    }
+    for (i, mat) in items(root, "materials") {
+        for path in [
+            "/pbrMetallicRoughness/baseColorTexture",
+            "/pbrMetallicRoughness/metallicRoughnessTexture",
+            "/normalTexture",
+            "/occlusionTexture",
+            "/emissiveTexture",
+        ] {
+            if let Some(info) = mat.pointer(path) {
+                let at = format!("materials[{i}]{}", path.replace('/', "."));
+                c.index(
+                    info.get("index"),
+                    &format!("{at}.index"),
+                    "textures",
+                    len("textures"),
+                );
+                // A texture coordinate set: any u32 parses, but the writer renumbers sets.
+                c.index(
+                    info.get("texCoord"),
+                    &format!("{at}.texCoord"),
+                    "TEXCOORD sets",
+                    64,
+                );
+            }
+        }
+    }
+    for (i, skin) in items(root, "skins") {
+        let at = format!("skins[{i}]");
+        let item = format!("{at}.inverseBindMatrices");
+        c.index(
+            skin.get("inverseBindMatrices"),
+            &item,
+            "accessors",
+            len("accessors"),
+        );
+        c.index(
+            skin.get("skeleton"),
+            &format!("{at}.skeleton"),
+            "nodes",
+            len("nodes"),
+        );
+        for (k, j) in items(skin, "joints") {
+            c.index(Some(j), &format!("{at}.joints[{k}]"), "nodes", len("nodes"));
+        }
+    }
+    for (i, anim) in items(root, "animations") {
+        let at = format!("animations[{i}]");
+        let samplers = anim
+            .get("samplers")
+            .and_then(Value::as_array)
+            .map_or(0, Vec::len);
+        for (k, ch) in items(anim, "channels") {
+            let item = format!("{at}.channels[{k}].sampler");
+            c.index(ch.get("sampler"), &item, "animation samplers", samplers);
+            let item = format!("{at}.channels[{k}].target.node");
+            c.index(ch.pointer("/target/node"), &item, "nodes", len("nodes"));
+        }
+        for (k, s) in items(anim, "samplers") {
+            for key in ["input", "output"] {
+                let item = format!("{at}.samplers[{k}].{key}");
+                c.index(s.get(key), &item, "accessors", len("accessors"));
+            }
+        }
+    }
+    match c.errors {
+        Some(e) => Err(e),
+        None => Ok(()),
+    }
+}
+
+/// The elements of `value[key]` with their positions (none when it is not an array).
+fn items<'a>(value: &'a Value, key: &str) -> impl Iterator<Item = (usize, &'a Value)> {
+    value
+        .get(key)
+        .and_then(Value::as_array)
+        .into_iter()
+        .flatten()
+        .enumerate()
+}
+
+/// Keeps the first problem found.
+struct Checker {
+    errors: Option<Invalid>,
+}
+
+impl Checker {
+    /// `value`, if present, must index an array of `len` elements (`what` names it).
+    fn index(&mut self, value: Option<&Value>, item: &str, what: &str, len: usize) {
+        let Some(v) = value else { return };
+        if self.errors.is_some() {
+            return;
+        }
+        let reason = match v.as_u64() {
+            Some(i) if i > u64::from(u32::MAX) => format!("index {i} is larger than 2^32 - 1"),
+            Some(i) if i as usize >= len => {
+                format!("index {i} is out of range ({len} {what})")
+            }
+            Some(_) => return,
+            None => format!("{v} is not an index (a non-negative integer)"),
+        };
+        self.errors = Some(Invalid {
+            item: item.to_string(),
+            reason,
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use serde_json::json;
+
+    fn check(v: Value) -> Option<String> {
+        indices(&v)
+            .err()
+            .map(|e| format!("{}: {}", e.item, e.reason))
+    }
+
+    #[test]
+    fn every_index_is_checked_against_its_array() {
+        let ok = json!({
+            "scene": 0, "scenes": [{"nodes": [0]}],
+            "nodes": [{"mesh": 0}],
+            "meshes": [{"primitives": [{"attributes": {"POSITION": 0}, "material": 0}]}],
+            "materials": [{}], "accessors": [{"bufferView": 0}],
+            "bufferViews": [{"buffer": 0}], "buffers": [{}]
+        });
+        assert_eq!(check(ok.clone()), None);
+        let mut v = ok.clone();
+        v["meshes"][0]["primitives"][0]["attributes"]["POSITION"] = json!(99);
+        assert_eq!(
+            check(v).as_deref(),
+            Some(
+                "meshes[0].primitives[0].attributes.POSITION: index 99 is out of range (1 accessors)"
+            )
+        );
+        let mut v = ok.clone();
+        v.as_object_mut().unwrap().remove("accessors");
+        assert!(check(v).unwrap().contains("(0 accessors)"));
+        let mut v = ok.clone();
+        v["meshes"][0]["primitives"][0]["material"] = json!(9223372036854775808u64);
+        assert!(check(v).unwrap().contains("larger than 2^32 - 1"));
+        let mut v = ok.clone();
+        v["meshes"][0]["primitives"][0]["material"] = json!(-1);
+        assert!(check(v).unwrap().contains("not an index"));
+        let mut v = ok;
+        v["bufferViews"][0]["buffer"] = json!(1.5);
+        assert!(check(v).unwrap().starts_with("bufferViews[0].buffer"));
+    }
+}
