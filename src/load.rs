@@ -68,7 +68,7 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
         // The writer edits this object in place.
         return Err(not_gltf("the JSON root is not an object".into()));
     }
-    validate::indices(&json).map_err(|e| Error::BadItem {
+    validate::check(&json).map_err(|e| Error::BadItem {
         path: path.to_path_buf(),
         item: e.item,
         reason: e.reason,

@@ -1,5 +1,12 @@
 //! Checks of the glTF JSON that must hold before the `gltf` crate sees it.
 //!
+//! **Shapes.** serde accepts a JSON array where a struct is expected (as a sequence of its
+//! fields), so `"materials": [[]]` parses, and the writer, which edits the JSON in place, would
+//! then find an array where it adds `extensions`. So every element of the top-level arrays,
+//! every primitive, and every member that the specification defines as an object
+//! (`extensions`, `pbrMetallicRoughness`, texture infos, `attributes`, ...) must be an object.
+//!
+//! **Indices.**
 //! `gltf-json` (1.4) indexes `accessors` with a primitive's `POSITION` value while validating,
 //! without a bounds check, and our writer edits the JSON by the indices it finds there; both
 //! panic on an index past the end of its array. So every index field of the core specification
@@ -15,8 +22,104 @@ pub struct Invalid {
     pub reason: String,
 }
 
+/// Top-level arrays whose elements are objects.
+const OBJECT_ARRAYS: [&str; 13] = [
+    "accessors",
+    "animations",
+    "buffers",
+    "bufferViews",
+    "cameras",
+    "images",
+    "materials",
+    "meshes",
+    "nodes",
+    "samplers",
+    "scenes",
+    "skins",
+    "textures",
+];
+
+/// Members that are objects wherever they appear.
+const OBJECT_MEMBERS: [&str; 13] = [
+    "asset",
+    "extensions",
+    "pbrMetallicRoughness",
+    "baseColorTexture",
+    "metallicRoughnessTexture",
+    "normalTexture",
+    "occlusionTexture",
+    "emissiveTexture",
+    "attributes",
+    "sparse",
+    "perspective",
+    "orthographic",
+    "KHR_lights_punctual",
+];
+
+/// Checks the shapes, then every index of `root` against the array it points into.
+pub fn check(root: &Value) -> Result<(), Invalid> {
+    shapes(root, &mut String::new())?;
+    for key in OBJECT_ARRAYS {
+        for (i, v) in items(root, key) {
+            if !v.is_object() {
+                return Err(not_object(&format!("{key}[{i}]"), v));
+            }
+        }
+    }
+    for (i, mesh) in items(root, "meshes") {
+        for (p, prim) in items(mesh, "primitives") {
+            if !prim.is_object() {
+                return Err(not_object(&format!("meshes[{i}].primitives[{p}]"), prim));
+            }
+        }
+    }
+    indices(root)
+}
+
+fn not_object(item: &str, v: &Value) -> Invalid {
+    let found = match v {
+        Value::Array(_) => "an array",
+        Value::String(_) => "a string",
+        Value::Number(_) => "a number",
+        Value::Bool(_) => "a boolean",
+        Value::Null => "null",
+        Value::Object(_) => "an object",
+    };
+    Invalid {
+        item: item.to_string(),
+        reason: format!("must be a JSON object, found {found}"),
+    }
+}
+
+/// [`OBJECT_MEMBERS`] anywhere in the tree; `at` is the path so far.
+fn shapes(v: &Value, at: &mut String) -> Result<(), Invalid> {
+    let len = at.len();
+    match v {
+        Value::Object(m) => {
+            for (k, x) in m {
+                at.push_str(if at.is_empty() { "" } else { "." });
+                at.push_str(k);
+                if OBJECT_MEMBERS.contains(&k.as_str()) && !x.is_object() {
+                    return Err(not_object(at, x));
+                }
+                shapes(x, at)?;
+                at.truncate(len);
+            }
+        }
+        Value::Array(a) => {
+            for (i, x) in a.iter().enumerate() {
+                at.push_str(&format!("[{i}]"));
+                shapes(x, at)?;
+                at.truncate(len);
+            }
+        }
+        _ => {}
+    }
+    Ok(())
+}
+
 /// Checks every index of `root` against the array it points into.
-pub fn indices(root: &Value) -> Result<(), Invalid> {
+fn indices(root: &Value) -> Result<(), Invalid> {
     let len = |key: &str| root.get(key).and_then(Value::as_array).map_or(0, Vec::len);
     let lights = root
         .pointer("/extensions/KHR_lights_punctual/lights")
@@ -288,8 +391,21 @@ mod tests {
         let mut v = ok.clone();
         v["meshes"][0]["primitives"][0]["material"] = json!(-1);
         assert!(check(v).unwrap().contains("not an index"));
-        let mut v = ok;
+        let mut v = ok.clone();
         v["bufferViews"][0]["buffer"] = json!(1.5);
         assert!(check(v).unwrap().starts_with("bufferViews[0].buffer"));
+        // Shapes: an array where an object belongs parses with serde, so it is refused here.
+        let mut v = ok.clone();
+        v["materials"][0] = json!([]);
+        assert_eq!(
+            check(v).as_deref(),
+            Some("materials[0]: must be a JSON object, found an array")
+        );
+        let mut v = ok;
+        v["materials"][0]["extensions"] = json!([1]);
+        assert_eq!(
+            check(v).as_deref(),
+            Some("materials[0].extensions: must be a JSON object, found an array")
+        );
     }
 }

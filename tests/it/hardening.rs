@@ -248,7 +248,7 @@ fn errors_say_things_once() {
     ]);
     assert_eq!(run.code, Some(1), "{}", run.stderr);
     assert_eq!(run.stderr.matches("in.glb").count(), 1, "{}", run.stderr);
-    assert_eq!(run.stderr.matches("padding").count(), 1, "{}", run.stderr);
+    assert_eq!(run.stderr.matches("no room").count(), 1, "{}", run.stderr);
     let bad = edit(&fixtures::box_on_floor(), |j, _| {
         let view = j["accessors"][position(j, 1)]["bufferView"]
             .as_u64()
