@@ -258,16 +258,20 @@ mod tests {
         let hard = dir.join("hard.glb");
         std::fs::hard_link(&input, &hard).unwrap();
         for out in [&input, &dotted, &link, &hard] {
-            let e = check_outputs(&[input.clone()], &[("OUT", out)]).unwrap_err();
+            let e = check_outputs(std::slice::from_ref(&input), &[("OUT", out)]).unwrap_err();
             assert!(e.to_string().contains("never overwrites its input"), "{e}");
         }
         let fine = dir.join("out.glb");
         assert_eq!(
-            check_outputs(&[input.clone()], &[("OUT", &fine)]).unwrap(),
+            check_outputs(std::slice::from_ref(&input), &[("OUT", &fine)]).unwrap(),
             vec![fine.clone()]
         );
         // Two outputs naming one file, existing or not.
-        let e = check_outputs(&[input.clone()], &[("OUT", &fine), ("--exr", &fine)]).unwrap_err();
+        let e = check_outputs(
+            std::slice::from_ref(&input),
+            &[("OUT", &fine), ("--exr", &fine)],
+        )
+        .unwrap_err();
         assert!(e.to_string().contains("also the OUT output"), "{e}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
