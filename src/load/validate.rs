@@ -359,7 +359,7 @@ mod tests {
     use serde_json::json;
 
     fn check(v: Value) -> Option<String> {
-        indices(&v)
+        super::check(&v)
             .err()
             .map(|e| format!("{}: {}", e.item, e.reason))
     }
