@@ -25,8 +25,12 @@ use std::f64::consts::PI;
 /// winding. Dimensionless. A polygon entirely above the horizon is summed as it is, without the
 /// clipping's copy (the same value).
 pub fn point_polygon_form_factor(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
-    // `!(h >= 0)` also sends a NaN corner through the clipping, which drops it.
-    if poly.iter().any(|v| !(n.dot(*v - p) >= 0.0)) {
+    // A NaN corner goes through the clipping too, which drops it.
+    let below = |v: &DVec3| {
+        let h = n.dot(*v - p);
+        h < 0.0 || h.is_nan()
+    };
+    if poly.iter().any(below) {
         contour_form_factor(p, n, &clip_to_horizon(poly, p, n))
     } else {
         contour_form_factor(p, n, poly)

@@ -19,11 +19,12 @@
 //! channel. `B = M + rho H`. Everything is deterministic: fixed sample patterns, and every
 //! parallel loop writes its own output slot.
 //!
-//! One solver per file: [`direct`] (the direct light at the vertices), [`progressive`] (the
-//! indirect light: patches, progressive refinement, final gather) and [`gauss_seidel`] (a
-//! matrix solve of the same patch system, the test oracle). [`radiosity`] is the entry point.
-//! The shared physics (form factors, emitters, the punctual light model) is in
-//! [`crate::geometry`] and [`crate::light`].
+//! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
+//! indirect light: patches, progressive refinement, final gather) and `gauss_seidel.rs` (a
+//! matrix solve of the same patch system, the test oracle). [`radiosity`] is the entry point:
+//! the direct light, then the indirect solver (another indirect solver goes in a file of its
+//! own beside `progressive.rs`, chosen there). The shared physics (form factors, emitters, the
+//! punctual light model) is in [`crate::geometry`] and [`crate::light`].
 
 pub mod direct;
 pub mod gauss_seidel;
