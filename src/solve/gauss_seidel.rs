@@ -7,7 +7,7 @@ use glam::DVec3;
 
 /// Gauss-Seidel on the full patch system `B_i = E_i + rho_i sum_j K_ij B_j`, where `E_i` is the
 /// reflected direct light and `K_ij` the point-to-patch form factor at patch `i`'s centroid;
-/// returns each patch's irradiance like [`progressive`]. Quadratic memory: for small scenes and
+/// returns each patch's irradiance like [`progressive`](super::progressive::progressive). Quadratic memory: for small scenes and
 /// tests.
 pub fn gauss_seidel(
     vis: &Visibility,
