@@ -29,315 +29,17 @@
 //!
 //! All geometry is f64. Lengths in scene units; form factors are dimensionless.
 
-use crate::scene::{Frame, Scene};
-use crate::solve::point_polygon_form_factor;
+use crate::geometry::{clip_polygon_to_plane, contour_sum, signed_area};
+use crate::scene::Scene;
 use glam::{DVec2, DVec3};
-use std::collections::BTreeMap;
+
+// The convex decomposition and the emitter shape live in the shared modules; re-exported here
+// because the backprojection is where they are used.
+pub use crate::geometry::{convex_hull, convex_pieces};
+pub use crate::light::EmitterShape;
 
 // ---------------------------------------------------------------------------------------------
-// Convex decomposition
-
-/// Merges a triangulated planar polygon into convex pieces (Hertel-Mehlhorn): two pieces that
-/// share a whole edge are merged when their union is convex; shared edges are visited in a fixed
-/// order, so the result is deterministic.
-///
-/// `tris` are the triangles in plane coordinates; corners are matched by their exact
-/// coordinates. Returns each piece as a counter-clockwise list of corner references `3 t + k`
-/// (corner `k` of triangle `t`), and the piece each triangle went into (`usize::MAX` for a
-/// degenerate triangle, which is left out). Vertices where a piece's boundary runs straight on
-/// are removed.
-pub fn convex_pieces(tris: &[[DVec2; 3]]) -> (Vec<Vec<usize>>, Vec<usize>) {
-    // -0.0 and 0.0 are the same point.
-    let key = |q: DVec2| [(q.x + 0.0).to_bits(), (q.y + 0.0).to_bits()];
-    let corner = |c: usize| tris[c / 3][c % 3];
-    let mut pieces: Vec<Vec<usize>> = tris
-        .iter()
-        .enumerate()
-        .map(|(t, tri)| {
-            let area2 = (tri[1] - tri[0]).perp_dot(tri[2] - tri[0]);
-            if area2 > 0.0 {
-                vec![3 * t, 3 * t + 1, 3 * t + 2]
-            } else if area2 < 0.0 {
-                vec![3 * t, 3 * t + 2, 3 * t + 1]
-            } else {
-                Vec::new()
-            }
-        })
-        .collect();
-    fn find(parent: &mut [usize], mut i: usize) -> usize {
-        while parent[i] != i {
-            parent[i] = parent[parent[i]];
-            i = parent[i];
-        }
-        i
-    }
-    // Piece slots are indexed like the triangles; a merged piece lives in one slot and the
-    // union-find sends the others there. Passes repeat until nothing merges: after a pass,
-    // straight-on vertices are dropped, so strips of a grid then share whole edges.
-    let mut parent: Vec<usize> = (0..pieces.len()).collect();
-    loop {
-        let mut edges: BTreeMap<([u64; 2], [u64; 2]), Vec<usize>> = BTreeMap::new();
-        for (t, piece) in pieces.iter().enumerate() {
-            for i in 0..piece.len() {
-                let (a, b) = (
-                    key(corner(piece[i])),
-                    key(corner(piece[(i + 1) % piece.len()])),
-                );
-                if a != b {
-                    edges.entry((a.min(b), a.max(b))).or_default().push(t);
-                }
-            }
-        }
-        let mut merged_any = false;
-        for ((ka, kb), owners) in &edges {
-            if owners.len() != 2 {
-                continue;
-            }
-            let (i, j) = (find(&mut parent, owners[0]), find(&mut parent, owners[1]));
-            if i == j {
-                continue;
-            }
-            if let Some(merged) = merge_convex(&pieces[i], &pieces[j], *ka, *kb, &key, &corner) {
-                pieces[i] = merged;
-                pieces[j].clear();
-                parent[j] = i;
-                merged_any = true;
-            }
-        }
-        for p in &mut pieces {
-            if !p.is_empty() {
-                *p = drop_straight_vertices(std::mem::take(p), &corner);
-                if p.len() < 3 {
-                    p.clear();
-                }
-            }
-        }
-        if !merged_any {
-            break;
-        }
-    }
-    let mut index = vec![usize::MAX; pieces.len()];
-    let mut out = Vec::new();
-    for (i, p) in pieces.into_iter().enumerate() {
-        if p.len() >= 3 {
-            index[i] = out.len();
-            out.push(p);
-        }
-    }
-    let owner = (0..tris.len())
-        .map(|t| {
-            let root = find(&mut parent, t);
-            index[root]
-        })
-        .collect();
-    (out, owner)
-}
-
-/// The union of two counter-clockwise convex pieces sharing the edge `{ka, kb}`, if convex.
-fn merge_convex(
-    p: &[usize],
-    q: &[usize],
-    ka: [u64; 2],
-    kb: [u64; 2],
-    key: &dyn Fn(DVec2) -> [u64; 2],
-    corner: &dyn Fn(usize) -> DVec2,
-) -> Option<Vec<usize>> {
-    let (np, nq) = (p.len(), q.len());
-    // In p the edge runs x -> y; in q it runs y -> x.
-    let s = (0..np).find(|&s| {
-        let (a, b) = (key(corner(p[s])), key(corner(p[(s + 1) % np])));
-        (a == ka && b == kb) || (a == kb && b == ka)
-    })?;
-    let (x, y) = (key(corner(p[s])), key(corner(p[(s + 1) % np])));
-    let r = (0..nq).find(|&r| key(corner(q[r])) == y && key(corner(q[(r + 1) % nq])) == x)?;
-    let convex_at = |prev: DVec2, at: DVec2, next: DVec2| {
-        let (e1, e2) = (at - prev, next - at);
-        e1.perp_dot(e2) >= -1e-12 * e1.length() * e2.length()
-    };
-    let (px, py) = (corner(p[s]), corner(p[(s + 1) % np]));
-    if !convex_at(corner(p[(s + np - 1) % np]), px, corner(q[(r + 2) % nq]))
-        || !convex_at(corner(q[(r + nq - 1) % nq]), py, corner(p[(s + 2) % np]))
-    {
-        return None;
-    }
-    let mut merged = Vec::with_capacity(np + nq - 2);
-    merged.extend((0..np).map(|k| p[(s + 1 + k) % np]));
-    merged.extend((0..nq - 2).map(|k| q[(r + 2 + k) % nq]));
-    Some(merged)
-}
-
-/// Removes vertices where the boundary goes straight on (or doubles back onto itself).
-fn drop_straight_vertices(mut p: Vec<usize>, corner: &dyn Fn(usize) -> DVec2) -> Vec<usize> {
-    let mut k = 0;
-    while p.len() >= 3 && k < p.len() {
-        let n = p.len();
-        let (a, b, c) = (
-            corner(p[(k + n - 1) % n]),
-            corner(p[k]),
-            corner(p[(k + 1) % n]),
-        );
-        let (e1, e2) = (b - a, c - b);
-        if b == a || e1.perp_dot(e2).abs() <= 1e-12 * e1.length() * e2.length() {
-            p.remove(k);
-            k = k.saturating_sub(1);
-        } else {
-            k += 1;
-        }
-    }
-    p
-}
-
-/// Convex hull of 2D points, counter-clockwise, without collinear points (Andrew's monotone
-/// chain). Fewer than three points (or all collinear) give what is left of the chain.
-pub fn convex_hull(points: &[DVec2]) -> Vec<DVec2> {
-    let mut pts = points.to_vec();
-    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
-    pts.dedup();
-    if pts.len() < 3 {
-        return pts;
-    }
-    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
-    // Lower chain left to right, then upper chain right to left.
-    let chain = |iter: &mut dyn Iterator<Item = DVec2>| {
-        let mut c: Vec<DVec2> = Vec::new();
-        for q in iter {
-            while c.len() >= 2 && cross(c[c.len() - 2], c[c.len() - 1], q) <= 0.0 {
-                c.pop();
-            }
-            c.push(q);
-        }
-        c.pop();
-        c
-    };
-    let mut hull = chain(&mut pts.iter().copied());
-    hull.extend(chain(&mut pts.iter().rev().copied()));
-    hull
-}
-
-fn signed_area(poly: &[DVec2]) -> f64 {
-    if poly.len() < 3 {
-        return 0.0;
-    }
-    let o = poly[0];
-    let mut a = 0.0;
-    for i in 1..poly.len() - 1 {
-        a += (poly[i] - o).perp_dot(poly[i + 1] - o);
-    }
-    0.5 * a
-}
-
-// ---------------------------------------------------------------------------------------------
-// Emitters and occluders
-
-/// A planar area emitter prepared for backprojection: its convex pieces in its own plane frame.
-#[derive(Clone, Debug)]
-pub struct EmitterShape {
-    /// The emitter's plane; `frame.n` is the emitting (front) side.
-    pub frame: Frame,
-    /// Convex pieces, counter-clockwise in `frame` coordinates (seen from the front).
-    pub pieces: Vec<Vec<DVec2>>,
-    /// The pieces in world space.
-    pub pieces_world: Vec<Vec<DVec3>>,
-    /// Convex hull of all pieces, counter-clockwise.
-    pub hull: Vec<DVec2>,
-    /// Area, scene units².
-    pub area: f64,
-    /// Diameter of the hull's bounding box: the length scale of the emitter's tolerances.
-    pub size: f64,
-}
-
-impl EmitterShape {
-    /// From the triangles of a planar polygon, in the plane coordinates of `frame`.
-    pub fn new(frame: Frame, triangles_plane: &[[DVec2; 3]]) -> EmitterShape {
-        let pieces: Vec<Vec<DVec2>> = convex_pieces(triangles_plane)
-            .0
-            .into_iter()
-            .map(|p| {
-                p.into_iter()
-                    .map(|c| triangles_plane[c / 3][c % 3])
-                    .collect()
-            })
-            .collect();
-        let all: Vec<DVec2> = pieces.iter().flatten().copied().collect();
-        let hull = convex_hull(&all);
-        let (lo, hi) = all.iter().fold(
-            (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
-            |(lo, hi), q| (lo.min(*q), hi.max(*q)),
-        );
-        EmitterShape {
-            frame,
-            area: pieces.iter().map(|p| signed_area(p)).sum(),
-            pieces_world: pieces
-                .iter()
-                .map(|p| p.iter().map(|q| frame.world_from_plane(*q)).collect())
-                .collect(),
-            pieces,
-            hull,
-            size: if all.is_empty() {
-                0.0
-            } else {
-                (hi - lo).length()
-            },
-        }
-    }
-
-    /// A convex polygon given by its world-space corners, counter-clockwise seen from the side
-    /// it emits to.
-    pub fn convex(corners: &[DVec3]) -> EmitterShape {
-        // Newell's normal: the winding's area vector.
-        let mut normal = DVec3::ZERO;
-        for i in 0..corners.len() {
-            normal += corners[i].cross(corners[(i + 1) % corners.len()]);
-        }
-        let frame = Frame::new(corners[0], normal, corners[1] - corners[0]);
-        let q: Vec<DVec2> = corners.iter().map(|c| frame.plane_from_world(*c)).collect();
-        let tris: Vec<[DVec2; 3]> = (1..q.len() - 1).map(|i| [q[0], q[i], q[i + 1]]).collect();
-        EmitterShape::new(frame, &tris)
-    }
-
-    /// Occluders no farther than this in front of the emitter's plane (scene units) are taken
-    /// to lie in it, and never block it.
-    pub fn plane_tolerance(&self) -> f64 {
-        1e-9 * self.size
-    }
-
-    /// The hull's corners in world space.
-    pub fn hull_world(&self) -> Vec<DVec3> {
-        self.hull
-            .iter()
-            .map(|q| self.frame.world_from_plane(*q))
-            .collect()
-    }
-
-    /// Unoccluded form factor from `(p, n)` to the emitter's front face (Lambert's contour
-    /// formula over the pieces, clipped to the horizon of `p`).
-    pub fn form_factor(&self, p: DVec3, n: DVec3) -> f64 {
-        if self.frame.n.dot(p - self.frame.origin) <= 0.0 {
-            return 0.0;
-        }
-        self.pieces_world
-            .iter()
-            .map(|piece| {
-                // Entirely above the horizon: the contour sum as is, without the clipping's
-                // copy (the same value as `point_polygon_form_factor`).
-                let (mut reach, mut height, mut below) = (0.0f64, 0.0f64, false);
-                for v in piece {
-                    let h = n.dot(*v - p);
-                    below |= h < 0.0;
-                    height = height.max(h);
-                    reach = reach.max((*v - p).length());
-                }
-                if below {
-                    point_polygon_form_factor(p, n, piece)
-                } else if height <= 1e-9 * reach {
-                    0.0
-                } else {
-                    contour_sum(p, n, piece).abs() / (2.0 * std::f64::consts::PI)
-                }
-            })
-            .sum()
-    }
-}
+// Occluders
 
 /// One convex piece of a scene polygon, as an occluder.
 #[derive(Clone, Debug)]
@@ -565,23 +267,6 @@ pub struct Scratch {
     hull_world: Vec<DVec3>,
 }
 
-/// Clips a 3D polygon to `n·(x - o) >= 0` (Sutherland-Hodgman).
-fn clip3(poly: &[DVec3], n: DVec3, o: DVec3, out: &mut Vec<DVec3>) {
-    out.clear();
-    let len = poly.len();
-    for i in 0..len {
-        let (a, b) = (poly[i], poly[(i + 1) % len]);
-        let (da, db) = (n.dot(a - o), n.dot(b - o));
-        if da >= 0.0 {
-            out.push(a);
-        }
-        if (da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0) {
-            out.push(a + (b - a) * (da / (da - db)));
-        }
-    }
-}
-
-/// Splits convex `poly` by the signed distances `s` (already snapped to 0 within tolerance)
 /// into its parts with `s <= 0` (`outside`) and `s >= 0` (`inside`).
 fn split2(poly: &[DVec2], s: &[f64], outside: &mut Vec<DVec2>, inside: &mut Vec<DVec2>) {
     outside.clear();
@@ -671,24 +356,6 @@ fn subtract(
         }
     }
     // What is left lies inside q: hidden.
-}
-
-/// Lambert's contour sum `sum_i gamma_i n·unit(r_i x r_(i+1))` of a polygon above the horizon
-/// of `p` (no clipping), signed by its winding; `F` is its absolute value over `2 pi`.
-fn contour_sum(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
-    let mut sum = 0.0;
-    for i in 0..poly.len() {
-        let a = poly[i] - p;
-        let b = poly[(i + 1) % poly.len()] - p;
-        let c = a.cross(b);
-        let cl = c.length();
-        if cl <= 0.0 {
-            continue;
-        }
-        // atan2 keeps the angle accurate for tiny and near-straight angles.
-        sum += cl.atan2(a.dot(b)) * n.dot(c) / cl;
-    }
-    sum
 }
 
 /// The form factor from `(p, n)` to the part of `emitter` that the polygons `occluders` leave
@@ -819,7 +486,7 @@ impl Scratch {
                     break;
                 }
                 if any_out {
-                    clip3(&self.buf_a, *m, *o, &mut self.buf_b);
+                    clip_polygon_to_plane(&self.buf_a, *m, *o, &mut self.buf_b);
                     std::mem::swap(&mut self.buf_a, &mut self.buf_b);
                     if self.buf_a.len() < 3 {
                         break;
@@ -930,58 +597,7 @@ impl Scratch {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    fn square_tris(n: usize) -> Vec<[DVec2; 3]> {
-        // An n x n grid of the unit square, two triangles per cell.
-        let mut out = Vec::new();
-        let h = 1.0 / n as f64;
-        for i in 0..n {
-            for j in 0..n {
-                let a = DVec2::new(i as f64 * h, j as f64 * h);
-                let b = a + DVec2::new(h, 0.0);
-                let c = a + DVec2::new(h, h);
-                let d = a + DVec2::new(0.0, h);
-                out.push([a, b, c]);
-                out.push([a, c, d]);
-            }
-        }
-        out
-    }
-
-    #[test]
-    fn tessellated_square_merges_into_one_piece() {
-        let tris = square_tris(8);
-        let (pieces, owner) = convex_pieces(&tris);
-        assert!(owner.iter().all(|&k| k < pieces.len()));
-        assert_eq!(pieces.len(), 1, "{pieces:?}");
-        let q: Vec<DVec2> = pieces[0].iter().map(|&c| tris[c / 3][c % 3]).collect();
-        assert_eq!(q.len(), 4);
-        assert!((signed_area(&q) - 1.0).abs() < 1e-12);
-    }
-
-    #[test]
-    fn l_shape_gives_convex_pieces_covering_it() {
-        // An L of three unit squares.
-        let mut tris = Vec::new();
-        for (x, y) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)] {
-            let a = DVec2::new(x, y);
-            tris.push([a, a + DVec2::X, a + DVec2::ONE]);
-            tris.push([a, a + DVec2::ONE, a + DVec2::Y]);
-        }
-        let (pieces, owner) = convex_pieces(&tris);
-        assert!(owner.iter().all(|&k| k < pieces.len()));
-        assert!(pieces.len() == 2, "{pieces:?}");
-        let mut total = 0.0;
-        for p in &pieces {
-            let q: Vec<DVec2> = p.iter().map(|&c| tris[c / 3][c % 3]).collect();
-            for i in 0..q.len() {
-                let (a, b, c) = (q[i], q[(i + 1) % q.len()], q[(i + 2) % q.len()]);
-                assert!((b - a).perp_dot(c - b) > 0.0, "not strictly convex: {q:?}");
-            }
-            total += signed_area(&q);
-        }
-        assert!((total - 3.0).abs() < 1e-12);
-    }
+    use crate::geometry::point_polygon_form_factor;
 
     #[test]
     fn subtracting_keeps_the_area_outside() {

@@ -18,6 +18,8 @@
 //! unoccluded irradiance that the wedge's emitter carries at the piece; pieces under the
 //! threshold are dropped, and the weakest go first when the element budget would be exceeded.
 
+use crate::geometry::point_polygon_form_factor;
+use crate::light::{luminance, punctual_unoccluded};
 use crate::scene::{LightKind, Scene};
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3, Vec3A};
@@ -928,9 +930,10 @@ fn closest_on_line(p: DVec3, q: DVec3, c: DVec3, d: DVec3) -> DVec3 {
     c + v * s.clamp(0.0, 1.0)
 }
 
-/// Unoccluded irradiance (luminance, W/m²) that `light` gives at `p` with normal `n`.
+/// Unoccluded irradiance (luminance, W/m²) that `light` gives at `p` with normal `n`: for a
+/// punctual light the shared model ([`punctual_unoccluded`]), spot cone and range included, so
+/// an event where the light does not reach ranks 0.
 fn unoccluded_irradiance(scene: &Scene, light: Light, p: DVec3, n: DVec3) -> f64 {
-    let lum = |c: DVec3| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
     match light {
         Light::Area(e) => {
             let poly = &scene.polygons[e];
@@ -940,20 +943,10 @@ fn unoccluded_irradiance(scene: &Scene, light: Light, p: DVec3, n: DVec3) -> f64
             let f: f64 = poly
                 .triangles
                 .iter()
-                .map(|&t| crate::solve::point_polygon_form_factor(p, n, &scene.triangles[t].p))
+                .map(|&t| point_polygon_form_factor(p, n, &scene.triangles[t].p))
                 .sum();
-            std::f64::consts::PI * f * lum(scene.materials[poly.material].radiance)
+            std::f64::consts::PI * f * luminance(scene.materials[poly.material].radiance)
         }
-        Light::Punctual(l) => {
-            let light = &scene.lights[l];
-            match light.kind {
-                LightKind::Directional => n.dot(-light.direction).max(0.0) * lum(light.intensity),
-                _ => {
-                    let d = light.position - p;
-                    let r2 = d.length_squared().max(1e-300);
-                    (n.dot(d) / r2.sqrt()).max(0.0) / r2 * lum(light.intensity)
-                }
-            }
-        }
+        Light::Punctual(l) => punctual_unoccluded(&scene.lights[l], p, n).map_or(0.0, luminance),
     }
 }

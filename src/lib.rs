@@ -27,7 +27,7 @@ pub mod discontinuity;
 /// Receiver meshes: uniform, discontinuity, adaptive.
 pub mod mesh;
 
-/// Direct and indirect light at the mesh vertices.
+/// Direct and indirect light at the mesh vertices: one solver per file under `solve/`.
 pub mod solve;
 
 /// Exact visible emitter parts (used by `solve`).
@@ -41,6 +41,15 @@ pub mod lightmap;
 
 /// The lightmapped glb.
 pub mod write;
+
+// Shared physics, used by several stages (depend on nothing but `scene`'s plain data).
+
+/// Form factors by Lambert's contour formula, polygon clipping, convex pieces, areas,
+/// barycentrics.
+pub mod geometry;
+
+/// Receiving points, area emitters, the punctual light model, luminance.
+pub mod light;
 
 // The pipeline driver and its bookkeeping.
 

@@ -5,6 +5,7 @@
 //! image, as glTF's UV origin is the image's top-left corner.
 
 use crate::atlas::Atlas;
+use crate::geometry::barycentric_2d;
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
 use glam::{DVec2, DVec3};
@@ -110,11 +111,7 @@ impl<'a> Locator<'a> {
 
     fn barycentric(&self, k: u32, q: DVec2) -> [f64; 3] {
         let t = self.mesh.triangles[k as usize];
-        let [a, b, c] = t.map(|i| self.mesh.vertices[i as usize]);
-        let d = (b - a).perp_dot(c - a);
-        let l1 = (q - a).perp_dot(c - a) / d;
-        let l2 = (b - a).perp_dot(q - a) / d;
-        [1.0 - l1 - l2, l1, l2]
+        barycentric_2d(&t.map(|i| self.mesh.vertices[i as usize]), q)
     }
 
     /// The interpolated value at plane point `q`. A point outside every triangle (rounding at
@@ -266,9 +263,7 @@ pub fn rasterize(
                                 x as f64 + ((s % n) as f64 + 0.5) / n as f64,
                                 y as f64 + ((s / n) as f64 + 0.5) / n as f64,
                             );
-                            let l1 = (q - t.uv[0]).perp_dot(t.uv[2] - t.uv[0]) / area;
-                            let l2 = (t.uv[1] - t.uv[0]).perp_dot(q - t.uv[0]) / area;
-                            let l0 = 1.0 - l1 - l2;
+                            let [l0, l1, l2] = barycentric_2d(&t.uv, q);
                             if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
                                 continue;
                             }

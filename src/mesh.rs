@@ -66,8 +66,7 @@ impl ReceiverMesh {
 }
 
 fn tri_area(m: &ReceiverMesh, t: &[u32; 3]) -> f64 {
-    let [a, b, c] = t.map(|i| m.vertices[i as usize]);
-    0.5 * (b - a).perp_dot(c - a)
+    crate::geometry::signed_area(&t.map(|i| m.vertices[i as usize]))
 }
 
 /// Minimum angle for quality refinement, degrees.
@@ -560,7 +559,7 @@ pub fn adaptive<F>(scene: &Scene, budget: usize, tolerance: f64, evaluate: F) ->
 where
     F: Fn(&[ReceiverMesh]) -> Vec<Vec<glam::DVec3>>,
 {
-    let lum = |c: &glam::DVec3| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z;
+    let lum = |c: &glam::DVec3| crate::light::luminance(*c);
     let mut meshes = uniform(scene, (budget / 4).max(1));
     for _ in 0..8 {
         let total: usize = meshes.iter().map(|m| m.triangles.len()).sum();

@@ -686,7 +686,7 @@ fn texel(tracer: &Tracer, points: &[SurfacePoint], spp: u32, rng: &mut SplitMix6
             .scene
             .lights
             .iter()
-            .filter_map(|l| solve::punctual_unoccluded(l, at))
+            .filter_map(|l| crate::light::punctual_unoccluded(l, at.p, at.n))
             .map(luminance)
             .sum();
         unoccluded += probe.unoccluded / per as f64 + punctual_unoccluded;

@@ -229,7 +229,7 @@ pub fn render_radiance(
                 let inst = &scene.instances[tri.instance];
                 let k = tri.local_index;
                 let ids = &inst.indices[3 * k..3 * k + 3];
-                let bary = barycentric(&tri.p, p);
+                let bary = crate::geometry::barycentric_3d(&tri.p, p);
                 let uv: DVec2 = (0..3).map(|c| b.uv1[ids[c] as usize] * bary[c]).sum();
                 (b, uv)
             });
@@ -259,7 +259,7 @@ pub fn render_radiance(
 pub fn auto_exposure(radiance: &[DVec3]) -> f64 {
     let mut lum: Vec<f64> = radiance
         .iter()
-        .map(|c| 0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z)
+        .map(|c| crate::light::luminance(*c))
         .filter(|&v| v > 0.0)
         .collect();
     lum.sort_by(|a, b| a.total_cmp(b));
@@ -293,19 +293,6 @@ pub fn sample_map(map: &Lightmap, uv: DVec2) -> DVec3 {
     let t = |x: usize, y: usize| map.texels[y * w + x];
     (t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx) * (1.0 - fy)
         + (t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx) * fy
-}
-
-fn barycentric(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
-    let (e1, e2, d) = (t[1] - t[0], t[2] - t[0], p - t[0]);
-    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
-    let (d1p, d2p) = (e1.dot(d), e2.dot(d));
-    let den = d11 * d22 - d12 * d12;
-    if den == 0.0 {
-        return [1.0, 0.0, 0.0];
-    }
-    let v = (d22 * d1p - d12 * d2p) / den;
-    let w = (d11 * d2p - d12 * d1p) / den;
-    [1.0 - v - w, v, w]
 }
 
 /// The sRGB opto-electronic transfer function (IEC 61966-2-1), value in [0,1].

@@ -45,9 +45,7 @@ pub struct Triangle {
 impl Triangle {
     /// Area in square scene units.
     pub fn area(&self) -> f64 {
-        0.5 * (self.p[1] - self.p[0])
-            .cross(self.p[2] - self.p[0])
-            .length()
+        crate::geometry::triangle_area(&self.p)
     }
 }
 

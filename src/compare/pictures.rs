@@ -4,6 +4,7 @@
 
 use super::Region;
 use crate::error::{Error, Result};
+use crate::geometry::barycentric_2d;
 use crate::lightmap::{self, Lightmap, Locator};
 use crate::mesh::ReceiverMesh;
 use crate::reference::ReferenceMap;
@@ -297,13 +298,7 @@ pub fn locate(polygon: &Polygon, q: DVec2) -> Option<(usize, [f64; 3])> {
         .triangles_plane
         .iter()
         .position(|t| point_in_triangle(q, t))
-        .map(|k| {
-            let [a, b, c] = polygon.triangles_plane[k];
-            let d = (b - a).perp_dot(c - a);
-            let l1 = (q - a).perp_dot(c - a) / d;
-            let l2 = (b - a).perp_dot(q - a) / d;
-            (k, [1.0 - l1 - l2, l1, l2])
-        })
+        .map(|k| (k, barycentric_2d(&polygon.triangles_plane[k], q)))
 }
 
 /// One column of the strip: a title, caption lines, and its cells top to bottom (all cells of a

@@ -318,3 +318,89 @@ fn golden_segments_cornell_box() {
         &segment_text(&bake_dm(&fixtures::cornell_box())),
     );
 }
+
+/// A 8 m floor with a 0.3 m tall box spanning `box_x` in x and [-0.25, 0.25] in z, and `light`
+/// at (0, 2, 0) pointing down.
+fn box_under_light(box_x: [f64; 2], light: fixtures::Light) -> Vec<u8> {
+    let mut g = GlbBuilder::new();
+    let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
+    g.add_mesh_node(
+        "floor",
+        &fixtures::horizontal_rect([-4.0, 4.0], [-4.0, 4.0], 0.0, true),
+        grey,
+    );
+    let [x0, x1] = box_x;
+    let top = [
+        [x0, 0.3, -0.25],
+        [x0, 0.3, 0.25],
+        [x1, 0.3, 0.25],
+        [x1, 0.3, -0.25],
+    ];
+    g.add_mesh_node("box", &fixtures::block(top, 0.0, false), grey);
+    let light = g.add_light(light);
+    g.add_node(
+        fixtures::Node::new("lamp")
+            .with_transform(fixtures::Transform::look_to(
+                [0.0, 2.0, 0.0],
+                [0.0, -1.0, 0.0],
+                [0.0, 0.0, -1.0],
+            ))
+            .with_light(light),
+    );
+    g.to_glb()
+}
+
+/// Punctual-light segments on the floor, and the wedge pieces dropped under the threshold.
+fn punctual_segments(glb: &[u8]) -> (usize, usize) {
+    let mut o = dm();
+    o.solve.bounces = Some(0);
+    let b = crate::bake(glb, &o);
+    let f = floor(&b);
+    let n = b.segments[f]
+        .iter()
+        .filter(|s| s.kind == Kind::Punctual)
+        .count();
+    let stats = b.stats.discontinuity.expect("discontinuity stats");
+    (n, stats.dropped_threshold)
+}
+
+/// The ranking of punctual wedges uses the light model of the solve: a spot light's cone (outer
+/// 0.4 rad: it reaches 0.85 m from the floor's centre) keeps the shadow lines of a box inside it
+/// and drops those of a box far outside it, which gets no light there; a point light in the
+/// same place keeps both.
+#[test]
+fn spot_cone_decides_which_shadow_lines_are_kept() {
+    let spot = || fixtures::Light::spot("spot", 10.0, 0.3, 0.4);
+    let (inside, _) = punctual_segments(&box_under_light([0.2, 0.5], spot()));
+    assert!(inside >= 3, "{inside} shadow lines inside the cone");
+    let (outside, dropped) = punctual_segments(&box_under_light([2.5, 3.0], spot()));
+    assert_eq!(outside, 0, "shadow lines kept outside the cone");
+    assert!(
+        dropped >= 3,
+        "{dropped}: the lines were traced and then dropped"
+    );
+    let point = fixtures::Light::point("point", 10.0);
+    let (unlimited, _) = punctual_segments(&box_under_light([2.5, 3.0], point));
+    assert!(
+        unlimited >= 3,
+        "{unlimited} shadow lines of the point light"
+    );
+}
+
+/// A point light's `range` (glTF: no light at or beyond it) shorter than its height over the
+/// floor leaves no shadow lines; a longer range keeps them.
+#[test]
+fn light_range_drops_shadow_lines_beyond_it() {
+    let lamp = |range: f64| fixtures::Light {
+        range: Some(range),
+        ..fixtures::Light::point("lamp", 10.0)
+    };
+    let (short, dropped) = punctual_segments(&box_under_light([0.2, 0.5], lamp(1.5)));
+    assert_eq!(short, 0, "shadow lines kept beyond the range");
+    assert!(
+        dropped >= 3,
+        "{dropped}: the lines were traced and then dropped"
+    );
+    let (long, _) = punctual_segments(&box_under_light([0.2, 0.5], lamp(10.0)));
+    assert!(long >= 3, "{long} shadow lines within the range");
+}

@@ -1,0 +1,590 @@
+//! Shared geometry: form factors by the contour integral, polygon clipping, convex pieces,
+//! areas and barycentric coordinates.
+//!
+//! Depends on nothing else in the crate (glam and std only). Everything is f64; lengths in
+//! scene units, areas in scene units², form factors dimensionless. Polygons are corner lists,
+//! closed implicitly (the last corner joins the first).
+
+use glam::{DVec2, DVec3};
+use std::collections::BTreeMap;
+use std::f64::consts::PI;
+
+// ---------------------------------------------------------------------------------------------
+// Form factors
+
+/// Form factor from a differential area at `p` with unit normal `n` to a planar polygon, by
+/// Lambert's contour formula (Lambert, "Photometria", 1760; as used for radiosity by Baum,
+/// Rushmeier, Winget, "Improving radiosity solutions through the use of analytically determined
+/// form-factors", SIGGRAPH 1989):
+///
+/// ```text
+/// F = 1/(2 pi) |sum_i gamma_i n·unit(r_i x r_(i+1))|
+/// ```
+///
+/// after clipping the polygon to the horizon of `p` ([`clip_to_horizon`]). Unoccluded; either
+/// winding. Dimensionless. A polygon entirely above the horizon is summed as it is, without the
+/// clipping's copy (the same value).
+pub fn point_polygon_form_factor(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
+    // A NaN corner goes through the clipping too, which drops it.
+    let below = |v: &DVec3| {
+        let h = n.dot(*v - p);
+        h < 0.0 || h.is_nan()
+    };
+    if poly.iter().any(below) {
+        contour_form_factor(p, n, &clip_to_horizon(poly, p, n))
+    } else {
+        contour_form_factor(p, n, poly)
+    }
+}
+
+/// [`point_polygon_form_factor`] of a polygon already clipped to the horizon of `p`.
+fn contour_form_factor(p: DVec3, n: DVec3, clipped: &[DVec3]) -> f64 {
+    if clipped.len() < 3 {
+        return 0.0;
+    }
+    // A polygon in the tangent plane (coplanar with the receiver, up to rounding) subtends no
+    // projected solid angle; its contour terms would only add rounding noise.
+    let reach = clipped
+        .iter()
+        .map(|v| (*v - p).length())
+        .fold(0.0, f64::max);
+    let height = clipped.iter().map(|v| n.dot(*v - p)).fold(0.0, f64::max);
+    if height <= 1e-9 * reach {
+        return 0.0;
+    }
+    contour_sum(p, n, clipped).abs() / (2.0 * PI)
+}
+
+/// Lambert's contour sum `sum_i gamma_i n·unit(r_i x r_(i+1))` of a polygon above the horizon
+/// of `p` (no clipping), with `r_i` the corners relative to `p` and `gamma_i` the angle between
+/// `r_i` and `r_(i+1)`, in radians; signed by the winding. The form factor is its absolute value
+/// over `2 pi` (see [`point_polygon_form_factor`]). Edges through `p` contribute nothing.
+pub fn contour_sum(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
+    let mut sum = 0.0;
+    for i in 0..poly.len() {
+        let a = poly[i] - p;
+        let b = poly[(i + 1) % poly.len()] - p;
+        let c = a.cross(b);
+        let cl = c.length();
+        if cl <= 0.0 {
+            continue;
+        }
+        // atan2 keeps the angle accurate for tiny and near-straight angles.
+        sum += cl.atan2(a.dot(b)) * n.dot(c) / cl;
+    }
+    sum
+}
+
+// ---------------------------------------------------------------------------------------------
+// Clipping
+
+/// Clips a polygon to the horizon of a point: the closed half-space `n·(x - p) >= 0`
+/// (Sutherland-Hodgman, as [`clip_polygon_to_plane`]). Unlike that one, an edge with one end
+/// exactly on the plane also yields an intersection point, at (or within rounding of) that end:
+/// the contour sum gives such a repeated corner a zero or rounding-size term. The form factors
+/// of the solve depend on these exact values, so this variant is kept as it is.
+pub fn clip_to_horizon(poly: &[DVec3], p: DVec3, n: DVec3) -> Vec<DVec3> {
+    let mut out = Vec::with_capacity(poly.len() + 2);
+    for i in 0..poly.len() {
+        let a = poly[i];
+        let b = poly[(i + 1) % poly.len()];
+        let da = n.dot(a - p);
+        let db = n.dot(b - p);
+        if da >= 0.0 {
+            out.push(a);
+        }
+        if (da >= 0.0) != (db >= 0.0) {
+            let t = da / (da - db);
+            out.push(a + (b - a) * t);
+        }
+    }
+    out
+}
+
+/// Clips a 3D polygon to the closed half-space `n·(x - o) >= 0` into `out` (cleared first): one
+/// stage of Sutherland and Hodgman, "Reentrant polygon clipping", CACM 1974. An edge gets an
+/// intersection point only when its ends lie strictly on opposite sides, so a corner on the
+/// plane is kept once and never doubled. Convex in, convex out; `n` need not be unit.
+pub fn clip_polygon_to_plane(poly: &[DVec3], n: DVec3, o: DVec3, out: &mut Vec<DVec3>) {
+    out.clear();
+    let len = poly.len();
+    for i in 0..len {
+        let (a, b) = (poly[i], poly[(i + 1) % len]);
+        let (da, db) = (n.dot(a - o), n.dot(b - o));
+        if da >= 0.0 {
+            out.push(a);
+        }
+        if (da > 0.0 && db < 0.0) || (da < 0.0 && db > 0.0) {
+            out.push(a + (b - a) * (da / (da - db)));
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Convex decomposition and areas
+/// Merges a triangulated planar polygon into convex pieces (Hertel-Mehlhorn): two pieces that
+/// share a whole edge are merged when their union is convex; shared edges are visited in a fixed
+/// order, so the result is deterministic.
+///
+/// `tris` are the triangles in plane coordinates; corners are matched by their exact
+/// coordinates. Returns each piece as a counter-clockwise list of corner references `3 t + k`
+/// (corner `k` of triangle `t`), and the piece each triangle went into (`usize::MAX` for a
+/// degenerate triangle, which is left out). Vertices where a piece's boundary runs straight on
+/// are removed.
+pub fn convex_pieces(tris: &[[DVec2; 3]]) -> (Vec<Vec<usize>>, Vec<usize>) {
+    // -0.0 and 0.0 are the same point.
+    let key = |q: DVec2| [(q.x + 0.0).to_bits(), (q.y + 0.0).to_bits()];
+    let corner = |c: usize| tris[c / 3][c % 3];
+    let mut pieces: Vec<Vec<usize>> = tris
+        .iter()
+        .enumerate()
+        .map(|(t, tri)| {
+            let area2 = (tri[1] - tri[0]).perp_dot(tri[2] - tri[0]);
+            if area2 > 0.0 {
+                vec![3 * t, 3 * t + 1, 3 * t + 2]
+            } else if area2 < 0.0 {
+                vec![3 * t, 3 * t + 2, 3 * t + 1]
+            } else {
+                Vec::new()
+            }
+        })
+        .collect();
+    fn find(parent: &mut [usize], mut i: usize) -> usize {
+        while parent[i] != i {
+            parent[i] = parent[parent[i]];
+            i = parent[i];
+        }
+        i
+    }
+    // Piece slots are indexed like the triangles; a merged piece lives in one slot and the
+    // union-find sends the others there. Passes repeat until nothing merges: after a pass,
+    // straight-on vertices are dropped, so strips of a grid then share whole edges.
+    let mut parent: Vec<usize> = (0..pieces.len()).collect();
+    loop {
+        let mut edges: BTreeMap<([u64; 2], [u64; 2]), Vec<usize>> = BTreeMap::new();
+        for (t, piece) in pieces.iter().enumerate() {
+            for i in 0..piece.len() {
+                let (a, b) = (
+                    key(corner(piece[i])),
+                    key(corner(piece[(i + 1) % piece.len()])),
+                );
+                if a != b {
+                    edges.entry((a.min(b), a.max(b))).or_default().push(t);
+                }
+            }
+        }
+        let mut merged_any = false;
+        for ((ka, kb), owners) in &edges {
+            if owners.len() != 2 {
+                continue;
+            }
+            let (i, j) = (find(&mut parent, owners[0]), find(&mut parent, owners[1]));
+            if i == j {
+                continue;
+            }
+            if let Some(merged) = merge_convex(&pieces[i], &pieces[j], *ka, *kb, &key, &corner) {
+                pieces[i] = merged;
+                pieces[j].clear();
+                parent[j] = i;
+                merged_any = true;
+            }
+        }
+        for p in &mut pieces {
+            if !p.is_empty() {
+                *p = drop_straight_vertices(std::mem::take(p), &corner);
+                if p.len() < 3 {
+                    p.clear();
+                }
+            }
+        }
+        if !merged_any {
+            break;
+        }
+    }
+    let mut index = vec![usize::MAX; pieces.len()];
+    let mut out = Vec::new();
+    for (i, p) in pieces.into_iter().enumerate() {
+        if p.len() >= 3 {
+            index[i] = out.len();
+            out.push(p);
+        }
+    }
+    let owner = (0..tris.len())
+        .map(|t| {
+            let root = find(&mut parent, t);
+            index[root]
+        })
+        .collect();
+    (out, owner)
+}
+
+/// The union of two counter-clockwise convex pieces sharing the edge `{ka, kb}`, if convex.
+fn merge_convex(
+    p: &[usize],
+    q: &[usize],
+    ka: [u64; 2],
+    kb: [u64; 2],
+    key: &dyn Fn(DVec2) -> [u64; 2],
+    corner: &dyn Fn(usize) -> DVec2,
+) -> Option<Vec<usize>> {
+    let (np, nq) = (p.len(), q.len());
+    // In p the edge runs x -> y; in q it runs y -> x.
+    let s = (0..np).find(|&s| {
+        let (a, b) = (key(corner(p[s])), key(corner(p[(s + 1) % np])));
+        (a == ka && b == kb) || (a == kb && b == ka)
+    })?;
+    let (x, y) = (key(corner(p[s])), key(corner(p[(s + 1) % np])));
+    let r = (0..nq).find(|&r| key(corner(q[r])) == y && key(corner(q[(r + 1) % nq])) == x)?;
+    let convex_at = |prev: DVec2, at: DVec2, next: DVec2| {
+        let (e1, e2) = (at - prev, next - at);
+        e1.perp_dot(e2) >= -1e-12 * e1.length() * e2.length()
+    };
+    let (px, py) = (corner(p[s]), corner(p[(s + 1) % np]));
+    if !convex_at(corner(p[(s + np - 1) % np]), px, corner(q[(r + 2) % nq]))
+        || !convex_at(corner(q[(r + nq - 1) % nq]), py, corner(p[(s + 2) % np]))
+    {
+        return None;
+    }
+    let mut merged = Vec::with_capacity(np + nq - 2);
+    merged.extend((0..np).map(|k| p[(s + 1 + k) % np]));
+    merged.extend((0..nq - 2).map(|k| q[(r + 2 + k) % nq]));
+    Some(merged)
+}
+
+/// Removes vertices where the boundary goes straight on (or doubles back onto itself).
+fn drop_straight_vertices(mut p: Vec<usize>, corner: &dyn Fn(usize) -> DVec2) -> Vec<usize> {
+    let mut k = 0;
+    while p.len() >= 3 && k < p.len() {
+        let n = p.len();
+        let (a, b, c) = (
+            corner(p[(k + n - 1) % n]),
+            corner(p[k]),
+            corner(p[(k + 1) % n]),
+        );
+        let (e1, e2) = (b - a, c - b);
+        if b == a || e1.perp_dot(e2).abs() <= 1e-12 * e1.length() * e2.length() {
+            p.remove(k);
+            k = k.saturating_sub(1);
+        } else {
+            k += 1;
+        }
+    }
+    p
+}
+
+/// Convex hull of 2D points, counter-clockwise, without collinear points (Andrew's monotone
+/// chain). Fewer than three points (or all collinear) give what is left of the chain.
+pub fn convex_hull(points: &[DVec2]) -> Vec<DVec2> {
+    let mut pts = points.to_vec();
+    pts.sort_by(|a, b| a.x.total_cmp(&b.x).then(a.y.total_cmp(&b.y)));
+    pts.dedup();
+    if pts.len() < 3 {
+        return pts;
+    }
+    let cross = |o: DVec2, a: DVec2, b: DVec2| (a - o).perp_dot(b - o);
+    // Lower chain left to right, then upper chain right to left.
+    let chain = |iter: &mut dyn Iterator<Item = DVec2>| {
+        let mut c: Vec<DVec2> = Vec::new();
+        for q in iter {
+            while c.len() >= 2 && cross(c[c.len() - 2], c[c.len() - 1], q) <= 0.0 {
+                c.pop();
+            }
+            c.push(q);
+        }
+        c.pop();
+        c
+    };
+    let mut hull = chain(&mut pts.iter().copied());
+    hull.extend(chain(&mut pts.iter().rev().copied()));
+    hull
+}
+
+/// Signed area of a 2D polygon (scene units²): positive when counter-clockwise. A fan from the
+/// first corner (the shoelace formula); fewer than three corners give 0.
+pub fn signed_area(poly: &[DVec2]) -> f64 {
+    if poly.len() < 3 {
+        return 0.0;
+    }
+    let o = poly[0];
+    let mut a = 0.0;
+    for i in 1..poly.len() - 1 {
+        a += (poly[i] - o).perp_dot(poly[i + 1] - o);
+    }
+    0.5 * a
+}
+
+/// Area of a 3D triangle, scene units².
+pub fn triangle_area(p: &[DVec3; 3]) -> f64 {
+    0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length()
+}
+
+// ---------------------------------------------------------------------------------------------
+// Barycentric coordinates
+
+/// Barycentric coordinates `[l0, l1, l2]` of plane point `q` in triangle `t` (by signed areas:
+/// `l1 = area(a, q, c) / area(a, b, c)`, ...). Outside the triangle some are negative; a
+/// degenerate triangle gives non-finite values.
+pub fn barycentric_2d(t: &[DVec2; 3], q: DVec2) -> [f64; 3] {
+    let [a, b, c] = *t;
+    let d = (b - a).perp_dot(c - a);
+    let l1 = (q - a).perp_dot(c - a) / d;
+    let l2 = (b - a).perp_dot(q - a) / d;
+    [1.0 - l1 - l2, l1, l2]
+}
+
+/// Barycentric coordinates of point `p` (projected onto the triangle's plane) in the 3D triangle
+/// `t`, by least squares over the edge vectors; `[1, 0, 0]` for a degenerate triangle.
+pub fn barycentric_3d(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
+    let (e1, e2, d) = (t[1] - t[0], t[2] - t[0], p - t[0]);
+    let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
+    let (d1p, d2p) = (e1.dot(d), e2.dot(d));
+    let den = d11 * d22 - d12 * d12;
+    if den == 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let v = (d22 * d1p - d12 * d2p) / den;
+    let w = (d11 * d2p - d12 * d1p) / den;
+    [1.0 - v - w, v, w]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn square(z: f64, size: f64) -> Vec<DVec3> {
+        let h = size / 2.0;
+        vec![
+            DVec3::new(-h, -h, z),
+            DVec3::new(h, -h, z),
+            DVec3::new(h, h, z),
+            DVec3::new(-h, h, z),
+        ]
+    }
+
+    /// Corner formula for a differential element under a parallel rectangle (Howell's catalogue).
+    fn corner(a: f64, b: f64, h: f64) -> f64 {
+        let sa = (a * a + h * h).sqrt();
+        let sb = (b * b + h * h).sqrt();
+        (a / sa * (b / sa).atan() + b / sb * (a / sb).atan()) / (2.0 * PI)
+    }
+
+    #[test]
+    fn differential_under_coaxial_disk_is_half() {
+        // r = h: F = r²/(h²+r²) = 0.5; a 4096-gon approximates the disk to ~4e-7.
+        let n = 4096;
+        let disk: Vec<DVec3> = (0..n)
+            .map(|k| {
+                let a = 2.0 * PI * k as f64 / n as f64;
+                DVec3::new(a.cos(), a.sin(), 1.0)
+            })
+            .collect();
+        let f = point_polygon_form_factor(DVec3::ZERO, DVec3::Z, &disk);
+        // The inscribed polygon is smaller than the disk by a relative 4e-7.
+        assert!((f - 0.5).abs() < 1e-6, "{f}");
+    }
+
+    #[test]
+    fn rectangle_corner_formula_matches_contour_integral() {
+        // Axis-aligned rectangle [x0,x1]x[y0,y1] at height h above the point.
+        let (x0, x1, y0, y1, h) = (-0.3, 1.2, 0.4, 2.0, 0.7);
+        let exact = corner(x1, y1, h) - corner(x0, y1, h) - corner(x1, y0, h) + corner(x0, y0, h);
+        let poly = vec![
+            DVec3::new(x0, y0, h),
+            DVec3::new(x1, y0, h),
+            DVec3::new(x1, y1, h),
+            DVec3::new(x0, y1, h),
+        ];
+        let f = point_polygon_form_factor(DVec3::ZERO, DVec3::Z, &poly);
+        assert!((f - exact).abs() < 1e-12, "{f} vs {exact}");
+    }
+
+    /// Area-to-area form factor by Gauss-Legendre quadrature of the point-to-polygon form factor
+    /// over the receiving unit square.
+    fn area_form_factor(receiver: &dyn Fn(f64, f64) -> (DVec3, DVec3), source: &[DVec3]) -> f64 {
+        // 20-point Gauss-Legendre nodes and weights on [-1, 1], by Newton iteration.
+        let n = 20;
+        let mut nodes = vec![0.0; n];
+        let mut weights = vec![0.0; n];
+        for i in 0..n {
+            let mut x = (PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
+            for _ in 0..100 {
+                let (mut p0, mut p1) = (1.0, x);
+                for k in 2..=n {
+                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                    p0 = p1;
+                    p1 = p2;
+                }
+                let dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+                let dx = p1 / dp;
+                x -= dx;
+                if dx.abs() < 1e-15 {
+                    break;
+                }
+            }
+            let (mut p0, mut p1) = (1.0, x);
+            for k in 2..=n {
+                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
+                p0 = p1;
+                p1 = p2;
+            }
+            let dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
+            nodes[i] = x;
+            weights[i] = 2.0 / ((1.0 - x * x) * dp * dp);
+        }
+        // Composite over 4x4 cells so the edge singularity of adjacent squares converges.
+        let cells = 4;
+        let mut sum = 0.0;
+        for cu in 0..cells {
+            for cv in 0..cells {
+                for i in 0..n {
+                    for j in 0..n {
+                        let u = (cu as f64 + 0.5 * (nodes[i] + 1.0)) / cells as f64;
+                        let v = (cv as f64 + 0.5 * (nodes[j] + 1.0)) / cells as f64;
+                        let (p, nn) = receiver(u, v);
+                        let w = weights[i] * weights[j] * 0.25 / (cells * cells) as f64;
+                        sum += w * point_polygon_form_factor(p, nn, source);
+                    }
+                }
+            }
+        }
+        sum
+    }
+
+    #[test]
+    fn parallel_unit_squares_match_howell() {
+        for (d, exact) in [
+            (1.0, 0.1998248957),
+            (2.0, 0.0685895888),
+            (0.5, 0.4152532836),
+        ] {
+            let src = square(d, 1.0);
+            let f = area_form_factor(&|u, v| (DVec3::new(u - 0.5, v - 0.5, 0.0), DVec3::Z), &src);
+            assert!((f - exact).abs() < 1e-6, "d={d}: {f} vs {exact}");
+        }
+    }
+
+    #[test]
+    fn perpendicular_unit_squares_match_howell() {
+        // Receiver in z=0 (x in [0,1], y in [0,1]), source in the plane y=0 above it (x, z in
+        // [0,1]), sharing the edge along x. Howell C-14: 0.2000437761.
+        let src = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 1.0),
+            DVec3::new(0.0, 0.0, 1.0),
+        ];
+        let f = area_form_factor(&|u, v| (DVec3::new(u, v, 0.0), DVec3::Z), &src);
+        // The edge singularity limits quadrature accuracy; 1e-5 still catches any real error.
+        assert!((f - 0.2000437761).abs() < 1e-5, "{f}");
+    }
+
+    #[test]
+    fn horizon_clipping_halves_a_symmetric_source() {
+        // A point on a wall's base looking sideways sees exactly the half of a symmetric source
+        // above its horizon.
+        let src = vec![
+            DVec3::new(-1.0, 1.0, -1.0),
+            DVec3::new(1.0, 1.0, -1.0),
+            DVec3::new(1.0, 1.0, 1.0),
+            DVec3::new(-1.0, 1.0, 1.0),
+        ];
+        let full = point_polygon_form_factor(DVec3::ZERO, DVec3::Y, &src);
+        let half = point_polygon_form_factor(DVec3::ZERO, DVec3::X, &src);
+        // By symmetry the x-facing point sees the x>0 half, weighted by cos to x.
+        let right = vec![
+            DVec3::new(0.0, 1.0, -1.0),
+            DVec3::new(1.0, 1.0, -1.0),
+            DVec3::new(1.0, 1.0, 1.0),
+            DVec3::new(0.0, 1.0, 1.0),
+        ];
+        let expected = point_polygon_form_factor(DVec3::ZERO, DVec3::X, &right);
+        assert!((half - expected).abs() < 1e-14);
+        assert!(full > half && half > 0.0);
+    }
+
+    fn square_tris(n: usize) -> Vec<[DVec2; 3]> {
+        // An n x n grid of the unit square, two triangles per cell.
+        let mut out = Vec::new();
+        let h = 1.0 / n as f64;
+        for i in 0..n {
+            for j in 0..n {
+                let a = DVec2::new(i as f64 * h, j as f64 * h);
+                let b = a + DVec2::new(h, 0.0);
+                let c = a + DVec2::new(h, h);
+                let d = a + DVec2::new(0.0, h);
+                out.push([a, b, c]);
+                out.push([a, c, d]);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn tessellated_square_merges_into_one_piece() {
+        let tris = square_tris(8);
+        let (pieces, owner) = convex_pieces(&tris);
+        assert!(owner.iter().all(|&k| k < pieces.len()));
+        assert_eq!(pieces.len(), 1, "{pieces:?}");
+        let q: Vec<DVec2> = pieces[0].iter().map(|&c| tris[c / 3][c % 3]).collect();
+        assert_eq!(q.len(), 4);
+        assert!((signed_area(&q) - 1.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn l_shape_gives_convex_pieces_covering_it() {
+        // An L of three unit squares.
+        let mut tris = Vec::new();
+        for (x, y) in [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)] {
+            let a = DVec2::new(x, y);
+            tris.push([a, a + DVec2::X, a + DVec2::ONE]);
+            tris.push([a, a + DVec2::ONE, a + DVec2::Y]);
+        }
+        let (pieces, owner) = convex_pieces(&tris);
+        assert!(owner.iter().all(|&k| k < pieces.len()));
+        assert!(pieces.len() == 2, "{pieces:?}");
+        let mut total = 0.0;
+        for p in &pieces {
+            let q: Vec<DVec2> = p.iter().map(|&c| tris[c / 3][c % 3]).collect();
+            for i in 0..q.len() {
+                let (a, b, c) = (q[i], q[(i + 1) % q.len()], q[(i + 2) % q.len()]);
+                assert!((b - a).perp_dot(c - b) > 0.0, "not strictly convex: {q:?}");
+            }
+            total += signed_area(&q);
+        }
+        assert!((total - 3.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn entirely_above_the_horizon_skips_the_clip_with_the_same_value() {
+        let poly = square(1.0, 1.0);
+        let (p, n) = (
+            DVec3::new(0.3, -0.2, 0.0),
+            DVec3::new(0.1, 0.0, 1.0).normalize(),
+        );
+        let clipped = clip_to_horizon(&poly, p, n);
+        assert_eq!(clipped, poly);
+        assert_eq!(
+            point_polygon_form_factor(p, n, &poly),
+            contour_sum(p, n, &poly).abs() / (2.0 * PI)
+        );
+    }
+
+    #[test]
+    fn barycentrics_reproduce_the_point() {
+        let t2 = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(2.0, 0.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        let q = DVec2::new(0.5, 0.25);
+        let l = barycentric_2d(&t2, q);
+        let back = t2[0] * l[0] + t2[1] * l[1] + t2[2] * l[2];
+        assert!((back - q).length() < 1e-15, "{l:?}");
+        let t3 = t2.map(|v| DVec3::new(v.x, 1.0, v.y));
+        let m = barycentric_3d(&t3, DVec3::new(0.5, 1.0, 0.25));
+        for k in 0..3 {
+            assert!((l[k] - m[k]).abs() < 1e-15, "{l:?} vs {m:?}");
+        }
+        assert!((triangle_area(&t3) - signed_area(&t2)).abs() < 1e-15);
+    }
+}

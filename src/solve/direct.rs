@@ -1,0 +1,657 @@
+//! Direct light at the mesh vertices: every area emitter (exact by backprojection, or sampled
+//! with shadow rays) and every punctual light, per receiver with a cluster tree over its
+//! vertices so the occluder search is shared.
+//!
+//! The exact method: the point-to-polygon form factor of the part of each emitter that a vertex
+//! sees ([`crate::backproject`]); occluders are culled per cluster of vertices by the shaft of
+//! the cluster and the emitter (Haines, Wallace, "Shaft culling for efficient ray-cast
+//! radiosity", 1991). The sampled method (and the exact method's fallback past its caps): the
+//! exact unoccluded form factor times a visibility fraction from stratified shadow rays.
+//! Irradiance in W/m² per linear RGB channel.
+
+use super::{DirectMethod, SolveOptions, evaluation_points};
+use crate::backproject::{EmitterShape, Limits, Occluders, Scratch, Shaft};
+use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint, punctual_unoccluded};
+use crate::mesh::ReceiverMesh;
+use crate::scene::{LightKind, PunctualLight, Scene};
+use crate::visibility::Visibility;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::Instant;
+
+/// Counters of the direct light at the mesh vertices (`--stats`: `solve.direct`).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct DirectStats {
+    pub method: DirectMethod,
+    /// Wall time of the direct light at the vertices, s.
+    pub seconds: f64,
+    /// (vertex, area emitter) pairs with the emitter above the vertex's horizon.
+    pub evaluations: u64,
+    /// Exact method: pairs that fell back to shadow rays (occluders over `occluder_cap`, or
+    /// too many visible pieces).
+    pub fallbacks: u64,
+    pub occluder_cap: usize,
+    /// Exact method: candidate occluders (convex pieces) left after the shaft culling, summed
+    /// over pairs: what the per-point clipping looked at.
+    pub candidates: u64,
+    /// Exact method: occluders clipped and subtracted, summed over pairs, and the most at one
+    /// pair.
+    pub occluders: u64,
+    pub occluders_max: u64,
+    /// Exact method: the most convex pieces the visible part of an emitter was cut into.
+    pub pieces_max: u64,
+    /// Cost per area emitter.
+    pub emitters: Vec<EmitterCost>,
+}
+
+/// What one area emitter cost in the direct light at the vertices.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct EmitterCost {
+    /// Index into [`Scene::polygons`].
+    pub polygon: usize,
+    /// Triangles of the emitter polygon and the convex pieces they were merged into.
+    pub triangles: usize,
+    pub convex_pieces: usize,
+    pub evaluations: u64,
+    pub occluders: u64,
+    pub fallbacks: u64,
+    /// Time spent on this emitter, summed over threads, s.
+    pub seconds: f64,
+}
+
+/// Per-emitter counters of a [`Direct`].
+#[derive(Default)]
+struct EmitterCounters {
+    evaluations: AtomicU64,
+    occluders: AtomicU64,
+    fallbacks: AtomicU64,
+    nanos: AtomicU64,
+}
+
+/// Counters of one call, added to the shared ones at its end.
+#[derive(Default)]
+struct Tally {
+    evaluations: u64,
+    candidates: u64,
+    fallbacks: u64,
+    occluders: u64,
+    occluders_max: u64,
+    pieces_max: u64,
+    rays: u64,
+}
+
+/// Direct irradiance at a surface point: the light of every emitter and punctual light.
+///
+/// With [`DirectMethod::Exact`], [`Direct::irradiance_points`] evaluates the points of one
+/// receiver together: per emitter, the occluders in the box around the points and the emitter
+/// come from the BVH once, then a kd-tree over the points culls them with the shaft (convex
+/// hull) of each cluster and the emitter, down to clusters of a few points, so each point clips
+/// only the occluders near its own view of the emitter.
+pub struct Direct<'a> {
+    pub scene: &'a Scene,
+    pub vis: &'a Visibility,
+    pub emitters: Vec<AreaEmitter>,
+    pub rays: AtomicU64,
+    pub method: DirectMethod,
+    /// Caps of the exact method, past which it falls back to shadow rays.
+    pub limits: Limits,
+    /// The scene's polygons in convex pieces (exact method only; empty otherwise).
+    pub occluders: Occluders,
+    evaluations: AtomicU64,
+    candidates: AtomicU64,
+    fallbacks: AtomicU64,
+    occluder_total: AtomicU64,
+    occluders_max: AtomicU64,
+    pieces_max: AtomicU64,
+    per_emitter: Vec<EmitterCounters>,
+}
+
+/// Points per leaf of the cluster tree of [`Direct::irradiance_points`].
+const CLUSTER_LEAF: usize = 12;
+
+impl<'a> Direct<'a> {
+    /// Exact direct light, with `shadow_samples` rays for the fallback.
+    pub fn new(scene: &'a Scene, vis: &'a Visibility, shadow_samples: usize) -> Direct<'a> {
+        Direct::with_options(
+            scene,
+            vis,
+            &SolveOptions {
+                shadow_samples,
+                ..SolveOptions::default()
+            },
+        )
+    }
+
+    /// Direct light as `options` asks (`direct`, `shadow_samples`, `occluder_cap`).
+    pub fn with_options(
+        scene: &'a Scene,
+        vis: &'a Visibility,
+        options: &SolveOptions,
+    ) -> Direct<'a> {
+        let emitters = AreaEmitter::all(scene, options.shadow_samples);
+        let occluders = match options.direct {
+            DirectMethod::Exact => Occluders::new(scene),
+            DirectMethod::Sampled => Occluders::default(),
+        };
+        Direct {
+            scene,
+            vis,
+            per_emitter: emitters
+                .iter()
+                .map(|_| EmitterCounters::default())
+                .collect(),
+            emitters,
+            rays: AtomicU64::new(0),
+            method: options.direct,
+            limits: Limits {
+                max_occluders: options.occluder_cap,
+                ..Limits::default()
+            },
+            occluders,
+            evaluations: AtomicU64::new(0),
+            candidates: AtomicU64::new(0),
+            fallbacks: AtomicU64::new(0),
+            occluder_total: AtomicU64::new(0),
+            occluders_max: AtomicU64::new(0),
+            pieces_max: AtomicU64::new(0),
+        }
+    }
+
+    /// Irradiance H (W/m²) at a receiving point.
+    pub fn irradiance(&self, at: &SurfacePoint) -> DVec3 {
+        match self.method {
+            DirectMethod::Sampled => self.irradiance_sampled(at),
+            DirectMethod::Exact => self.irradiance_points(std::slice::from_ref(at))[0],
+        }
+    }
+
+    /// Irradiance H (W/m²) at each of `points`, best called with the points of one receiver
+    /// polygon (a mesh's vertices): the exact method shares the occluder search between
+    /// neighbouring points. The result of each point does not depend on the others, up to
+    /// rounding in rare near-degenerate cases; it is deterministic for given `points`.
+    pub fn irradiance_points(&self, points: &[SurfacePoint]) -> Vec<DVec3> {
+        if self.method == DirectMethod::Sampled {
+            return points.iter().map(|p| self.irradiance_sampled(p)).collect();
+        }
+        let mut h = vec![DVec3::ZERO; points.len()];
+        let mut tally = Tally::default();
+        let mut scale = vec![0.0; points.len()];
+        let tree = ClusterTree::new(points);
+        let mut scratch = Scratch::default();
+        for (ei, e) in self.emitters.iter().enumerate() {
+            let start = Instant::now();
+            let before = (tally.evaluations, tally.occluders, tally.fallbacks);
+            let f_un: Vec<f64> = points.iter().map(|q| e.form_factor(q.p, q.n)).collect();
+            let active = f_un.iter().filter(|f| **f > 0.0).count();
+            if active == 0 {
+                continue;
+            }
+            // Candidate occluders: the BVH's triangles in the box around the points and the
+            // emitter, as convex pieces, without the emitter itself.
+            let hull = e.shape.hull_world();
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for q in (0..points.len())
+                .filter(|&i| f_un[i] > 0.0)
+                .map(|i| points[i].p)
+                .chain(hull.iter().copied())
+            {
+                lo = lo.min(q);
+                hi = hi.max(q);
+            }
+            let mut tris = Vec::new();
+            self.vis.triangles_overlapping(lo, hi, &mut tris);
+            let mut candidates: Vec<u32> = tris
+                .iter()
+                .map(|&t| self.occluders.piece_of_triangle[t])
+                .filter(|&k| {
+                    k != u32::MAX && self.occluders.pieces[k as usize].polygon != e.polygon
+                })
+                .collect();
+            candidates.sort_unstable();
+            candidates.dedup();
+            let job = EmitterJob {
+                emitter: e,
+                hull: &hull,
+                points,
+                tree: &tree,
+                f_un: &f_un,
+            };
+            self.exact_cluster(&job, 0, &candidates, &mut scale, &mut tally, &mut scratch);
+            for (i, h) in h.iter_mut().enumerate() {
+                if f_un[i] > 0.0 {
+                    *h += e.radiance * scale[i];
+                }
+            }
+            let c = &self.per_emitter[ei];
+            c.evaluations
+                .fetch_add(tally.evaluations - before.0, Ordering::Relaxed);
+            c.occluders
+                .fetch_add(tally.occluders - before.1, Ordering::Relaxed);
+            c.fallbacks
+                .fetch_add(tally.fallbacks - before.2, Ordering::Relaxed);
+            c.nanos
+                .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        }
+        for (pt, h) in points.iter().zip(&mut h) {
+            for light in &self.scene.lights {
+                let (value, r) = punctual_irradiance(light, self.vis, pt);
+                *h += value;
+                tally.rays += r;
+            }
+        }
+        self.rays.fetch_add(tally.rays, Ordering::Relaxed);
+        self.evaluations
+            .fetch_add(tally.evaluations, Ordering::Relaxed);
+        self.fallbacks.fetch_add(tally.fallbacks, Ordering::Relaxed);
+        self.candidates
+            .fetch_add(tally.candidates, Ordering::Relaxed);
+        self.occluder_total
+            .fetch_add(tally.occluders, Ordering::Relaxed);
+        self.occluders_max
+            .fetch_max(tally.occluders_max, Ordering::Relaxed);
+        self.pieces_max
+            .fetch_max(tally.pieces_max, Ordering::Relaxed);
+        h
+    }
+
+    /// Exact light of one emitter at the points of cluster `node` that see it: culls
+    /// `candidates` with the shaft of the cluster and the emitter, then goes down to the two
+    /// halves, or evaluates the points of a leaf. Writes `pi F_visible` of each point into
+    /// `scale`.
+    fn exact_cluster(
+        &self,
+        job: &EmitterJob,
+        node: usize,
+        candidates: &[u32],
+        scale: &mut [f64],
+        tally: &mut Tally,
+        scratch: &mut Scratch,
+    ) {
+        let cluster = &job.tree.nodes[node];
+        let members = &job.tree.order[cluster.start..cluster.end];
+        if !members.iter().any(|&i| job.f_un[i] > 0.0) {
+            return;
+        }
+        // A short list is left to the per-point clipping; a shaft costs more than it saves.
+        let culled: Vec<u32>;
+        let candidates = if candidates.len() <= 4 {
+            candidates
+        } else {
+            let shaft = cluster.shaft(&job.emitter.shape, job.hull);
+            culled = candidates
+                .iter()
+                .copied()
+                .filter(|&k| !shaft.excludes(&self.occluders.pieces[k as usize].vertices))
+                .collect();
+            &culled
+        };
+        match cluster.children {
+            Some([left, right]) if !candidates.is_empty() => {
+                self.exact_cluster(job, left, candidates, scale, tally, scratch);
+                self.exact_cluster(job, right, candidates, scale, tally, scratch);
+            }
+            _ => {
+                for &i in members {
+                    if job.f_un[i] > 0.0 {
+                        scale[i] = self.exact_at(
+                            job.emitter,
+                            &job.points[i],
+                            job.f_un[i],
+                            candidates,
+                            tally,
+                            scratch,
+                        );
+                    }
+                }
+            }
+        }
+    }
+
+    /// `pi F` of the visible part of `e` at one point, from the occluder pieces `candidates`
+    /// (the point's own polygon left out); shadow rays past the caps.
+    fn exact_at(
+        &self,
+        e: &AreaEmitter,
+        at: &SurfacePoint,
+        f_unoccluded: f64,
+        candidates: &[u32],
+        tally: &mut Tally,
+        scratch: &mut Scratch,
+    ) -> f64 {
+        tally.evaluations += 1;
+        if candidates.is_empty() {
+            return PI * f_unoccluded;
+        }
+        tally.candidates += candidates.len() as u64;
+        let pieces = &self.occluders.pieces;
+        let occluders = candidates
+            .iter()
+            .map(|&k| &pieces[k as usize])
+            .filter(|piece| piece.polygon != at.polygon)
+            .map(|piece| piece.vertices.as_slice());
+        let r = scratch.visible_form_factor(
+            at.p,
+            at.n,
+            &e.shape,
+            occluders,
+            &self.limits,
+            Some(f_unoccluded),
+        );
+        tally.occluders += r.occluders as u64;
+        tally.occluders_max = tally.occluders_max.max(r.occluders as u64);
+        tally.pieces_max = tally.pieces_max.max(r.pieces as u64);
+        match r.form_factor {
+            // Nothing in the way: the same value as the sampled method's unoccluded one.
+            Some(_) if r.occluders == 0 => PI * f_unoccluded,
+            Some(f) => PI * f,
+            None => {
+                tally.fallbacks += 1;
+                let total = self.total_weight(at);
+                let (visible, rays) = self.sampled_visibility(e, f_unoccluded, total, at);
+                tally.rays += rays;
+                PI * f_unoccluded * visible
+            }
+        }
+    }
+
+    /// Sum over the emitters of the unoccluded form factor times the summed radiance: how the
+    /// sampled method shares its shadow rays between emitters.
+    fn total_weight(&self, at: &SurfacePoint) -> f64 {
+        self.emitters
+            .iter()
+            .map(|e| e.form_factor(at.p, at.n) * e.radiance.element_sum())
+            .sum()
+    }
+
+    /// Visibility fraction of `e` from `at` by shadow rays: the emitter's share (`f` x radiance
+    /// out of `total`) of its sample count, at least one set; each ray weighted by its
+    /// form-factor kernel. Returns the fraction and the rays cast.
+    fn sampled_visibility(
+        &self,
+        e: &AreaEmitter,
+        f: f64,
+        total: f64,
+        at: &SurfacePoint,
+    ) -> (f64, u64) {
+        let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
+        let mut rays = 0;
+        let wanted =
+            e.samples[0].len() as f64 * f * e.radiance.element_sum() / total.max(f64::MIN_POSITIVE);
+        let mut level = 0;
+        while level + 1 < e.samples.len() && e.samples[level + 1].len() as f64 >= wanted {
+            level += 1;
+        }
+        let mut seen = 0.0;
+        let mut all = 0.0;
+        for &(s, a) in &e.samples[level] {
+            let d = s - p;
+            let r2 = d.length_squared();
+            let cos_r = n.dot(d);
+            let cos_e = -e.normal.dot(d);
+            if cos_r <= 0.0 || cos_e <= 0.0 {
+                continue;
+            }
+            let w = a * cos_r * cos_e / (r2 * r2);
+            all += w;
+            rays += 1;
+            if !self
+                .vis
+                .occluded_skipping(p_ray, s, [at.polygon, e.polygon])
+            {
+                seen += w;
+            }
+        }
+        // When every sample is below the horizon the sliver that remains is taken as seen.
+        (if all > 0.0 { seen / all } else { 1.0 }, rays)
+    }
+
+    /// Sampled direct light at one point: exact unoccluded form factor x visibility fraction
+    /// from shadow rays, spent in proportion to each emitter's contribution (at least one per
+    /// visible emitter), so scenes with many small emitters stay cheap.
+    fn irradiance_sampled(&self, at: &SurfacePoint) -> DVec3 {
+        let mut h = DVec3::ZERO;
+        let mut rays = 0u64;
+        let (p, n) = (at.p, at.n);
+        let unoccluded: Vec<f64> = self.emitters.iter().map(|e| e.form_factor(p, n)).collect();
+        let total: f64 = self
+            .emitters
+            .iter()
+            .zip(&unoccluded)
+            .map(|(e, &f)| f * e.radiance.element_sum())
+            .sum();
+        let mut evaluations = 0;
+        for ((e, &f), c) in self.emitters.iter().zip(&unoccluded).zip(&self.per_emitter) {
+            if f <= 0.0 {
+                continue;
+            }
+            evaluations += 1;
+            let start = Instant::now();
+            let (visible, r) = self.sampled_visibility(e, f, total, at);
+            c.evaluations.fetch_add(1, Ordering::Relaxed);
+            c.nanos
+                .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+            rays += r;
+            h += e.radiance * (PI * f * visible);
+        }
+        for light in &self.scene.lights {
+            let (value, r) = punctual_irradiance(light, self.vis, at);
+            h += value;
+            rays += r;
+        }
+        self.evaluations.fetch_add(evaluations, Ordering::Relaxed);
+        self.rays.fetch_add(rays, Ordering::Relaxed);
+        h
+    }
+
+    /// The counters so far (all calls since [`Direct::new`]); `seconds` is left at 0.
+    pub fn stats(&self) -> DirectStats {
+        let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        DirectStats {
+            method: self.method,
+            seconds: 0.0,
+            evaluations: load(&self.evaluations),
+            candidates: load(&self.candidates),
+            fallbacks: load(&self.fallbacks),
+            occluder_cap: self.limits.max_occluders,
+            occluders: load(&self.occluder_total),
+            occluders_max: load(&self.occluders_max),
+            pieces_max: load(&self.pieces_max),
+            emitters: self
+                .emitters
+                .iter()
+                .zip(&self.per_emitter)
+                .map(|(e, c)| EmitterCost {
+                    polygon: e.polygon,
+                    triangles: e.triangles.len(),
+                    convex_pieces: e.shape.pieces.len(),
+                    evaluations: load(&c.evaluations),
+                    occluders: load(&c.occluders),
+                    fallbacks: load(&c.fallbacks),
+                    seconds: load(&c.nanos) as f64 * 1e-9,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// One emitter's exact pass over the points of one [`Direct::irradiance_points`] call.
+struct EmitterJob<'a> {
+    emitter: &'a AreaEmitter,
+    /// The emitter's hull, world space.
+    hull: &'a [DVec3],
+    points: &'a [SurfacePoint],
+    tree: &'a ClusterTree,
+    /// Unoccluded form factor of each point (0: the emitter is behind or below its horizon).
+    f_un: &'a [f64],
+}
+
+/// A kd-tree over receiving points, built once per call and shared by all emitters: each node
+/// holds the points `order[start..end]`, halved along their widest axis down to
+/// [`CLUSTER_LEAF`] points.
+struct ClusterTree {
+    order: Vec<usize>,
+    nodes: Vec<Cluster>,
+}
+
+struct Cluster {
+    start: usize,
+    end: usize,
+    /// Corners of the points' bounding box in a frame of the first point's normal: 4 when the
+    /// points lie in one plane, 8 otherwise.
+    corners: Vec<DVec3>,
+    /// For points of one plane with one normal: the normal and the highest point's height along
+    /// it, as a point. Occluders below that plane cannot block them.
+    plane: Option<(DVec3, DVec3)>,
+    children: Option<[usize; 2]>,
+}
+
+impl ClusterTree {
+    fn new(points: &[SurfacePoint]) -> ClusterTree {
+        let mut tree = ClusterTree {
+            order: (0..points.len()).collect(),
+            nodes: Vec::new(),
+        };
+        if !points.is_empty() {
+            tree.build(points, 0, points.len());
+        }
+        tree
+    }
+
+    fn build(&mut self, points: &[SurfacePoint], start: usize, end: usize) -> usize {
+        let members = &self.order[start..end];
+        let first = &points[members[0]];
+        let n0 = first.n;
+        let u = n0.any_orthonormal_vector();
+        let v = n0.cross(u);
+        let o = first.p;
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        let (mut wlo, mut whi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        let mut one_normal = true;
+        for &i in members {
+            let d = points[i].p - o;
+            let q = DVec3::new(d.dot(u), d.dot(v), d.dot(n0));
+            lo = lo.min(q);
+            hi = hi.max(q);
+            wlo = wlo.min(points[i].p);
+            whi = whi.max(points[i].p);
+            one_normal &= points[i].n == n0;
+        }
+        let extent = (hi - lo).max_element();
+        let flat = hi.z - lo.z <= 1e-9 * extent;
+        let corners = (0..if flat { 4 } else { 8 })
+            .map(|k| {
+                let x = if k & 1 == 0 { lo.x } else { hi.x };
+                let y = if k & 2 == 0 { lo.y } else { hi.y };
+                let z = if flat || k & 4 == 0 { lo.z } else { hi.z };
+                o + u * x + v * y + n0 * z
+            })
+            .collect();
+        let id = self.nodes.len();
+        self.nodes.push(Cluster {
+            start,
+            end,
+            corners,
+            plane: (flat && one_normal).then_some((n0, o + n0 * hi.z)),
+            children: None,
+        });
+        if end - start > CLUSTER_LEAF {
+            let d = whi - wlo;
+            let axis = if d.x >= d.y && d.x >= d.z {
+                0
+            } else if d.y >= d.z {
+                1
+            } else {
+                2
+            };
+            let mid = (end - start) / 2;
+            self.order[start..end].select_nth_unstable_by(mid, |&a, &b| {
+                points[a].p[axis]
+                    .total_cmp(&points[b].p[axis])
+                    .then(a.cmp(&b))
+            });
+            let left = self.build(points, start, start + mid);
+            let right = self.build(points, start + mid, end);
+            self.nodes[id].children = Some([left, right]);
+        }
+        id
+    }
+}
+
+impl Cluster {
+    /// The shaft of the cluster and an emitter: the convex hull of the cluster's corners and
+    /// the emitter's hull (its bounding rectangle when the hull has many corners), less what
+    /// lies on or behind the emitter's plane and, for a planar cluster, below its plane.
+    fn shaft(&self, shape: &EmitterShape, hull: &[DVec3]) -> Shaft {
+        let mut pts: Vec<DVec3> = Vec::with_capacity(self.corners.len() + 8);
+        pts.extend_from_slice(&self.corners);
+        if hull.len() <= 8 {
+            pts.extend_from_slice(hull);
+        } else {
+            let (a, b) = shape.hull.iter().fold(
+                (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+                |(a, b), q| (a.min(*q), b.max(*q)),
+            );
+            for q in [a, DVec2::new(b.x, a.y), b, DVec2::new(a.x, b.y)] {
+                pts.push(shape.frame.world_from_plane(q));
+            }
+        }
+        let shaft = Shaft::hull(&pts);
+        let tol = shaft.tolerance();
+        let fr = &shape.frame;
+        // Excluded when every corner is less than the plane tolerance in front of the emitter,
+        // as the per-point clipping does.
+        let mut shaft = shaft.with_plane(-fr.n, fr.origin + fr.n * (shape.plane_tolerance() + tol));
+        if let Some((n, q)) = self.plane {
+            // Excluded when every corner is below the receivers' plane (or in it, to within
+            // the tolerance): such an occluder projects to nothing from points in that plane.
+            shaft = shaft.with_plane(-n, q + n * (2.0 * tol));
+        }
+        shaft
+    }
+}
+
+/// Irradiance from one punctual light at a receiving point, and the rays it cast: the
+/// unoccluded irradiance of [`punctual_unoccluded`] if one shadow ray towards the light is free.
+pub fn punctual_irradiance(
+    light: &PunctualLight,
+    vis: &Visibility,
+    at: &SurfacePoint,
+) -> (DVec3, u64) {
+    let Some(e) = punctual_unoccluded(light, at.p, at.n) else {
+        return (DVec3::ZERO, 0);
+    };
+    let lit = match light.kind {
+        LightKind::Directional => {
+            vis.unoccluded_towards(at.ray_origin, -light.direction, at.polygon)
+        }
+        LightKind::Point | LightKind::Spot { .. } => {
+            !vis.occluded_skipping(at.ray_origin, light.position, [at.polygon, NO_POLYGON])
+        }
+    };
+    (if lit { e } else { DVec3::ZERO }, 1)
+}
+
+/// Direct irradiance H (W/m², linear RGB) at every vertex of `meshes`, one mesh per task: the
+/// vertices of one receiver are evaluated together ([`Direct::irradiance_points`]).
+pub fn direct_light(
+    scene: &Scene,
+    vis: &Visibility,
+    direct: &Direct<'_>,
+    meshes: &[ReceiverMesh],
+    progress: &crate::stats::Progress<'_>,
+) -> Vec<Vec<DVec3>> {
+    let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
+    let done = AtomicU64::new(0);
+    meshes
+        .par_iter()
+        .map(|m| {
+            let pts = evaluation_points(scene, vis, m);
+            let out = direct.irradiance_points(&pts);
+            let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
+            progress("direct light", d + m.vertices.len() as u64, total_vertices);
+            out
+        })
+        .collect()
+}

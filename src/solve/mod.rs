@@ -1,0 +1,217 @@
+//! Diffuse radiosity at the vertices of the receiver meshes.
+//!
+//! * **Direct light** at every vertex from every emitter. For area emitters, by default
+//!   ([`DirectMethod::Exact`]) the exact point-to-polygon form factor of the part of the emitter
+//!   that the vertex sees, by backprojection ([`crate::backproject`]); with
+//!   [`DirectMethod::Sampled`] (and as the fallback past an occluder cap) the exact unoccluded
+//!   form factor (Lambert's contour formula, clipped to the receiver's horizon) times a
+//!   visibility fraction from a fixed stratified set of shadow rays. Punctual lights: the exact
+//!   term with one shadow ray.
+//! * **Indirect light** by progressive refinement (Cohen, Chen, Wallace, Greenberg, "A progressive
+//!   refinement approach to fast radiosity image generation", SIGGRAPH 1988) over coarse patches,
+//!   with ray-cast form factors (Wallace, Elmquist, Haines, "A ray tracing algorithm for
+//!   progressive radiosity", SIGGRAPH 1989): the point-to-patch form factor evaluated at the
+//!   receiver, exact for the unoccluded part and subdivided near the receiver. The converged
+//!   patch radiosities are then gathered at every mesh vertex (a final gather), so the mesh
+//!   vertices receive the indirect light without the patch resolution showing.
+//!
+//! Quantities: radiance `L` in W/(m² sr), irradiance `H` and radiosity `B` in W/m², per linear RGB
+//! channel. `B = M + rho H`. Everything is deterministic: fixed sample patterns, and every
+//! parallel loop writes its own output slot.
+//!
+//! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
+//! indirect light: patches, progressive refinement, final gather) and `gauss_seidel.rs` (a
+//! matrix solve of the same patch system, the test oracle). [`radiosity`] is the entry point:
+//! the direct light, then the indirect solver (another indirect solver goes in a file of its
+//! own beside `progressive.rs`, chosen there). The shared physics (form factors, emitters, the
+//! punctual light model) is in [`crate::geometry`] and [`crate::light`].
+
+pub mod direct;
+pub mod gauss_seidel;
+pub mod progressive;
+
+pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
+pub use gauss_seidel::gauss_seidel;
+pub use progressive::{Patch, patches, point_patch_form_factor, progressive};
+// The receiving point and the area emitter are shared physics; re-exported for the solver's
+// users.
+pub use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint};
+
+use crate::backproject::Limits;
+use crate::mesh::ReceiverMesh;
+use crate::scene::Scene;
+use crate::visibility::Visibility;
+use glam::{DVec2, DVec3};
+use std::f64::consts::PI;
+use std::sync::atomic::Ordering;
+use std::time::Instant;
+
+/// How the direct light of area emitters is computed (`--direct`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DirectMethod {
+    /// The exact form factor of the visible part of each emitter, by backprojection: occluders
+    /// projected through the point onto the emitter and subtracted from it.
+    #[default]
+    Exact,
+    /// The exact unoccluded form factor times a visibility fraction from a fixed set of
+    /// stratified shadow rays (`shadow_samples` per point and emitter).
+    Sampled,
+}
+
+/// Options of the solve.
+#[derive(Clone, Debug)]
+pub struct SolveOptions {
+    /// How area emitters light the vertices.
+    pub direct: DirectMethod,
+    /// Shadow rays per vertex and area emitter for the visibility fraction (sampled direct
+    /// light, and the exact method's fallback).
+    pub shadow_samples: usize,
+    /// Exact direct light: when more than this many occluders project onto an emitter from one
+    /// point, that emitter's light at that point is sampled instead (counted in
+    /// [`DirectStats::fallbacks`]).
+    pub occluder_cap: usize,
+    /// Number of light bounces after the direct light (`Some(0)`: direct only); `None` iterates
+    /// until the unshot power is below `tolerance` of the power first received.
+    pub bounces: Option<u32>,
+    /// Target number of patches for the indirect solve.
+    pub patches: usize,
+    /// Convergence tolerance on the unshot power, relative to the directly received power.
+    pub tolerance: f64,
+}
+
+impl Default for SolveOptions {
+    fn default() -> Self {
+        SolveOptions {
+            direct: DirectMethod::Exact,
+            shadow_samples: 64,
+            occluder_cap: Limits::default().max_occluders,
+            bounces: None,
+            patches: 1024,
+            tolerance: 1e-3,
+        }
+    }
+}
+
+/// Irradiance at every mesh vertex plus counters.
+#[derive(Clone, Debug, Default)]
+pub struct Solution {
+    /// `irradiance[m][v]`: irradiance H (W/m², linear RGB) at vertex `v` of mesh `m`, direct plus
+    /// indirect, without the surface's own emission.
+    pub irradiance: Vec<Vec<DVec3>>,
+    /// Direct part of `irradiance`, same layout.
+    pub direct: Vec<Vec<DVec3>>,
+    pub stats: SolveStats,
+}
+
+/// Counters of a solve, reported in `--stats`.
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct SolveStats {
+    pub patches: usize,
+    pub shots: usize,
+    pub rays: u64,
+    /// Unshot power left at the end, relative to the power first received.
+    pub unshot_fraction: f64,
+    /// Power emitted by area emitters, W (mean over RGB).
+    pub emitted_power: f64,
+    /// Power received directly by all patches, W (mean over RGB).
+    pub direct_power: f64,
+    /// Power absorbed by all patches, W (mean over RGB).
+    pub absorbed_power: f64,
+    /// The direct light at the mesh vertices.
+    pub direct: DirectStats,
+}
+
+/// Ray origins of receiving points from the BVH's offset (the pure constructors are
+/// [`SurfacePoint::with_epsilon`] and [`SurfacePoint::near_edge_with_epsilon`]).
+impl SurfacePoint {
+    /// A point inside a surface: rays start `2 epsilon` along the normal
+    /// ([`Visibility::epsilon`]).
+    pub fn new(p: DVec3, n: DVec3, polygon: usize, vis: &Visibility) -> SurfacePoint {
+        SurfacePoint::with_epsilon(p, n, polygon, vis.epsilon())
+    }
+
+    /// A point on or near a polygon's edge: `inward` is the unit in-plane direction into the
+    /// polygon. Form factors are evaluated `1e-6` of the scene extent inside, rays start
+    /// `4 epsilon` inside and `2 epsilon` off the surface.
+    pub fn near_edge(
+        p: DVec3,
+        n: DVec3,
+        inward: DVec3,
+        polygon: usize,
+        vis: &Visibility,
+        extent: f64,
+    ) -> SurfacePoint {
+        SurfacePoint::near_edge_with_epsilon(p, n, inward, polygon, vis.epsilon(), extent)
+    }
+}
+
+/// Where each mesh vertex is evaluated: the vertex as a [`SurfacePoint::near_edge`], pulled
+/// toward the centroid of one of its triangles. A vertex on the polygon's edge then sees a
+/// surface that meets the edge (a wall on the floor) as its limit from inside the polygon,
+/// instead of lying in that surface's plane, where the contour integral and rays degenerate.
+fn evaluation_points(scene: &Scene, vis: &Visibility, mesh: &ReceiverMesh) -> Vec<SurfacePoint> {
+    let frame = &scene.polygons[mesh.polygon].frame;
+    let mut toward = vec![None::<DVec2>; mesh.vertices.len()];
+    for t in &mesh.triangles {
+        let c = t.iter().map(|&i| mesh.vertices[i as usize]).sum::<DVec2>() / 3.0;
+        for &i in t {
+            toward[i as usize].get_or_insert(c);
+        }
+    }
+    mesh.vertices
+        .iter()
+        .zip(&toward)
+        .map(|(&v, c)| {
+            let d = c
+                .map(|c| (c - v).normalize_or_zero())
+                .unwrap_or(DVec2::ZERO);
+            let inward = frame.u * d.x + frame.v * d.y;
+            SurfacePoint::near_edge(
+                frame.world_from_plane(v),
+                frame.n,
+                inward,
+                mesh.polygon,
+                vis,
+                scene.extent(),
+            )
+        })
+        .collect()
+}
+
+/// Solves direct and indirect light at every vertex of `meshes`.
+pub fn radiosity(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    options: &SolveOptions,
+    progress: &crate::stats::Progress<'_>,
+) -> Solution {
+    let direct = Direct::with_options(scene, vis, options);
+    let mut stats = SolveStats::default();
+
+    // Direct light at the vertices.
+    let start = Instant::now();
+    let direct_h = direct_light(scene, vis, &direct, meshes, progress);
+    stats.direct = direct.stats();
+    stats.direct.seconds = start.elapsed().as_secs_f64();
+
+    let irradiance = if options.bounces == Some(0) {
+        direct_h.clone()
+    } else {
+        progressive::indirect(
+            scene, vis, &direct, meshes, &direct_h, options, &mut stats, progress,
+        )
+    };
+    stats.rays += direct.rays.load(Ordering::Relaxed);
+    stats.emitted_power = direct
+        .emitters
+        .iter()
+        .map(|e| PI * e.radiance.element_sum() / 3.0 * scene.polygons[e.polygon].area)
+        .sum();
+    Solution {
+        irradiance,
+        direct: direct_h,
+        stats,
+    }
+}

@@ -1,0 +1,311 @@
+//! The indirect light by progressive refinement (Cohen, Chen, Wallace, Greenberg, "A progressive
+//! refinement approach to fast radiosity image generation", SIGGRAPH 1988) over coarse patches,
+//! with ray-cast form factors (Wallace, Elmquist, Haines, "A ray tracing algorithm for
+//! progressive radiosity", SIGGRAPH 1989), then a final gather of the converged patch
+//! radiosities at every mesh vertex.
+//!
+//! Irradiance `H` and radiosity `B` in W/m² per linear RGB channel; form factors dimensionless.
+
+use super::{SolveOptions, SolveStats, evaluation_points};
+use crate::geometry::{point_polygon_form_factor, triangle_area};
+use crate::light::SurfacePoint;
+use crate::mesh::ReceiverMesh;
+use crate::scene::Scene;
+use crate::solve::Direct;
+use crate::visibility::Visibility;
+use glam::DVec3;
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicU64, Ordering};
+
+/// A coarse patch of the indirect solve: one triangle.
+#[derive(Clone, Debug)]
+pub struct Patch {
+    /// Index into [`Scene::polygons`].
+    pub polygon: usize,
+    pub p: [DVec3; 3],
+    pub normal: DVec3,
+    pub centroid: DVec3,
+    pub area: f64,
+    pub rho: DVec3,
+    /// Bounding radius around the centroid.
+    pub radius: f64,
+}
+
+impl Patch {
+    fn new(polygon: usize, p: [DVec3; 3], normal: DVec3, rho: DVec3) -> Patch {
+        let centroid = (p[0] + p[1] + p[2]) / 3.0;
+        let area = triangle_area(&p);
+        let radius = p.iter().map(|q| q.distance(centroid)).fold(0.0, f64::max);
+        Patch {
+            polygon,
+            p,
+            normal,
+            centroid,
+            area,
+            rho,
+            radius,
+        }
+    }
+}
+
+/// Builds the patches: the polygons triangulated to about `target` triangles.
+pub fn patches(scene: &Scene, target: usize) -> Vec<Patch> {
+    let meshes = crate::mesh::uniform(scene, target);
+    let mut out = Vec::new();
+    for m in &meshes {
+        let poly = &scene.polygons[m.polygon];
+        let rho = scene.materials[poly.material].rho;
+        for t in &m.triangles {
+            let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
+            out.push(Patch::new(m.polygon, p, poly.frame.n, rho));
+        }
+    }
+    out
+}
+
+/// Form factor from a receiving surface point `(p, n)` to a patch, with visibility: exact unoccluded
+/// form factor of each piece times the visibility of its centroid; pieces near `p` are split in
+/// four, up to two levels. Returns the form factor and adds the rays cast to `rays`.
+pub fn point_patch_form_factor(
+    vis: &Visibility,
+    at: &SurfacePoint,
+    patch: &Patch,
+    rays: &mut u64,
+) -> f64 {
+    let (p, n) = (at.p, at.n);
+    // Cull: a planar polygon does not see itself; the receiver behind (or in the plane of) the
+    // patch; the patch entirely below the receiver's horizon.
+    if at.polygon == patch.polygon
+        || patch.normal.dot(p - patch.centroid) <= 1e-9 * (p - patch.centroid).length()
+    {
+        return 0.0;
+    }
+    if patch.p.iter().all(|q| n.dot(*q - p) <= 0.0) {
+        return 0.0;
+    }
+    let skip = [at.polygon, patch.polygon];
+    piece_form_factor(
+        vis,
+        p,
+        at.ray_origin,
+        n,
+        skip,
+        &patch.p,
+        patch.radius,
+        0,
+        rays,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn piece_form_factor(
+    vis: &Visibility,
+    p: DVec3,
+    p_ray: DVec3,
+    n: DVec3,
+    skip: [usize; 2],
+    t: &[DVec3; 3],
+    radius: f64,
+    depth: u32,
+    rays: &mut u64,
+) -> f64 {
+    let c = (t[0] + t[1] + t[2]) / 3.0;
+    if depth < 2 && c.distance(p) < 3.0 * radius {
+        let m = [
+            (t[0] + t[1]) * 0.5,
+            (t[1] + t[2]) * 0.5,
+            (t[2] + t[0]) * 0.5,
+        ];
+        let kids = [
+            [t[0], m[0], m[2]],
+            [m[0], t[1], m[1]],
+            [m[2], m[1], t[2]],
+            [m[0], m[1], m[2]],
+        ];
+        return kids
+            .iter()
+            .map(|k| piece_form_factor(vis, p, p_ray, n, skip, k, radius * 0.5, depth + 1, rays))
+            .sum();
+    }
+    let f = point_polygon_form_factor(p, n, t);
+    if f <= 0.0 {
+        return 0.0;
+    }
+    *rays += 1;
+    if vis.occluded_skipping(p_ray, c, skip) {
+        0.0
+    } else {
+        f
+    }
+}
+
+/// Progressive refinement over patches: returns the irradiance of each patch, direct plus
+/// indirect. `direct[i]` is the direct irradiance of patch `i`.
+pub fn progressive(
+    vis: &Visibility,
+    patches: &[Patch],
+    direct: &[DVec3],
+    bounces: Option<u32>,
+    tolerance: f64,
+    stats: &mut SolveStats,
+) -> Vec<DVec3> {
+    let mut h = direct.to_vec();
+    // Unshot radiosity (W/m²) of each patch: its reflected direct light.
+    let mut unshot: Vec<DVec3> = patches
+        .iter()
+        .zip(direct)
+        .map(|(p, d)| p.rho * *d)
+        .collect();
+    let power = |i: usize, u: &[DVec3]| u[i].element_sum() / 3.0 * patches[i].area;
+    let initial: f64 = (0..patches.len()).map(|i| power(i, &unshot)).sum();
+    let mut rays = 0u64;
+    let mut shots = 0usize;
+    // Shoots radiosity `b` from patch `i`: every other patch receives irradiance at its
+    // centroid, and its reflected part becomes unshot radiosity in `next`.
+    let mut shoot = |i: usize, b: DVec3, h: &mut Vec<DVec3>, next: &mut Vec<DVec3>| {
+        let src = &patches[i];
+        let received: Vec<(DVec3, u64)> = patches
+            .par_iter()
+            .enumerate()
+            .map(|(j, r)| {
+                if j == i {
+                    return (DVec3::ZERO, 0);
+                }
+                let mut n = 0;
+                let at = SurfacePoint::new(r.centroid, r.normal, r.polygon, vis);
+                let f = point_patch_form_factor(vis, &at, src, &mut n);
+                (b * f, n)
+            })
+            .collect();
+        for (j, (dh, n)) in received.into_iter().enumerate() {
+            rays += n;
+            h[j] += dh;
+            next[j] += patches[j].rho * dh;
+        }
+    };
+    match bounces {
+        Some(0) => {}
+        Some(n) => {
+            // n bounces in all: the final gather at the vertices is the last one, so the patches
+            // exchange light n-1 times, one generation of unshot light at a time.
+            for _ in 1..n {
+                let mut next = vec![DVec3::ZERO; patches.len()];
+                for (i, &b) in unshot.iter().enumerate() {
+                    if b.max_element() > 0.0 {
+                        shoot(i, b, &mut h, &mut next);
+                        shots += 1;
+                    }
+                }
+                unshot = next;
+            }
+        }
+        None => {
+            let limit = 100 * patches.len() + 1000;
+            loop {
+                let total: f64 = (0..patches.len()).map(|i| power(i, &unshot)).sum();
+                if total <= tolerance * initial || shots >= limit {
+                    break;
+                }
+                // The patch with the most unshot power; ties broken by index.
+                let mut best = 0;
+                let mut best_power = -1.0;
+                for i in 0..patches.len() {
+                    let pw = power(i, &unshot);
+                    if pw > best_power {
+                        best = i;
+                        best_power = pw;
+                    }
+                }
+                let b = std::mem::take(&mut unshot[best]);
+                shoot(best, b, &mut h, &mut unshot);
+                shots += 1;
+            }
+        }
+    }
+    let left: f64 = (0..patches.len()).map(|i| power(i, &unshot)).sum();
+    stats.patches = patches.len();
+    stats.shots = shots;
+    stats.rays += rays;
+    stats.unshot_fraction = if initial > 0.0 { left / initial } else { 0.0 };
+    h
+}
+
+/// The indirect light at every vertex of `meshes`, added to their direct light `direct_h`:
+/// patches, their direct light from `direct`, progressive refinement, and the final gather.
+/// Fills the patch counters and powers of `stats` and adds the rays cast.
+#[allow(clippy::too_many_arguments)]
+pub fn indirect(
+    scene: &Scene,
+    vis: &Visibility,
+    direct: &Direct<'_>,
+    meshes: &[ReceiverMesh],
+    direct_h: &[Vec<DVec3>],
+    options: &SolveOptions,
+    stats: &mut SolveStats,
+    progress: &crate::stats::Progress<'_>,
+) -> Vec<Vec<DVec3>> {
+    let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
+    let patches = patches(scene, options.patches);
+    let patch_direct: Vec<DVec3> = patches
+        .par_iter()
+        .map(|p| direct.irradiance(&SurfacePoint::new(p.centroid, p.normal, p.polygon, vis)))
+        .collect();
+    let patch_h = progressive(
+        vis,
+        &patches,
+        &patch_direct,
+        options.bounces,
+        options.tolerance,
+        stats,
+    );
+    stats.direct_power = patches
+        .iter()
+        .zip(&patch_direct)
+        .map(|(p, h)| p.area * h.element_sum() / 3.0)
+        .sum();
+    stats.absorbed_power = patches
+        .iter()
+        .zip(&patch_h)
+        .map(|(p, h)| p.area * ((DVec3::ONE - p.rho) * *h).element_sum() / 3.0)
+        .sum();
+    // Reflected radiosity of each patch, the source of the final gather.
+    let reflected: Vec<DVec3> = patches
+        .iter()
+        .zip(&patch_h)
+        .map(|(p, h)| p.rho * *h)
+        .collect();
+    let gather_rays = AtomicU64::new(0);
+    let done = AtomicU64::new(0);
+    let out = meshes
+        .par_iter()
+        .zip(direct_h)
+        .map(|(m, dh)| {
+            let pts = evaluation_points(scene, vis, m);
+            let mut rays = 0u64;
+            let values = pts
+                .iter()
+                .zip(dh)
+                .map(|(p, &d)| {
+                    let mut h = d;
+                    for (patch, b) in patches.iter().zip(&reflected) {
+                        if b.max_element() <= 0.0 {
+                            continue;
+                        }
+                        h += *b * point_patch_form_factor(vis, p, patch, &mut rays);
+                    }
+                    h
+                })
+                .collect();
+            gather_rays.fetch_add(rays, Ordering::Relaxed);
+            let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
+            progress(
+                "indirect light",
+                d + m.vertices.len() as u64,
+                total_vertices,
+            );
+            values
+        })
+        .collect();
+    stats.rays += gather_rays.load(Ordering::Relaxed);
+    out
+}
