@@ -1,6 +1,7 @@
 //! Exact direct light by backprojection (`--direct exact`): reference profiles, the Cornell
 //! floor, brute force on random scenes, the sampled fallback and its counters.
 
+use crate::Rng;
 use crate::{bake, parse, quick};
 use glam::{DVec2, DVec3};
 use penumbra::backproject::{self, EmitterShape, Limits};
@@ -210,20 +211,12 @@ fn cornell_floor_matches_reference() {
 // ---------------------------------------------------------------------------------------------
 // Brute force
 
-/// SplitMix64: a small deterministic generator.
-struct Rng(u64);
+/// Random directions for the brute-force checks.
+trait UnitVectors {
+    fn unit(&mut self) -> DVec3;
+}
 
-impl Rng {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
+impl UnitVectors for Rng {
     fn unit(&mut self) -> DVec3 {
         loop {
             let v = DVec3::new(

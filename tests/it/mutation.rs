@@ -8,6 +8,7 @@
 //! mutants instead of the default and `PENUMBRA_MUTANTS_FROM=K` starts at mutant K (for longer
 //! runs; the `cargo fuzz` target in `tests/fuzz` covers the loader alone, coverage-guided).
 
+use crate::Rng;
 use crate::output::split_glb;
 use penumbra::fixtures;
 use serde_json::{Value, json};
@@ -20,23 +21,6 @@ const MUTANTS: usize = 500;
 
 /// The longest a bake of one (small) mutant may take.
 const LIMIT: Duration = Duration::from_secs(30);
-
-/// splitmix64: a small, fixed random stream.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
 
 /// JSON pointers of every value in `v`, depth first.
 fn pointers(v: &Value, at: String, out: &mut Vec<String>) {
