@@ -355,31 +355,33 @@ pub fn bake_file(
     if let Some(stats) = &outputs.stats {
         named.push(("--stats", stats));
     }
-    let paths = files::check_outputs(&gltf.files_read(), &named)?;
+    // Resolved in the order named: the glb, then the EXR and the stats where asked for.
+    let mut paths = files::check_outputs(&gltf.files_read(), &named)?.into_iter();
+    let glb_path = paths.next();
+    let exr_path = outputs.exr.as_ref().and(paths.next());
+    let stats_path = outputs.stats.as_ref().and(paths.next());
     let mut result = bake(&gltf, options, progress)?;
     result.stats.timings_s.load += read_time;
     let mut write_time = 0.0;
-    let staged = stage(&mut write_time, "write", progress, || -> Result<Staged> {
+    let mut staged = stage(&mut write_time, "write", progress, || -> Result<Staged> {
         let mut staged = Staged::new();
-        staged.add(&paths[0], &glb_bytes(&gltf, &mut result)?)?;
-        if outputs.exr.is_some() {
+        if let Some(path) = &glb_path {
+            staged.add(path, &glb_bytes(&gltf, &mut result)?)?;
+        }
+        if let Some(path) = &exr_path {
             let map = &result.lightmap;
-            staged.add(
-                &paths[1],
-                &write::exr_bytes(&map.texels, map.width, map.height)?,
-            )?;
+            staged.add(path, &write::exr_bytes(&map.texels, map.width, map.height)?)?;
         }
         Ok(staged)
     })?;
-    let mut staged = staged;
     result.stats.timings_s.write = write_time;
     result.stats.timings_s.total = start.elapsed().as_secs_f64();
-    if outputs.stats.is_some() {
+    if let Some(path) = &stats_path {
         let json = serde_json::to_vec_pretty(&result.stats).map_err(|e| Error::Write {
-            path: paths[paths.len() - 1].clone(),
+            path: path.clone(),
             source: e.into(),
         })?;
-        staged.add(&paths[paths.len() - 1], &json)?;
+        staged.add(path, &json)?;
     }
     staged.commit()?;
     Ok(result)
