@@ -83,6 +83,9 @@ impl BakeOptions {
         if !(1..=1_000_000).contains(&self.solve.patches) {
             return bad("--patches", "must be between 1 and 1000000");
         }
+        if !(self.solve.hr_tolerance > 0.0 && self.solve.hr_tolerance <= 1.0) {
+            return bad("--hr-tolerance", "must be in (0, 1]");
+        }
         if let Some(t) = self.texels_per_unit
             && !(t.is_finite() && t > 0.0)
         {
@@ -149,6 +152,9 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats.lightmap_height = atlas.height;
     stats.texels_per_unit = atlas.texels_per_unit;
     stats.warnings = scene.warnings.clone();
+    stats
+        .warnings
+        .extend(solution.stats.warnings.iter().cloned());
     if !scene.has_light() {
         stats
             .warnings
