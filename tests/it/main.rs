@@ -6,6 +6,7 @@ mod direct;
 mod discontinuity;
 mod failure_scenes;
 mod fixtures;
+mod hierarchical;
 mod known_answers;
 mod loading;
 mod output;
