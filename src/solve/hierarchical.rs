@@ -45,13 +45,16 @@
 //! midpoints between centroid and corners; a larger node: the centroids of the elements at the
 //! 1/8, 3/8, 5/8, 7/8 positions of its range):
 //!
-//! * **Close surface-to-surface** (both nodes in one plane each, centre distance under
-//!   `CLOSE` × the sum of the radii, the source at most `CONTOUR_ELEMENTS` elements): the exact
-//!   unoccluded point-to-polygon form factor (Lambert's contour formula, clipped to the
-//!   receiver point's horizon: [`point_polygon_form_factor`]) from each receiver sample to each
-//!   source triangle, averaged over the receiver samples, times the visible fraction of the
-//!   4 × 4 sample pairs.
-//! * **Otherwise** (distant, or either end a cluster): per sample pair `(i, j)` the disk
+//! * **Surface to surface** (both nodes in one plane each): the exact unoccluded
+//!   point-to-polygon form factor (Lambert's contour formula) from each receiver sample to the
+//!   source, averaged over the receiver samples, times the visible fraction of the 4 × 4
+//!   sample pairs. When the source's bounding box is above the sample's horizon the contour
+//!   sum runs over the source node's *outline* only (its element edges whose reverse is not in
+//!   the node: interior edges cancel in the contour sum), so a large source costs its boundary,
+//!   not its area; a source straddling the horizon with at most `CONTOUR_ELEMENTS` elements is
+//!   summed per element, each clipped to the horizon ([`point_polygon_form_factor`]); a larger
+//!   straddling source falls to the disk estimate below.
+//! * **Otherwise** (either end a cluster, or a large straddling source): per sample pair `(i, j)` the disk
 //!   approximation `A_s cos_i cos_j / (π d_ij² + A_s)` (exact on the axis of a disk of area
 //!   `A_s`), with `cos` taken at each end from that sample's own element normal and clamped at
 //!   zero, times the pair's visibility, averaged over the pairs. At a cluster end this is a
@@ -124,12 +127,9 @@ use std::time::Instant;
 /// next ones with the previous pass's solution.
 pub const REFINE_PASSES: usize = 2;
 
-/// Close links (centre distance below this many times the sum of the bounding radii) between
-/// two surface nodes use the contour formula.
-const CLOSE: f64 = 2.0;
-
-/// Most source elements for the contour formula; larger close sources use the disk estimate
-/// (and are refined by the oracle when the link matters).
+/// Most source elements for the per-element (horizon-clipped) contour formula when the source
+/// straddles a receiver sample's horizon; larger straddling sources use the disk estimate (and
+/// are refined by the oracle when the link matters).
 const CONTOUR_ELEMENTS: u32 = 16;
 
 /// Most links; past it the refinement is redone with a 4× larger tolerance (a warning).
@@ -184,6 +184,8 @@ pub struct Element {
     pub rho: DVec3,
     /// Direct irradiance: the mean of the three vertices' exact values (W/m²).
     pub direct: DVec3,
+    /// The mesh's vertex ids of the corners.
+    pub v: [u32; 3],
 }
 
 /// A node of the hierarchy; it covers the elements `lo..hi`.
@@ -251,6 +253,60 @@ pub struct Hierarchy {
     /// `leaf[e]`: the node of element `e`.
     pub leaf: Vec<u32>,
     samples: Vec<Vec<Sample>>,
+    /// Per surface node, its outline: the directed element edges whose reverse is not in the
+    /// node (mesh vertex ids and world ends). Empty for clusters.
+    outline: Vec<Vec<Edge>>,
+}
+
+/// A directed edge of a surface node's outline: mesh vertex ids, world ends.
+type Edge = (u32, u32, DVec3, DVec3);
+
+/// The outlines of every surface node (children before parents): interior edges appear once in
+/// each direction and cancel in Lambert's contour sum, so the form factor of a whole surface
+/// node is the contour sum over its outline alone.
+fn outlines(nodes: &[Node], elements: &[Element]) -> Vec<Vec<Edge>> {
+    let mut out: Vec<Vec<Edge>> = Vec::with_capacity(nodes.len());
+    for n in nodes {
+        let edges = match n.kids {
+            None => {
+                let e = &elements[n.lo as usize];
+                (0..3)
+                    .map(|i| (e.v[i], e.v[(i + 1) % 3], e.p[i], e.p[(i + 1) % 3]))
+                    .collect()
+            }
+            Some(_) if n.polygon == NO_POLYGON => Vec::new(),
+            Some([a, b]) => {
+                let mut all: Vec<Edge> = out[a as usize]
+                    .iter()
+                    .chain(&out[b as usize])
+                    .copied()
+                    .collect();
+                all.sort_by_key(|e| (e.0, e.1));
+                let has =
+                    |x: u32, y: u32| all.binary_search_by_key(&(x, y), |e| (e.0, e.1)).is_ok();
+                all.iter().filter(|e| !has(e.1, e.0)).copied().collect()
+            }
+        };
+        out.push(edges);
+    }
+    out
+}
+
+/// Lambert's contour sum over a set of directed edges (see
+/// [`crate::geometry::contour_sum`]); the form factor is its absolute value over `2 pi` when
+/// the edges bound a region entirely above the horizon of `p`.
+fn edge_contour_sum(p: DVec3, n: DVec3, edges: &[Edge]) -> f64 {
+    let mut sum = 0.0;
+    for &(_, _, a, b) in edges {
+        let (a, b) = (a - p, b - p);
+        let c = a.cross(b);
+        let cl = c.length();
+        if cl <= 0.0 {
+            continue;
+        }
+        sum += cl.atan2(a.dot(b)) * n.dot(c) / cl;
+    }
+    sum
 }
 
 struct Builder<'a> {
@@ -426,6 +482,7 @@ impl Hierarchy {
                     area,
                     rho,
                     direct,
+                    v: *t,
                 });
             }
             if !ids.is_empty() {
@@ -448,11 +505,13 @@ impl Hierarchy {
             .par_iter()
             .map(|n| node_samples(n, &b.elements, vis))
             .collect();
+        let outline = outlines(&b.nodes, &b.elements);
         Some(Hierarchy {
             elements: b.elements,
             nodes: b.nodes,
             leaf: b.leaf,
             samples,
+            outline,
         })
     }
 
@@ -465,11 +524,14 @@ impl Hierarchy {
     pub fn transfer(&self, vis: &Visibility, r: u32, s: u32) -> Transfer {
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
-        let d = nr.center.distance(ns.center);
+        // Surface to surface: the exact unoccluded form factor from each receiver sample, over
+        // the source's outline when the source lies wholly above the sample's horizon, else
+        // (a close, straddling source of few elements) per element, clipped.
         let contour = nr.polygon != NO_POLYGON
             && ns.polygon != NO_POLYGON
-            && ns.hi - ns.lo <= CONTOUR_ELEMENTS
-            && d < CLOSE * (nr.radius + ns.radius);
+            && sr
+                .iter()
+                .all(|a| box_above(a.p, a.n, ns) || ns.hi - ns.lo <= CONTOUR_ELEMENTS);
         let mut rays = 0u64;
         let (mut seen, mut tested) = (0u32, 0u32);
         let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
@@ -478,12 +540,17 @@ impl Hierarchy {
         };
         if contour {
             let tris = &self.elements[ns.lo as usize..ns.hi as usize];
+            let outline = &self.outline[s as usize];
             let unoccluded = sr
                 .iter()
                 .map(|a| {
-                    tris.iter()
-                        .map(|e| point_polygon_form_factor(a.p, a.n, &e.p))
-                        .sum::<f64>()
+                    if box_above(a.p, a.n, ns) {
+                        edge_contour_sum(a.p, a.n, outline).abs() / (2.0 * PI)
+                    } else {
+                        tris.iter()
+                            .map(|e| point_polygon_form_factor(a.p, a.n, &e.p))
+                            .sum::<f64>()
+                    }
                 })
                 .sum::<f64>()
                 / sr.len() as f64;
@@ -727,6 +794,19 @@ impl Hierarchy {
             .filter(|n| n.polygon == NO_POLYGON)
             .count()
     }
+}
+
+/// True when the bounding box of `n` lies above (or touches) the horizon of `(p, normal)`.
+fn box_above(p: DVec3, normal: DVec3, n: &Node) -> bool {
+    let tol = 1e-9 * (n.radius + n.center.distance(p));
+    (0..8).all(|c| {
+        let q = DVec3::new(
+            if c & 1 == 0 { n.min.x } else { n.max.x },
+            if c & 2 == 0 { n.min.y } else { n.max.y },
+            if c & 4 == 0 { n.min.z } else { n.max.z },
+        );
+        normal.dot(q - p) >= -tol
+    })
 }
 
 /// Up to four sample points of a node (see the module doc).
