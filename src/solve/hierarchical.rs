@@ -79,9 +79,12 @@
 //!
 //! From the root-to-root link, a link `r ← s` is refined while its power bound
 //! `B_s K̂ A_r` exceeds `hr_tolerance × P`, where `P` is the total reflected direct power
-//! (W, the power the indirect solve starts from) and `K̂` is `K` when every tested pair agrees
-//! on visibility, and the unoccluded `K` when the link is partially visible (the shadow inside
-//! the link is unresolved, so the whole unoccluded transfer is at stake). So `--hr-tolerance`
+//! (W, the power the indirect solve starts from). For surface-to-surface links `K̂` is `K`
+//! when every tested pair agrees on visibility, and the unoccluded `K` when the link is
+//! partially visible (the shadow inside the link is unresolved, so the whole unoccluded
+//! transfer is at stake). For links with a cluster end the four samples may miss the surfaces
+//! that matter, so `K̂ = A_s / (π g² + A_s)` with both cosines bounded by 1 and `g` the
+//! smallest possible distance between the nodes' bounding spheres (1 when they overlap). So `--hr-tolerance`
 //! is the largest fraction of the reflected direct power one link may carry (dimensionless).
 //! Refining splits the node of larger area that has children (a self-link of a cluster becomes
 //! the four links between its two children); a link between two leaves is kept as it is.
@@ -241,6 +244,8 @@ pub struct Transfer {
     pub partial: bool,
     /// Shadow rays cast.
     pub rays: u64,
+    /// The bound on `k` the refinement oracle uses.
+    pub bound: f64,
 }
 
 /// The element and cluster hierarchy of a set of receiver meshes.
@@ -560,6 +565,7 @@ impl Hierarchy {
                     unoccluded: 0.0,
                     partial: false,
                     rays: 0,
+                    bound: 0.0,
                 };
             }
             for a in sr {
@@ -579,11 +585,13 @@ impl Hierarchy {
             } else {
                 f64::from(seen) / f64::from(tested)
             };
+            let partial = seen > 0 && seen < tested;
             return Transfer {
                 k: unoccluded * v,
                 unoccluded,
-                partial: seen > 0 && seen < tested,
+                partial,
                 rays,
+                bound: if partial { unoccluded } else { unoccluded * v },
             };
         }
         let (mut k, mut unoccluded) = (0.0, 0.0);
@@ -609,11 +617,16 @@ impl Hierarchy {
             }
         }
         let pairs = (sr.len() * ss.len()) as f64;
+        // The sampled cosines may all miss (four samples of a cluster): the oracle bounds the
+        // transfer with both cosines at 1 and the nodes' closest possible distance.
+        let gap = (nr.center.distance(ns.center) - nr.radius - ns.radius).max(0.0);
+        let bound = ns.area / (PI * gap * gap + ns.area);
         Transfer {
             k: k / pairs,
             unoccluded: unoccluded / pairs,
             partial: seen > 0 && seen < tested,
             rays,
+            bound,
         }
     }
 
@@ -691,8 +704,7 @@ impl Hierarchy {
         }
         let t = self.transfer(vis, r, s);
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
-        let bound = if t.partial { t.unoccluded } else { t.k };
-        let power = b[s as usize] * bound * nr.area;
+        let power = b[s as usize] * t.bound * nr.area;
         let split = match (nr.kids, ns.kids) {
             _ if power <= threshold => None,
             (Some(kr), Some(ks)) => Some(if nr.area >= ns.area {
