@@ -461,7 +461,7 @@ impl Hierarchy {
             for (ti, t) in m.triangles.iter().enumerate() {
                 let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
                 let area = triangle_area(&p);
-                if !(area > 0.0) {
+                if area.is_nan() || area <= 0.0 {
                     continue;
                 }
                 let direct = direct_h
@@ -599,7 +599,7 @@ impl Hierarchy {
             for b in ss {
                 let dir = b.p - a.p;
                 let d2 = dir.length_squared();
-                if !(d2 > 0.0) {
+                if d2.is_nan() || d2 <= 0.0 {
                     continue;
                 }
                 let len = d2.sqrt();
@@ -662,7 +662,7 @@ impl Hierarchy {
     pub fn link(&self, vis: &Visibility, b: &[f64], threshold: f64) -> (Vec<Link>, u64, u64) {
         let root = self.root();
         let (mut links, refinements, rays) = self.refine(vis, b, threshold, root, root);
-        links.sort_by(|x, y| (x.receiver, x.source).cmp(&(y.receiver, y.source)));
+        links.sort_by_key(|l| (l.receiver, l.source));
         (links, refinements, rays)
     }
 
