@@ -84,6 +84,9 @@ impl BakeOptions {
         if !(1..=1_000_000).contains(&self.solve.patches) {
             return bad("--patches", "must be between 1 and 1000000");
         }
+        if !(self.solve.hr_tolerance > 0.0 && self.solve.hr_tolerance <= 1.0) {
+            return bad("--hr-tolerance", "must be in (0, 1]");
+        }
         if let Some(t) = self.texels_per_unit
             && !(t.is_finite() && t > 0.0)
         {
@@ -168,6 +171,9 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats.lightmap_height = atlas.height;
     stats.texels_per_unit = atlas.texels_per_unit;
     stats.warnings = scene.warnings.clone();
+    stats
+        .warnings
+        .extend(solution.stats.warnings.iter().cloned());
     if !scene.has_light() {
         stats
             .warnings
@@ -358,8 +364,8 @@ pub fn bake_file(
     // Resolved in the order named: the glb, then the EXR and the stats where asked for.
     let mut paths = files::check_outputs(&gltf.files_read(), &named)?.into_iter();
     let glb_path = paths.next();
-    let exr_path = outputs.exr.as_ref().and(paths.next());
-    let stats_path = outputs.stats.as_ref().and(paths.next());
+    let exr_path = outputs.exr.as_ref().and_then(|_| paths.next());
+    let stats_path = outputs.stats.as_ref().and_then(|_| paths.next());
     let mut result = bake(&gltf, options, progress)?;
     result.stats.timings_s.load += read_time;
     let mut write_time = 0.0;
