@@ -201,7 +201,8 @@ struct BakeArgs {
     #[arg(long, default_value_t = 1024)]
     patches: usize,
     /// Indirect-light solver: `progressive` (coarse patches, final gather at every vertex) or
-    /// `hierarchical` (hierarchical radiosity with clustering over the mesh elements).
+    /// `hierarchical` (experimental: hierarchical radiosity with clustering over the mesh
+    /// elements; energy balance holds, single vertices can be off by several percent).
     #[arg(long, value_enum, default_value_t = Solver::Progressive)]
     solver: Solver,
     /// Hierarchical solver: the most power one link may carry before it is refined, as a

@@ -69,6 +69,8 @@ pub enum Solver {
     #[default]
     Progressive,
     /// Hierarchical radiosity with clustering over the mesh elements ([`hierarchical`]).
+    /// Experimental: energy balance holds, but single vertices can be off by several percent
+    /// (see the module doc).
     Hierarchical,
 }
 
