@@ -118,8 +118,8 @@ enum Outcome {
 /// One rung's measurements.
 struct Row {
     name: &'static str,
-    /// Triangles of the generated scene (from the stats when the bake finished, else the
-    /// generator's target).
+    /// Triangles of the generated scene (from the stats when the bake finished, else as the
+    /// library's loader counts them).
     triangles: usize,
     glb_bytes: usize,
     wall_s: f64,
@@ -176,7 +176,11 @@ fn main() {
             rung.name,
             glb.len() as f64 / 1048576.0
         );
-        let row = bake(&o, &dir, rung, &input, glb.len());
+        // The exact count, as the baker's loader sees it.
+        let triangles = penumbra::load::from_bytes(glb.clone(), &input)
+            .and_then(|g| penumbra::load::scene(&g))
+            .map_or(rung.triangles, |s| s.triangles.len());
+        let row = bake(&o, &dir, rung, &input, glb.len(), triangles);
         eprintln!(
             "[{:7.1} s] {}: {} in {:.1} s, peak {:.0} MiB",
             start.elapsed().as_secs_f64(),
@@ -200,7 +204,14 @@ fn main() {
 }
 
 /// Bakes one rung in a child process, with the time limit; measures wall time and peak RSS.
-fn bake(o: &Options, dir: &Path, rung: &LadderScene, input: &Path, glb_bytes: usize) -> Row {
+fn bake(
+    o: &Options,
+    dir: &Path,
+    rung: &LadderScene,
+    input: &Path,
+    glb_bytes: usize,
+    triangles: usize,
+) -> Row {
     let output = dir.join(format!("{}.baked.glb", rung.name));
     let stats_path = dir.join(format!("{}.stats.json", rung.name));
     let stderr_path = dir.join(format!("{}.stderr.txt", rung.name));
@@ -272,7 +283,7 @@ fn bake(o: &Options, dir: &Path, rung: &LadderScene, input: &Path, glb_bytes: us
     let triangles = stats
         .as_ref()
         .and_then(|s| s["triangles"].as_u64())
-        .map_or(rung.triangles, |t| t as usize);
+        .map_or(triangles, |t| t as usize);
     Row {
         name: rung.name,
         triangles,
