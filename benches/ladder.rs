@@ -118,6 +118,7 @@ enum Outcome {
 /// One rung's measurements.
 struct Row {
     name: &'static str,
+    description: &'static str,
     /// Triangles of the generated scene (from the stats when the bake finished, else as the
     /// library's loader counts them).
     triangles: usize,
@@ -158,7 +159,7 @@ fn main() {
         ),
     };
     std::fs::create_dir_all(&dir).expect("cannot create the work directory");
-    let header = Header::now(&o);
+    let header = Header::now();
     let start = Instant::now();
     let mut rows: Vec<Row> = Vec::new();
     for rung in &rungs {
@@ -204,6 +205,8 @@ fn main() {
 }
 
 /// Bakes one rung in a child process, with the time limit; measures wall time and peak RSS.
+// The child is reaped by `libc::wait4` (std's `wait` would lose the resource usage).
+#[allow(clippy::zombie_processes)]
 fn bake(
     o: &Options,
     dir: &Path,
@@ -286,6 +289,7 @@ fn bake(
         .map_or(triangles, |t| t as usize);
     Row {
         name: rung.name,
+        description: rung.description,
         triangles,
         glb_bytes,
         wall_s,
@@ -346,7 +350,7 @@ struct Header {
 }
 
 impl Header {
-    fn now(o: &Options) -> Header {
+    fn now() -> Header {
         let git = |args: &[&str]| {
             Command::new("git")
                 .args(args)
@@ -375,7 +379,6 @@ impl Header {
                 }
             }
         }
-        let _ = o;
         Header {
             date: today(),
             commit,
@@ -465,9 +468,9 @@ fn report(
     let _ = writeln!(w, "### Counts\n");
     let _ = writeln!(
         w,
-        "| scene | glb MiB | instances | area emitters | punctual lights | lightmap | texels/m | warnings |"
+        "| scene | what | glb MiB | instances | area emitters | punctual lights | lightmap | texels/m | warnings |"
     );
-    let _ = writeln!(w, "|---|--:|--:|--:|--:|--:|--:|--:|");
+    let _ = writeln!(w, "|---|---|--:|--:|--:|--:|--:|--:|--:|");
     for r in rows {
         let lightmap = match (r.num("/lightmap_width"), r.num("/lightmap_height")) {
             (Some(a), Some(b)) => format!("{a}x{b}"),
@@ -480,8 +483,9 @@ fn report(
             .map_or("-".into(), |a| a.len().to_string());
         let _ = writeln!(
             w,
-            "| {} | {:.2} | {} | {} | {} | {lightmap} | {} | {warnings} |",
+            "| {} | {} | {:.2} | {} | {} | {} | {lightmap} | {} | {warnings} |",
             r.name,
+            r.description,
             r.glb_bytes as f64 / 1048576.0,
             int(r.num("/instances")),
             int(r.num("/area_emitters")),
@@ -583,13 +587,35 @@ fn report(
         }
     }
     let _ = writeln!(w);
-    let _ = writeln!(w, "Pairwise, between consecutive finished rungs:\n");
+    let _ = writeln!(
+        w,
+        "Pairwise, between consecutive finished rungs (k only where the triangle counts differ \
+         by 10 % or more; across families it mixes scene kinds), then between consecutive rungs \
+         of one family:\n"
+    );
     let _ = writeln!(w, "| from | to | triangles x | time x | k |");
     let _ = writeln!(w, "|---|---|--:|--:|--:|");
-    for p in done.windows(2) {
-        let (a, b) = (p[0], p[1]);
+    let mut pairs: Vec<(&Row, &Row)> = done.windows(2).map(|p| (p[0], p[1])).collect();
+    for (i, a) in done.iter().enumerate() {
+        let next = done[i + 1..]
+            .iter()
+            .find(|b| family(b.name) == family(a.name));
+        if let Some(b) = next
+            && !pairs
+                .iter()
+                .any(|(x, y)| x.name == a.name && y.name == b.name)
+        {
+            pairs.push((a, b));
+        }
+    }
+    for (a, b) in pairs {
         let tx = b.triangles as f64 / a.triangles as f64;
         let sx = total(b) / total(a);
+        let k = if tx.ln().abs() >= 1.1f64.ln() {
+            sx.ln() / tx.ln()
+        } else {
+            f64::NAN
+        };
         let _ = writeln!(
             w,
             "| {} | {} | {:.2} | {:.2} | {} |",
@@ -597,11 +623,7 @@ fn report(
             b.name,
             tx,
             sx,
-            fmt_k(if tx != 1.0 {
-                sx.ln() / tx.ln()
-            } else {
-                f64::NAN
-            })
+            fmt_k(k)
         );
     }
     let _ = writeln!(w);
@@ -740,6 +762,7 @@ fn int(v: Option<f64>) -> String {
 fn number(v: Option<f64>) -> String {
     match v {
         None => "-".into(),
+        Some(0.0) => "0".into(), // also -0
         Some(x) if x == x.trunc() && x.abs() < 1e15 => format!("{x:.0}"),
         Some(x) if x.abs() >= 0.01 => format!("{x:.3}"),
         Some(x) => format!("{x:.2e}"),
