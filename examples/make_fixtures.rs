@@ -2,24 +2,49 @@
 //!
 //! ```text
 //! cargo run --example make_fixtures [OUTPUT_DIR]
+//! cargo run --release --example make_fixtures -- --ladder DIR
 //! ```
 //!
 //! `OUTPUT_DIR` defaults to `fixtures` (relative to the current directory, so run it from the
 //! repository root). Each scene becomes `OUTPUT_DIR/<name>.glb`, e.g. `fixtures/cornell-box.glb`;
 //! the output is deterministic, so re-running it leaves the files unchanged.
+//!
+//! `--ladder DIR` writes the scale-ladder scenes (`penumbra::fixtures::ladder`, up to several
+//! megabytes each) to `DIR/<rung>.glb` instead; they are generated on demand and not kept in
+//! `fixtures/`.
 
 use std::path::PathBuf;
 
 fn main() -> std::io::Result<()> {
-    let mut args = std::env::args_os().skip(1);
+    let args: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
+    let usage = || -> ! {
+        eprintln!("usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR");
+        std::process::exit(2);
+    };
+    if args.first().is_some_and(|a| a == "--ladder") {
+        let [_, dir] = args.as_slice() else { usage() };
+        let dir = PathBuf::from(dir);
+        std::fs::create_dir_all(&dir)?;
+        for rung in penumbra::fixtures::ladder::ladder() {
+            let glb = (rung.generate)();
+            let path = dir.join(format!("{}.glb", rung.name));
+            std::fs::write(&path, &glb)?;
+            println!(
+                "{} ({} bytes, about {} triangles)",
+                path.display(),
+                glb.len(),
+                rung.triangles
+            );
+        }
+        return Ok(());
+    }
+    if args.len() > 1 {
+        usage();
+    }
     let dir = args
-        .next()
+        .first()
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from("fixtures"));
-    if args.next().is_some() {
-        eprintln!("usage: make_fixtures [OUTPUT_DIR]");
-        std::process::exit(2);
-    }
     std::fs::create_dir_all(&dir)?;
     for (name, glb) in penumbra::fixtures::all() {
         let path = dir.join(format!("{name}.glb"));

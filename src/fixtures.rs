@@ -37,6 +37,10 @@ use serde_json::{Map, Value, json};
 /// The failure sweep: scenes where each meshing method is known to break down.
 pub mod failure;
 
+/// The scale ladder: generated towns and a house interior of game-level size (about 5 000 to
+/// 100 000 triangles), for measuring how the baker scales.
+pub mod ladder;
+
 /// glTF `bufferView.target` for vertex attributes.
 const ARRAY_BUFFER: u32 = 34962;
 /// glTF `bufferView.target` for indices.
