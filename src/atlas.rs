@@ -169,7 +169,9 @@ pub enum AtlasError {
     },
     /// An output vertex is on an atlas page beyond the ones the atlas keeps (with a fixed
     /// resolution: any page but the first; checked after packing).
-    #[error("mesh {mesh}: output vertex {vertex} is on atlas page {page}, beyond the atlas's pages")]
+    #[error(
+        "mesh {mesh}: output vertex {vertex} is on atlas page {page}, beyond the atlas's pages"
+    )]
     NotOnePage {
         mesh: usize,
         vertex: usize,
@@ -790,7 +792,10 @@ fn collect_output(
                 if on.is_some_and(|p| p != a) {
                     return Err(internal(
                         m,
-                        format!("output triangle {k} has corners on pages {} and {a}", on.unwrap_or(a)),
+                        format!(
+                            "output triangle {k} has corners on pages {} and {a}",
+                            on.unwrap_or(a)
+                        ),
                     ));
                 }
                 on = Some(a);

@@ -259,7 +259,41 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::Atla
             padding: options.padding,
             page_size: options.page_size,
         },
-    )?;
+    )
+    .map_err(|error| {
+        // Densities in errors back to the scene's units.
+        let unscale = |t: f32| (t as f64 * scale) as f32;
+        match error {
+            atlas::AtlasError::ChartTooLarge {
+                page_size,
+                texels_per_unit,
+                texels,
+            } => atlas::AtlasError::ChartTooLarge {
+                page_size,
+                texels_per_unit: unscale(texels_per_unit),
+                texels,
+            },
+            atlas::AtlasError::TooLarge {
+                texels_per_unit,
+                texels,
+                max,
+            } => atlas::AtlasError::TooLarge {
+                texels_per_unit: unscale(texels_per_unit),
+                texels,
+                max,
+            },
+            atlas::AtlasError::DoesNotFit {
+                resolution,
+                texels_per_unit,
+                attempts,
+            } => atlas::AtlasError::DoesNotFit {
+                resolution,
+                texels_per_unit: unscale(texels_per_unit),
+                attempts,
+            },
+            error => error,
+        }
+    })?;
     atlas.texels_per_unit = (atlas.texels_per_unit as f64 * scale) as f32;
     Ok(atlas)
 }
@@ -399,10 +433,7 @@ pub fn bake_file(
         if outputs.exr.is_some() {
             let map = &result.lightmap;
             for (p, path) in std::iter::once(&paths[1]).chain(&page_paths).enumerate() {
-                staged.add(
-                    path,
-                    &write::exr_bytes(map.page(p), map.width, map.height)?,
-                )?;
+                staged.add(path, &write::exr_bytes(map.page(p), map.width, map.height)?)?;
             }
         }
         Ok(staged)

@@ -401,7 +401,10 @@ fn measure(
             ));
             let lightmap = if budget == picture_budget {
                 let path = bakes_dir.join(format!("{}.glb", method.name()));
-                crate::files::write_atomically(&path, &crate::bake::glb_bytes(gltf, &mut b, options.encoding)?)?;
+                crate::files::write_atomically(
+                    &path,
+                    &crate::bake::glb_bytes(gltf, &mut b, options.encoding)?,
+                )?;
                 let lightmap = b.lightmap.clone();
                 pictures.push((method, b, path));
                 lightmap

@@ -68,7 +68,7 @@ impl Lightmap {
     /// Number of pages (`texels.len() / (width x height)`).
     pub fn pages(&self) -> usize {
         let n = self.width as usize * self.height as usize;
-        if n == 0 { 0 } else { self.texels.len() / n }
+        self.texels.len().checked_div(n).unwrap_or(0)
     }
 
     /// The texels of page `p` (row-major, top row first).
@@ -81,7 +81,15 @@ impl Lightmap {
 /// How the 8-bit lightmap maps codes to values: the transfer curve between the stored code
 /// (0..255, / 255) and the linear value `v = H / scale` (0..1).
 #[derive(
-    Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Default,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
 )]
 #[serde(rename_all = "lowercase")]
 pub enum Encoding {

@@ -503,7 +503,11 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             args.output.display(),
             result.stats.elements,
             result.stats.lightmap_pages,
-            if result.stats.lightmap_pages == 1 { "" } else { "s" },
+            if result.stats.lightmap_pages == 1 {
+                ""
+            } else {
+                "s"
+            },
             result.stats.lightmap_width,
             result.stats.lightmap_height,
             result.stats.timings_s.total

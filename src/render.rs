@@ -260,9 +260,7 @@ pub fn render_radiance(
                 (b, uv)
             });
             if let Shading::Colour(map) = shading {
-                return uv.map_or(DVec3::splat(0.02), |(b, uv)| {
-                    sample_page(map, b.page, uv)
-                });
+                return uv.map_or(DVec3::splat(0.02), |(b, uv)| sample_page(map, b.page, uv));
             }
             let mut l = if tri.normal.dot(dir) < 0.0 {
                 mat.radiance

