@@ -91,6 +91,9 @@ impl BakeOptions {
         if !(1..=1_000_000).contains(&self.solve.patches) {
             return bad("--patches", "must be between 1 and 1000000");
         }
+        if !(self.solve.hr_tolerance > 0.0 && self.solve.hr_tolerance <= 1.0) {
+            return bad("--hr-tolerance", "must be in (0, 1]");
+        }
         if let Some(t) = self.texels_per_unit
             && !(t.is_finite() && t > 0.0)
         {
@@ -186,6 +189,9 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats.lightmap_encoding = options.encoding.name().into();
     stats.texels_per_unit = atlas.texels_per_unit;
     stats.warnings = scene.warnings.clone();
+    stats
+        .warnings
+        .extend(solution.stats.warnings.iter().cloned());
     if !scene.has_light() {
         stats
             .warnings
@@ -409,7 +415,11 @@ pub fn bake_file(
     if let Some(stats) = &outputs.stats {
         named.push(("--stats", stats));
     }
-    let paths = files::check_outputs(&gltf.files_read(), &named)?;
+    // Resolved in the order named: the glb, then the EXR and the stats where asked for.
+    let mut paths = files::check_outputs(&gltf.files_read(), &named)?.into_iter();
+    let glb_path = paths.next();
+    let exr_path = outputs.exr.as_ref().and_then(|_| paths.next());
+    let stats_path = outputs.stats.as_ref().and_then(|_| paths.next());
     let mut result = bake(&gltf, options, progress)?;
     result.stats.timings_s.load += read_time;
     // The EXRs of pages 1.. are known only now: check them too, with all the others.
@@ -427,26 +437,27 @@ pub fn bake_file(
         files::check_outputs(&gltf.files_read(), &all)?.split_off(named.len())
     };
     let mut write_time = 0.0;
-    let staged = stage(&mut write_time, "write", progress, || -> Result<Staged> {
+    let mut staged = stage(&mut write_time, "write", progress, || -> Result<Staged> {
         let mut staged = Staged::new();
-        staged.add(&paths[0], &glb_bytes(&gltf, &mut result, options.encoding)?)?;
-        if outputs.exr.is_some() {
+        if let Some(path) = &glb_path {
+            staged.add(path, &glb_bytes(&gltf, &mut result, options.encoding)?)?;
+        }
+        if let Some(path) = &exr_path {
             let map = &result.lightmap;
-            for (p, path) in std::iter::once(&paths[1]).chain(&page_paths).enumerate() {
+            for (p, path) in std::iter::once(path).chain(&page_paths).enumerate() {
                 staged.add(path, &write::exr_bytes(map.page(p), map.width, map.height)?)?;
             }
         }
         Ok(staged)
     })?;
-    let mut staged = staged;
     result.stats.timings_s.write = write_time;
     result.stats.timings_s.total = start.elapsed().as_secs_f64();
-    if outputs.stats.is_some() {
+    if let Some(path) = &stats_path {
         let json = serde_json::to_vec_pretty(&result.stats).map_err(|e| Error::Write {
-            path: paths[paths.len() - 1].clone(),
+            path: path.clone(),
             source: e.into(),
         })?;
-        staged.add(&paths[paths.len() - 1], &json)?;
+        staged.add(path, &json)?;
     }
     staged.commit()?;
     Ok(result)

@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use penumbra::files::write_atomically;
 use penumbra::load::Gltf;
 use penumbra::mesh::Mesher;
-use penumbra::solve::{DirectMethod, SolveOptions};
+use penumbra::solve::{DirectMethod, SolveOptions, Solver};
 use penumbra::{BakeOptions, OutputFiles, bake_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -200,6 +200,16 @@ struct BakeArgs {
     /// Target number of coarse patches for the indirect solve.
     #[arg(long, default_value_t = 1024)]
     patches: usize,
+    /// Indirect-light solver: `progressive` (coarse patches, final gather at every vertex) or
+    /// `hierarchical` (experimental: hierarchical radiosity with clustering over the mesh
+    /// elements; energy balance holds, single vertices can be off by several percent).
+    #[arg(long, value_enum, default_value_t = Solver::Progressive)]
+    solver: Solver,
+    /// Hierarchical solver: the most power one link may carry before it is refined, as a
+    /// fraction of the total reflected direct power (dimensionless, in (0, 1]; smaller: more
+    /// links, more accurate).
+    #[arg(long, default_value_t = penumbra::solve::DEFAULT_HR_TOLERANCE)]
+    hr_tolerance: f64,
     /// Lightmap density in texels per scene unit (metre), kept as given: charts that do not fit
     /// one --page-size page go onto more pages. Default: derived from --resolution.
     #[arg(long, conflicts_with = "resolution")]
@@ -468,6 +478,8 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             shadow_samples: args.shadow_samples,
             bounces: args.bounces,
             patches: args.patches,
+            solver: args.solver,
+            hr_tolerance: args.hr_tolerance,
             ..SolveOptions::default()
         },
         texels_per_unit: args.texels_per_unit,

@@ -224,12 +224,16 @@ fn indices(root: &Value) -> Result<(), Invalid> {
     }
     for (i, image) in items(root, "images") {
         let item = format!("images[{i}].bufferView");
-        c.index(
-            image.get("bufferView"),
-            &item,
-            "bufferViews",
-            len("bufferViews"),
-        );
+        let views = len("bufferViews");
+        c.index(image.get("bufferView"), &item, "bufferViews", views);
+        // glTF requires it with a bufferView; the gltf crate unwraps it.
+        let typed = image.get("mimeType").is_some_and(Value::is_string);
+        if image.get("bufferView").is_some() && !typed {
+            c.fail(
+                &format!("images[{i}]"),
+                "has a bufferView but no mimeType".into(),
+            );
+        }
     }
     for (i, tex) in items(root, "textures") {
         let at = format!("textures[{i}]");
@@ -332,6 +336,16 @@ struct Checker {
 }
 
 impl Checker {
+    /// Records a problem unless one is already recorded.
+    fn fail(&mut self, item: &str, reason: String) {
+        if self.errors.is_none() {
+            self.errors = Some(Invalid {
+                item: item.to_string(),
+                reason,
+            });
+        }
+    }
+
     /// `value`, if present, must index an array of `len` elements (`what` names it).
     fn index(&mut self, value: Option<&Value>, item: &str, what: &str, len: usize) {
         let Some(v) = value else { return };
@@ -346,10 +360,7 @@ impl Checker {
             Some(_) => return,
             None => format!("{v} is not an index (a non-negative integer)"),
         };
-        self.errors = Some(Invalid {
-            item: item.to_string(),
-            reason,
-        });
+        self.fail(item, reason);
     }
 }
 

@@ -28,6 +28,7 @@
 
 pub mod direct;
 pub mod gauss_seidel;
+pub mod hierarchical;
 pub mod progressive;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
@@ -59,6 +60,20 @@ pub enum DirectMethod {
     Sampled,
 }
 
+/// Which solver computes the indirect light (`--solver`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Solver {
+    /// Progressive refinement over coarse patches, then a final gather at every vertex
+    /// ([`progressive`]).
+    #[default]
+    Progressive,
+    /// Hierarchical radiosity with clustering over the mesh elements ([`hierarchical`]).
+    /// Experimental: energy balance holds, but single vertices can be off by several percent
+    /// (see the module doc).
+    Hierarchical,
+}
+
 /// Options of the solve.
 #[derive(Clone, Debug)]
 pub struct SolveOptions {
@@ -78,7 +93,15 @@ pub struct SolveOptions {
     pub patches: usize,
     /// Convergence tolerance on the unshot power, relative to the directly received power.
     pub tolerance: f64,
+    /// Which solver computes the indirect light.
+    pub solver: Solver,
+    /// Hierarchical radiosity: the most power one link may carry before it is refined, as a
+    /// fraction of the total reflected direct power (dimensionless; see [`hierarchical`]).
+    pub hr_tolerance: f64,
 }
+
+/// Default of [`SolveOptions::hr_tolerance`].
+pub const DEFAULT_HR_TOLERANCE: f64 = 1e-5;
 
 impl Default for SolveOptions {
     fn default() -> Self {
@@ -89,6 +112,8 @@ impl Default for SolveOptions {
             bounces: None,
             patches: 1024,
             tolerance: 1e-3,
+            solver: Solver::Progressive,
+            hr_tolerance: DEFAULT_HR_TOLERANCE,
         }
     }
 }
@@ -120,6 +145,12 @@ pub struct SolveStats {
     pub absorbed_power: f64,
     /// The direct light at the mesh vertices.
     pub direct: DirectStats,
+    /// The hierarchical solver's counters (`--solver hierarchical`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hierarchical: Option<hierarchical::HierStats>,
+    /// Caps that changed the result.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub warnings: Vec<String>,
 }
 
 /// Ray origins of receiving points from the BVH's offset (the pure constructors are
@@ -199,9 +230,14 @@ pub fn radiosity(
     let irradiance = if options.bounces == Some(0) {
         direct_h.clone()
     } else {
-        progressive::indirect(
-            scene, vis, &direct, meshes, &direct_h, options, &mut stats, progress,
-        )
+        match options.solver {
+            Solver::Progressive => progressive::indirect(
+                scene, vis, &direct, meshes, &direct_h, options, &mut stats, progress,
+            ),
+            Solver::Hierarchical => {
+                hierarchical::indirect(scene, vis, meshes, &direct_h, options, &mut stats, progress)
+            }
+        }
     };
     stats.rays += direct.rays.load(Ordering::Relaxed);
     stats.emitted_power = direct

@@ -183,6 +183,22 @@ fn indices_the_parser_would_panic_on() {
 }
 
 #[test]
+fn an_embedded_image_without_a_mime_type_is_refused() {
+    // The gltf crate unwraps `mimeType` for an image in a bufferView (found by the mutation
+    // test on a real scene).
+    let bad = edit(&fixtures::box_on_floor(), |j, bin| {
+        let at = bin.len();
+        bin.extend_from_slice(&[0u8; 8]);
+        let views = j["bufferViews"].as_array_mut().unwrap();
+        views.push(json!({"buffer": 0, "byteOffset": at, "byteLength": 8}));
+        let view = views.len() - 1;
+        j["buffers"][0]["byteLength"] = json!(bin.len());
+        j["images"] = json!([{"bufferView": view}]);
+    });
+    expect_failure("mime", Some(&bad), &["in.glb", "images[0]", "mimeType"]);
+}
+
+#[test]
 fn overlapping_stride_is_refused() {
     let bad = edit(&fixtures::box_on_floor(), |j, _| {
         let view = j["accessors"][position(j, 1)]["bufferView"]

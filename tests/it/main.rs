@@ -7,6 +7,7 @@ mod discontinuity;
 mod failure_scenes;
 mod fixtures;
 mod hardening;
+mod hierarchical;
 mod known_answers;
 mod loading;
 mod mutation;

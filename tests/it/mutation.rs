@@ -6,7 +6,8 @@
 //! Mutants are built from fixed seeds, so a failure reproduces: the message gives the seed and
 //! the mutations, and the mutant is kept in `target/tmp/mutants/`. `PENUMBRA_MUTANTS=N` runs N
 //! mutants instead of the default and `PENUMBRA_MUTANTS_FROM=K` starts at mutant K (for longer
-//! runs; the `cargo fuzz` target in `tests/fuzz` covers the loader alone, coverage-guided).
+//! runs), and `PENUMBRA_MUTANT_INPUTS=DIR` adds every `.glb` in DIR to the fixtures mutated.
+//! The `cargo fuzz` targets in `tests/fuzz` cover the loader and the bake, coverage-guided.
 
 use crate::Rng;
 use crate::output::split_glb;
@@ -278,7 +279,7 @@ fn mutants_of_the_fixtures_fail_cleanly() {
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(MUTANTS);
-    let bases: Vec<(&str, Vec<u8>)> = vec![
+    let mut bases: Vec<(&str, Vec<u8>)> = vec![
         ("box-on-floor", fixtures::box_on_floor()),
         ("point-light", fixtures::point_light()),
         ("spot-light", fixtures::spot_light()),
@@ -287,6 +288,20 @@ fn mutants_of_the_fixtures_fail_cleanly() {
         ("square-occluder", fixtures::square_occluder()),
         ("cornell-box", fixtures::cornell_box()),
     ];
+    // More inputs to mutate: every .glb in the directory PENUMBRA_MUTANT_INPUTS (e.g. real
+    // scenes; keep them small, each bake has the same time limit).
+    if let Ok(dir) = std::env::var("PENUMBRA_MUTANT_INPUTS") {
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+            .unwrap_or_else(|e| panic!("PENUMBRA_MUTANT_INPUTS={dir}: {e}"))
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|x| x == "glb"))
+            .collect();
+        files.sort();
+        for f in files {
+            let name: &'static str = f.file_name().unwrap().to_string_lossy().into_owned().leak();
+            bases.push((name, std::fs::read(&f).unwrap()));
+        }
+    }
     let from: usize = std::env::var("PENUMBRA_MUTANTS_FROM")
         .ok()
         .and_then(|v| v.parse().ok())

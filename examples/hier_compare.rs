@@ -1,0 +1,87 @@
+//! Bakes one glb with `--solver progressive` and `--solver hierarchical` in the same run and
+//! prints the solve and bake seconds, the hierarchical counters and the difference of the
+//! vertex irradiance (luminance) between the two, relative to the progressive mean:
+//! `cargo run --release --example hier_compare -- scene.glb [hr_tolerance] [budget]`.
+
+use penumbra::light::luminance;
+use penumbra::solve::Solver;
+use penumbra::{BakeOptions, load};
+use std::path::Path;
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let path = args
+        .next()
+        .ok_or_else(|| anyhow::anyhow!("usage: hier_compare SCENE.glb [TOL] [BUDGET]"))?;
+    let tol: Option<f64> = args.next().map(|s| s.parse()).transpose()?;
+    let budget: Option<usize> = args.next().map(|s| s.parse()).transpose()?;
+    let gltf = load::read(Path::new(&path))?;
+    let mut options = BakeOptions::default();
+    if let Some(b) = budget {
+        options.budget = b;
+    }
+    let mut runs = Vec::new();
+    for solver in [Solver::Progressive, Solver::Hierarchical] {
+        let mut o = options.clone();
+        o.solve.solver = solver;
+        if let Some(t) = tol {
+            o.solve.hr_tolerance = t;
+        }
+        let t = std::time::Instant::now();
+        let mut b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
+        b.stats.timings_s.total = t.elapsed().as_secs_f64();
+        println!(
+            "{solver:?}: solve {:.2} s, bake {:.2} s, rays {}, vertices {}, absorbed/emitted {:.4}, unshot {:.2e}",
+            b.stats.timings_s.solve,
+            b.stats.timings_s.total,
+            b.stats.solve.rays,
+            b.stats.vertices,
+            b.stats.solve.absorbed_power / b.stats.solve.emitted_power.max(1e-300),
+            b.stats.solve.unshot_fraction,
+        );
+        if let Some(h) = &b.stats.solve.hierarchical {
+            println!("  {}", serde_json::to_string(h)?);
+        }
+        for w in &b.stats.warnings {
+            println!("  warning: {w}");
+        }
+        runs.push(b);
+    }
+    let (p, h) = (&runs[0], &runs[1]);
+    let (mut sum_p, mut sum_h, mut n) = (0.0, 0.0, 0usize);
+    let (mut ind_p, mut ind_h) = (0.0, 0.0);
+    let mut diffs = Vec::new();
+    for m in 0..p.solution.irradiance.len() {
+        for v in 0..p.solution.irradiance[m].len() {
+            let a = luminance(p.solution.irradiance[m][v]);
+            let b = luminance(h.solution.irradiance[m][v]);
+            let d = luminance(p.solution.direct[m][v]);
+            sum_p += a;
+            sum_h += b;
+            ind_p += a - d;
+            ind_h += b - d;
+            n += 1;
+            diffs.push((b - a).abs());
+        }
+    }
+    let mean = sum_p / n as f64;
+    let mean_diff = diffs.iter().sum::<f64>() / n as f64;
+    let max_diff = diffs.iter().copied().fold(0.0, f64::max);
+    println!(
+        "mean H: progressive {:.5}, hierarchical {:.5} (ratio {:.4}); mean indirect: {:.5} vs {:.5} (ratio {:.4})",
+        mean,
+        sum_h / n as f64,
+        sum_h / sum_p,
+        ind_p / n as f64,
+        ind_h / n as f64,
+        ind_h / ind_p
+    );
+    println!(
+        "vertex |dH|: mean {:.4}, max {:.4} of the mean H; solve speed-up {:.2}x, bake {:.2}x",
+        mean_diff / mean,
+        max_diff / mean,
+        p.stats.timings_s.solve / h.stats.timings_s.solve,
+        p.stats.timings_s.total / h.stats.timings_s.total
+    );
+    Ok(())
+}

@@ -1,0 +1,986 @@
+//! The indirect light by hierarchical radiosity with clustering (`--solver hierarchical`).
+//!
+//! Papers: Hanrahan, Salzman, Aupperle, "A rapid hierarchical radiosity algorithm", SIGGRAPH
+//! 1991 (links between nodes of a hierarchy, refined by a `B F A` oracle; gather, push-pull);
+//! Lischinski, Tampieri, Greenberg, "Combining hierarchical radiosity and discontinuity
+//! meshing", SIGGRAPH 1993 (the leaves are the discontinuity mesh's elements, so no link ever
+//! averages across a shadow boundary or a contact); Smits, Arvo, Greenberg, "A clustering
+//! algorithm for radiosity in complex environments", SIGGRAPH 1994, and Sillion, "A unified
+//! hierarchical algorithm for global illumination with scattering volumes and object
+//! clusters", IEEE TVCG 1995 (clusters of surfaces above the polygons, so the number of links
+//! grows with the number of elements, not its square).
+//!
+//! # Why
+//!
+//! The progressive solver gathers every coarse patch at every mesh vertex: O(vertices ×
+//! patches) rays, and a patch that straddles a contact averages its dark and lit parts. Here
+//! light moves along *links* between nodes of a hierarchy, each link as coarse as the power it
+//! carries allows: distant or dim exchanges use one link between two clusters, bright close
+//! ones go down to single mesh elements. The leaves are the receiver mesh's triangles, which
+//! never cross a discontinuity or contact line, so the finest links resolve exactly what the
+//! mesher resolved.
+//!
+//! # Hierarchy
+//!
+//! * **Leaves**: the triangles of every [`ReceiverMesh`] (one *element* each), with their
+//!   direct irradiance = the mean of their three vertices' exact direct values.
+//! * **Surface nodes**: per receiver polygon, a binary tree of its elements, split at the
+//!   median element centroid along the longer axis of their bounding box in the polygon's 2D
+//!   frame. A surface node lies in one plane and has that plane's normal.
+//! * **Clusters**: above the polygons' roots, a top-down median split of the polygons' 3D
+//!   bounding-box centres along the longest axis, up to one root.
+//!
+//! Every node stores its area (scene units²), area-weighted reflectance, bounding box, centre
+//! (area-weighted centroid) and bounding radius about the centre. Nodes are numbered children
+//! before parents, and each covers a contiguous range of elements.
+//!
+//! # Links and the transport coefficient
+//!
+//! A link `r ← s` carries a transport coefficient `K` (dimensionless): the mean irradiance it
+//! adds over the receiver node `r` per unit radiosity of the source node `s`, i.e. the
+//! area-averaged form factor `F(r→s)`, with visibility. So `H_r += K B_s` (W/m²), and the link
+//! carries the power `K B_s A_r` (W).
+//!
+//! `K` is estimated from up to four fixed sample points per node (a leaf: its centroid and the
+//! midpoints between centroid and corners; a larger node: the centroids of the elements at the
+//! 1/8, 3/8, 5/8, 7/8 positions of its range):
+//!
+//! * **Surface to surface** (both nodes in one plane each): the exact unoccluded
+//!   point-to-polygon form factor (Lambert's contour formula) from each receiver sample to the
+//!   source, averaged over the receiver samples, times the visible fraction of the 4 × 4
+//!   sample pairs. When the source's bounding box is above the sample's horizon the contour
+//!   sum runs over the source node's *outline* only (its element edges whose reverse is not in
+//!   the node: interior edges cancel in the contour sum), so a large source costs its boundary,
+//!   not its area; a source straddling the horizon with at most `CONTOUR_ELEMENTS` elements is
+//!   summed per element, each clipped to the horizon ([`point_polygon_form_factor`]); a larger
+//!   straddling source falls to the disk estimate below.
+//! * **Otherwise** (either end a cluster, or a large straddling source): per sample pair `(i, j)` the disk
+//!   approximation `A_s cos_i cos_j / (π d_ij² + A_s)` (exact on the axis of a disk of area
+//!   `A_s`), with `cos` taken at each end from that sample's own element normal and clamped at
+//!   zero, times the pair's visibility, averaged over the pairs. At a cluster end this is a
+//!   *sampled* orientation model rather than Sillion's isotropic one (the isotropic model
+//!   replaces the cosine at a cluster end by 1/4, the mean of `max(cos, 0)` over the sphere):
+//!   the samples are surfaces of the cluster, so a cluster whose surfaces face away from the
+//!   other end neither sends nor receives. The irradiance a cluster receives is then pushed
+//!   unchanged to all its surfaces (the cluster's mean irradiance): that is where a cluster
+//!   link is coarse, and why the oracle below bounds the power such a link may carry.
+//!
+//! Visibility: one shadow ray per sample pair with `cos > 0` at both ends
+//! ([`Visibility::occluded_skipping`] between the two points' ray origins, each offset off its
+//! surface like [`SurfacePoint::new`], skipping the two points' own polygons). Deterministic
+//! points, no randomness.
+//!
+//! Pairs that carry nothing are never linked: two nodes of one plane (a planar polygon does not
+//! see itself), a source whose bounding box lies behind (or in) a surface receiver's plane, a
+//! receiver whose box lies behind a surface source's plane, and sources of zero reflectance
+//! (their indirect radiosity is always zero; their emission is in the direct light).
+//!
+//! # Refinement
+//!
+//! From the root-to-root link, a link `r ← s` is refined while its power bound
+//! `B_s K̂ A_r` exceeds `hr_tolerance × P`, where `P` is the total reflected direct power
+//! (W, the power the indirect solve starts from). For surface-to-surface links `K̂` is `K`
+//! when every tested pair agrees on visibility, and the unoccluded `K` when the link is
+//! partially visible (the shadow inside the link is unresolved, so the whole unoccluded
+//! transfer is at stake). For links with a cluster end the four samples may miss the surfaces
+//! that matter, so `K̂ = A_s / (π g² + A_s)` with both cosines bounded by 1 and `g` the
+//! smallest possible distance between the nodes' bounding spheres (1 when they overlap). So `--hr-tolerance`
+//! is the largest fraction of the reflected direct power one link may carry (dimensionless).
+//! Refining splits the node of larger area that has children (a self-link of a cluster becomes
+//! the four links between its two children); a link between two leaves is kept as it is.
+//!
+//! `B_s` for the oracle: [`REFINE_PASSES`] passes. The first uses the reflected direct light;
+//! the solution then gives every node its full radiosity (a node in shadow has none at first),
+//! and the links are refined again from the root with it and the system solved again.
+//!
+//! # Solve
+//!
+//! Jacobi iterations (every receiver gathers from the previous iterate, in parallel with an
+//! indexed collect, so the result does not depend on the thread count): gather along the links
+//! into each node's irradiance, push it down to the leaves (a leaf's indirect irradiance is the
+//! sum of what it and its ancestors gathered), `B_leaf = rho (H_direct + H_indirect)`, pull
+//! back up (a node's radiosity is the area-weighted mean of its children's). Only the
+//! *reflected* light moves: the emitters' direct light is already exact at the vertices.
+//! Converged when the power the last iteration added, `sum A |ΔB|` (mean over RGB), is below
+//! `tolerance` of `P` (the progressive solver's rule: its unshot power), or after `bounces`
+//! iterations when given (iteration `n` adds the `n`-th bounce).
+//!
+//! # Values at the vertices
+//!
+//! The indirect irradiance at a vertex is the area-weighted mean of the indirect irradiance of
+//! the elements of its own mesh that use it. A vertex split along a contact (one copy per
+//! side) is used only by the elements of its side, so the sides stay separate. The direct light
+//! stays the exact vertex value.
+//!
+//! Units: lengths in scene units; irradiance `H` and radiosity `B` in W/m² per linear RGB
+//! channel; powers in W (mean over RGB); form factors and `K` dimensionless.
+
+use super::{SolveOptions, SolveStats};
+use crate::geometry::{point_polygon_form_factor, triangle_area};
+use crate::light::{NO_POLYGON, SurfacePoint};
+use crate::mesh::ReceiverMesh;
+use crate::scene::Scene;
+use crate::visibility::Visibility;
+use glam::{DVec2, DVec3};
+use rayon::prelude::*;
+use std::f64::consts::PI;
+use std::time::Instant;
+
+/// Refinement passes: the first with the reflected direct light as the sources' radiosity, the
+/// next ones with the previous pass's solution.
+pub const REFINE_PASSES: usize = 2;
+
+/// Most source elements for the per-element (horizon-clipped) contour formula when the source
+/// straddles a receiver sample's horizon; larger straddling sources use the disk estimate (and
+/// are refined by the oracle when the link matters).
+const CONTOUR_ELEMENTS: u32 = 16;
+
+/// Most links; past it the refinement is redone with a 4× larger tolerance (a warning).
+pub const MAX_LINKS: usize = 30_000_000;
+
+/// Most Jacobi iterations when iterating to convergence (a warning when reached).
+pub const MAX_ITERATIONS: usize = 1000;
+
+/// Counters of the hierarchical solve (`--stats`: `solve.hierarchical`).
+#[derive(Clone, Debug, Default, serde::Serialize)]
+pub struct HierStats {
+    /// Nodes of the hierarchy (leaves, surface nodes, clusters).
+    pub nodes: usize,
+    /// Leaves: mesh elements.
+    pub elements: usize,
+    /// Cluster nodes (spanning more than one polygon).
+    pub clusters: usize,
+    /// Links of the last refinement pass.
+    pub links: usize,
+    /// Links refined (split), summed over the passes.
+    pub refinements: u64,
+    /// Jacobi iterations, summed over the passes.
+    pub iterations: usize,
+    /// Shadow rays of the link estimates.
+    pub rays: u64,
+    /// The refinement tolerance in effect (after any cap), fraction of the reflected direct
+    /// power.
+    pub tolerance: f64,
+    /// Seconds building the hierarchy.
+    pub build_seconds: f64,
+    /// Seconds refining links (all passes).
+    pub link_seconds: f64,
+    /// Seconds iterating (all passes).
+    pub solve_seconds: f64,
+    /// Seconds computing the vertex values.
+    pub vertex_seconds: f64,
+}
+
+/// A leaf: one triangle of one receiver mesh.
+#[derive(Clone, Debug)]
+pub struct Element {
+    /// Index into the `meshes` slice.
+    pub mesh: usize,
+    /// Triangle index in that mesh.
+    pub triangle: usize,
+    /// Index into [`Scene::polygons`].
+    pub polygon: usize,
+    /// World-space corners.
+    pub p: [DVec3; 3],
+    pub normal: DVec3,
+    pub area: f64,
+    pub rho: DVec3,
+    /// Direct irradiance: the mean of the three vertices' exact values (W/m²).
+    pub direct: DVec3,
+    /// The mesh's vertex ids of the corners.
+    pub v: [u32; 3],
+}
+
+/// A node of the hierarchy; it covers the elements `lo..hi`.
+#[derive(Clone, Debug)]
+pub struct Node {
+    pub lo: u32,
+    pub hi: u32,
+    /// Children (both lower indices), `None` for a leaf.
+    pub kids: Option<[u32; 2]>,
+    /// The polygon of a surface node (or leaf), [`NO_POLYGON`] for a cluster.
+    pub polygon: usize,
+    /// Area, scene units².
+    pub area: f64,
+    /// Area-weighted reflectance.
+    pub rho: DVec3,
+    pub min: DVec3,
+    pub max: DVec3,
+    /// Area-weighted centroid.
+    pub center: DVec3,
+    /// Bounding radius about `center`.
+    pub radius: f64,
+    /// Unit normal of a surface node; zero for a cluster.
+    pub normal: DVec3,
+}
+
+/// A sample point of a node: where it is, its surface's normal, its ray origin, its polygon.
+#[derive(Clone, Copy, Debug)]
+struct Sample {
+    p: DVec3,
+    n: DVec3,
+    ray: DVec3,
+    polygon: usize,
+}
+
+/// A link: `H[receiver] += k B[source]`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Link {
+    pub receiver: u32,
+    pub source: u32,
+    /// Transport coefficient (dimensionless): mean irradiance over the receiver per unit
+    /// radiosity of the source.
+    pub k: f64,
+}
+
+/// The estimate of one link.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Transfer {
+    /// With visibility.
+    pub k: f64,
+    /// Without visibility.
+    pub unoccluded: f64,
+    /// Some tested sample pairs see each other and some do not.
+    pub partial: bool,
+    /// Shadow rays cast.
+    pub rays: u64,
+    /// The bound on `k` the refinement oracle uses.
+    pub bound: f64,
+}
+
+/// The element and cluster hierarchy of a set of receiver meshes.
+#[derive(Clone, Debug)]
+pub struct Hierarchy {
+    /// Leaves, in node order (each node covers a contiguous range).
+    pub elements: Vec<Element>,
+    /// Nodes, children before parents; the last is the root.
+    pub nodes: Vec<Node>,
+    /// `leaf[e]`: the node of element `e`.
+    pub leaf: Vec<u32>,
+    samples: Vec<Vec<Sample>>,
+    /// Per surface node, its outline: the directed element edges whose reverse is not in the
+    /// node (mesh vertex ids and world ends). Empty for clusters.
+    outline: Vec<Vec<Edge>>,
+}
+
+/// A directed edge of a surface node's outline: mesh vertex ids, world ends.
+type Edge = (u32, u32, DVec3, DVec3);
+
+/// The outlines of every surface node (children before parents): interior edges appear once in
+/// each direction and cancel in Lambert's contour sum, so the form factor of a whole surface
+/// node is the contour sum over its outline alone.
+fn outlines(nodes: &[Node], elements: &[Element]) -> Vec<Vec<Edge>> {
+    let mut out: Vec<Vec<Edge>> = Vec::with_capacity(nodes.len());
+    for n in nodes {
+        let edges = match n.kids {
+            None => {
+                let e = &elements[n.lo as usize];
+                (0..3)
+                    .map(|i| (e.v[i], e.v[(i + 1) % 3], e.p[i], e.p[(i + 1) % 3]))
+                    .collect()
+            }
+            Some(_) if n.polygon == NO_POLYGON => Vec::new(),
+            Some([a, b]) => {
+                let mut all: Vec<Edge> = out[a as usize]
+                    .iter()
+                    .chain(&out[b as usize])
+                    .copied()
+                    .collect();
+                all.sort_by_key(|e| (e.0, e.1));
+                let has =
+                    |x: u32, y: u32| all.binary_search_by_key(&(x, y), |e| (e.0, e.1)).is_ok();
+                all.iter().filter(|e| !has(e.1, e.0)).copied().collect()
+            }
+        };
+        out.push(edges);
+    }
+    out
+}
+
+/// Lambert's contour sum over a set of directed edges (see
+/// [`crate::geometry::contour_sum`]); the form factor is its absolute value over `2 pi` when
+/// the edges bound a region entirely above the horizon of `p`.
+fn edge_contour_sum(p: DVec3, n: DVec3, edges: &[Edge]) -> f64 {
+    let mut sum = 0.0;
+    for &(_, _, a, b) in edges {
+        let (a, b) = (a - p, b - p);
+        let c = a.cross(b);
+        let cl = c.length();
+        if cl <= 0.0 {
+            continue;
+        }
+        sum += cl.atan2(a.dot(b)) * n.dot(c) / cl;
+    }
+    sum
+}
+
+struct Builder<'a> {
+    scene: &'a Scene,
+    items: Vec<Element>,
+    elements: Vec<Element>,
+    nodes: Vec<Node>,
+    leaf: Vec<u32>,
+}
+
+impl Builder<'_> {
+    fn leaf(&mut self, e: Element) -> u32 {
+        let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
+        let (min, max) = (
+            e.p[0].min(e.p[1]).min(e.p[2]),
+            e.p[0].max(e.p[1]).max(e.p[2]),
+        );
+        let id = self.elements.len() as u32;
+        let node = Node {
+            lo: id,
+            hi: id + 1,
+            kids: None,
+            polygon: e.polygon,
+            area: e.area,
+            rho: e.rho,
+            min,
+            max,
+            center: c,
+            radius: e.p.iter().map(|q| q.distance(c)).fold(0.0, f64::max),
+            normal: e.normal,
+        };
+        self.elements.push(e);
+        self.leaf.push(self.nodes.len() as u32);
+        self.nodes.push(node);
+        (self.nodes.len() - 1) as u32
+    }
+
+    fn join(&mut self, a: u32, b: u32) -> u32 {
+        let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
+        let area = na.area + nb.area;
+        let w = if area > 0.0 { na.area / area } else { 0.5 };
+        let center = na.center * w + nb.center * (1.0 - w);
+        let polygon = if na.polygon == nb.polygon {
+            na.polygon
+        } else {
+            NO_POLYGON
+        };
+        let node = Node {
+            lo: na.lo.min(nb.lo),
+            hi: na.hi.max(nb.hi),
+            kids: Some([a, b]),
+            polygon,
+            area,
+            rho: na.rho * w + nb.rho * (1.0 - w),
+            min: na.min.min(nb.min),
+            max: na.max.max(nb.max),
+            center,
+            radius: (na.center.distance(center) + na.radius)
+                .max(nb.center.distance(center) + nb.radius),
+            normal: if polygon == NO_POLYGON {
+                DVec3::ZERO
+            } else {
+                na.normal
+            },
+        };
+        self.nodes.push(node);
+        (self.nodes.len() - 1) as u32
+    }
+
+    /// A surface tree over `items` (indices into `self.items`, all of one polygon).
+    fn surface(&mut self, items: &mut [u32]) -> u32 {
+        if items.len() == 1 {
+            let e = self.items[items[0] as usize].clone();
+            return self.leaf(e);
+        }
+        let frame = &self.scene.polygons[self.items[items[0] as usize].polygon].frame;
+        let key = |i: u32, items: &[Element]| -> DVec2 {
+            let e = &items[i as usize];
+            frame.plane_from_world((e.p[0] + e.p[1] + e.p[2]) / 3.0)
+        };
+        let (lo, hi) = items.iter().fold(
+            (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+            |(lo, hi), &i| {
+                let c = key(i, &self.items);
+                (lo.min(c), hi.max(c))
+            },
+        );
+        let axis = usize::from(hi.y - lo.y > hi.x - lo.x);
+        let all = &self.items;
+        items.sort_by(|&a, &b| {
+            key(a, all)[axis]
+                .total_cmp(&key(b, all)[axis])
+                .then(a.cmp(&b))
+        });
+        let mid = items.len() / 2;
+        let (l, r) = items.split_at_mut(mid);
+        let a = self.surface(l);
+        let b = self.surface(r);
+        self.join(a, b)
+    }
+
+    /// A cluster tree over `polys`: (polygon bounding-box centre, that polygon's items).
+    fn cluster(&mut self, polys: &mut [(DVec3, Vec<u32>)]) -> u32 {
+        if polys.len() == 1 {
+            let mut items = std::mem::take(&mut polys[0].1);
+            return self.surface(&mut items);
+        }
+        let (lo, hi) = polys.iter().fold(
+            (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+            |(lo, hi), (c, _)| (lo.min(*c), hi.max(*c)),
+        );
+        let ext = hi - lo;
+        let axis = if ext.x >= ext.y && ext.x >= ext.z {
+            0
+        } else if ext.y >= ext.z {
+            1
+        } else {
+            2
+        };
+        polys.sort_by(|a, b| a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1)));
+        let mid = polys.len() / 2;
+        let (l, r) = polys.split_at_mut(mid);
+        let a = self.cluster(l);
+        let b = self.cluster(r);
+        self.join(a, b)
+    }
+}
+
+impl Hierarchy {
+    /// Builds the hierarchy of `meshes` (their triangles are the leaves); `direct_h[m][v]` is
+    /// the direct irradiance at vertex `v` of mesh `m`. `None` when no mesh has a triangle of
+    /// positive area.
+    pub fn build(
+        scene: &Scene,
+        vis: &Visibility,
+        meshes: &[ReceiverMesh],
+        direct_h: &[Vec<DVec3>],
+    ) -> Option<Hierarchy> {
+        let mut items = Vec::new();
+        // Per polygon (in mesh order): its items.
+        let mut groups: Vec<(DVec3, Vec<u32>)> = Vec::new();
+        for (mi, m) in meshes.iter().enumerate() {
+            let poly = &scene.polygons[m.polygon];
+            let rho = scene.materials[poly.material].rho;
+            let mut ids = Vec::new();
+            let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+            for (ti, t) in m.triangles.iter().enumerate() {
+                let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
+                let area = triangle_area(&p);
+                if area.is_nan() || area <= 0.0 {
+                    continue;
+                }
+                let direct = direct_h
+                    .get(mi)
+                    .map(|d| {
+                        t.iter()
+                            .map(|&i| d.get(i as usize).copied().unwrap_or(DVec3::ZERO))
+                            .sum::<DVec3>()
+                            / 3.0
+                    })
+                    .unwrap_or(DVec3::ZERO);
+                for q in &p {
+                    lo = lo.min(*q);
+                    hi = hi.max(*q);
+                }
+                ids.push(items.len() as u32);
+                items.push(Element {
+                    mesh: mi,
+                    triangle: ti,
+                    polygon: m.polygon,
+                    p,
+                    normal: poly.frame.n,
+                    area,
+                    rho,
+                    direct,
+                    v: *t,
+                });
+            }
+            if !ids.is_empty() {
+                groups.push(((lo + hi) * 0.5, ids));
+            }
+        }
+        if groups.is_empty() {
+            return None;
+        }
+        let mut b = Builder {
+            scene,
+            items,
+            elements: Vec::new(),
+            nodes: Vec::new(),
+            leaf: Vec::new(),
+        };
+        b.cluster(&mut groups);
+        let samples = b
+            .nodes
+            .par_iter()
+            .map(|n| node_samples(n, &b.elements, vis))
+            .collect();
+        let outline = outlines(&b.nodes, &b.elements);
+        Some(Hierarchy {
+            elements: b.elements,
+            nodes: b.nodes,
+            leaf: b.leaf,
+            samples,
+            outline,
+        })
+    }
+
+    /// The root node.
+    pub fn root(&self) -> u32 {
+        (self.nodes.len() - 1) as u32
+    }
+
+    /// The estimate of the link `r ← s` (see the module doc).
+    pub fn transfer(&self, vis: &Visibility, r: u32, s: u32) -> Transfer {
+        let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
+        let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
+        // Surface to surface: the exact unoccluded form factor from each receiver sample, over
+        // the source's outline when the source lies wholly above the sample's horizon, else
+        // (a close, straddling source of few elements) per element, clipped.
+        let contour = nr.polygon != NO_POLYGON
+            && ns.polygon != NO_POLYGON
+            && sr
+                .iter()
+                .all(|a| box_above(a.p, a.n, ns) || ns.hi - ns.lo <= CONTOUR_ELEMENTS);
+        let mut rays = 0u64;
+        let (mut seen, mut tested) = (0u32, 0u32);
+        let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
+            *rays += 1;
+            !vis.occluded_skipping(a.ray, b.ray, [a.polygon, b.polygon])
+        };
+        if contour {
+            let tris = &self.elements[ns.lo as usize..ns.hi as usize];
+            let outline = &self.outline[s as usize];
+            let unoccluded = sr
+                .iter()
+                .map(|a| {
+                    if box_above(a.p, a.n, ns) {
+                        edge_contour_sum(a.p, a.n, outline).abs() / (2.0 * PI)
+                    } else {
+                        tris.iter()
+                            .map(|e| point_polygon_form_factor(a.p, a.n, &e.p))
+                            .sum::<f64>()
+                    }
+                })
+                .sum::<f64>()
+                / sr.len() as f64;
+            if unoccluded <= 0.0 {
+                return Transfer {
+                    k: 0.0,
+                    unoccluded: 0.0,
+                    partial: false,
+                    rays: 0,
+                    bound: 0.0,
+                };
+            }
+            for a in sr {
+                for b in ss {
+                    let dir = b.p - a.p;
+                    if a.n.dot(dir) <= 0.0 || b.n.dot(dir) >= 0.0 {
+                        continue;
+                    }
+                    tested += 1;
+                    if visible(a, b, &mut rays) {
+                        seen += 1;
+                    }
+                }
+            }
+            let v = if tested == 0 {
+                1.0
+            } else {
+                f64::from(seen) / f64::from(tested)
+            };
+            let partial = seen > 0 && seen < tested;
+            return Transfer {
+                k: unoccluded * v,
+                unoccluded,
+                partial,
+                rays,
+                bound: if partial { unoccluded } else { unoccluded * v },
+            };
+        }
+        let (mut k, mut unoccluded) = (0.0, 0.0);
+        for a in sr {
+            for b in ss {
+                let dir = b.p - a.p;
+                let d2 = dir.length_squared();
+                if d2.is_nan() || d2 <= 0.0 {
+                    continue;
+                }
+                let len = d2.sqrt();
+                let (ci, cj) = (a.n.dot(dir) / len, -b.n.dot(dir) / len);
+                if ci <= 0.0 || cj <= 0.0 {
+                    continue;
+                }
+                let term = ns.area * ci * cj / (PI * d2 + ns.area);
+                unoccluded += term;
+                tested += 1;
+                if visible(a, b, &mut rays) {
+                    seen += 1;
+                    k += term;
+                }
+            }
+        }
+        let pairs = (sr.len() * ss.len()) as f64;
+        // The sampled cosines may all miss (four samples of a cluster): the oracle bounds the
+        // transfer with both cosines at 1 and the nodes' closest possible distance.
+        let gap = (nr.center.distance(ns.center) - nr.radius - ns.radius).max(0.0);
+        let bound = ns.area / (PI * gap * gap + ns.area);
+        Transfer {
+            k: k / pairs,
+            unoccluded: unoccluded / pairs,
+            partial: seen > 0 && seen < tested,
+            rays,
+            bound,
+        }
+    }
+
+    /// True when the link `r ← s` can carry nothing (see the module doc).
+    fn culled(&self, r: u32, s: u32) -> bool {
+        let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
+        if nr.polygon != NO_POLYGON && nr.polygon == ns.polygon {
+            return true;
+        }
+        if ns.rho.max_element() <= 0.0 {
+            return true;
+        }
+        let behind = |plane: &Node, other: &Node| {
+            if plane.polygon == NO_POLYGON {
+                return false;
+            }
+            let tol = 1e-9 * (other.radius + plane.radius).max(1e-300);
+            (0..8).all(|c| {
+                let q = DVec3::new(
+                    if c & 1 == 0 { other.min.x } else { other.max.x },
+                    if c & 2 == 0 { other.min.y } else { other.max.y },
+                    if c & 4 == 0 { other.min.z } else { other.max.z },
+                );
+                plane.normal.dot(q - plane.center) <= tol
+            })
+        };
+        behind(nr, ns) || behind(ns, nr)
+    }
+
+    /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
+    /// radiosity the oracle uses, `threshold` the most power one link may carry (W). Links
+    /// sorted by receiver, then source. Returns the links, the refinements and the rays.
+    pub fn link(&self, vis: &Visibility, b: &[f64], threshold: f64) -> (Vec<Link>, u64, u64) {
+        let root = self.root();
+        let (mut links, refinements, rays) = self.refine(vis, b, threshold, root, root);
+        links.sort_by_key(|l| (l.receiver, l.source));
+        (links, refinements, rays)
+    }
+
+    fn refine(
+        &self,
+        vis: &Visibility,
+        b: &[f64],
+        threshold: f64,
+        r: u32,
+        s: u32,
+    ) -> (Vec<Link>, u64, u64) {
+        let join = |pairs: Vec<(u32, u32)>| {
+            let parts: Vec<(Vec<Link>, u64, u64)> = pairs
+                .into_par_iter()
+                .map(|(r, s)| self.refine(vis, b, threshold, r, s))
+                .collect();
+            let mut out = (Vec::new(), 1u64, 0u64);
+            for (l, n, k) in parts {
+                out.0.extend(l);
+                out.1 += n;
+                out.2 += k;
+            }
+            out
+        };
+        if r == s {
+            let n = &self.nodes[r as usize];
+            return match n.kids {
+                Some([a, c]) if n.polygon == NO_POLYGON => {
+                    let mut o = join(vec![(a, a), (a, c), (c, a), (c, c)]);
+                    // A self-link split is not a refinement of an estimated link.
+                    o.1 -= 1;
+                    o
+                }
+                _ => (Vec::new(), 0, 0),
+            };
+        }
+        if self.culled(r, s) {
+            return (Vec::new(), 0, 0);
+        }
+        let t = self.transfer(vis, r, s);
+        let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
+        let power = b[s as usize] * t.bound * nr.area;
+        let split = match (nr.kids, ns.kids) {
+            _ if power <= threshold => None,
+            (Some(kr), Some(ks)) => Some(if nr.area >= ns.area {
+                [(kr[0], s), (kr[1], s)]
+            } else {
+                [(r, ks[0]), (r, ks[1])]
+            }),
+            (Some(kr), None) => Some([(kr[0], s), (kr[1], s)]),
+            (None, Some(ks)) => Some([(r, ks[0]), (r, ks[1])]),
+            (None, None) => None,
+        };
+        match split {
+            Some(pairs) => {
+                let mut o = join(pairs.to_vec());
+                o.2 += t.rays;
+                o
+            }
+            None => {
+                let links = if t.k > 0.0 {
+                    vec![Link {
+                        receiver: r,
+                        source: s,
+                        k: t.k,
+                    }]
+                } else {
+                    Vec::new()
+                };
+                (links, 0, t.rays)
+            }
+        }
+    }
+
+    /// Irradiance gathered by every node along `links` (sorted by receiver) from the node
+    /// radiosities `b` (W/m²).
+    pub fn gather(&self, links: &[Link], b: &[DVec3]) -> Vec<DVec3> {
+        let mut starts = Vec::new();
+        for (i, l) in links.iter().enumerate() {
+            if i == 0 || links[i - 1].receiver != l.receiver {
+                starts.push(i);
+            }
+        }
+        starts.push(links.len());
+        let sums: Vec<(u32, DVec3)> = starts
+            .par_windows(2)
+            .map(|w| {
+                let group = &links[w[0]..w[1]];
+                let h = group
+                    .iter()
+                    .map(|l| b[l.source as usize] * l.k)
+                    .sum::<DVec3>();
+                (group[0].receiver, h)
+            })
+            .collect();
+        let mut h = vec![DVec3::ZERO; self.nodes.len()];
+        for (r, v) in sums {
+            h[r as usize] = v;
+        }
+        h
+    }
+
+    /// Push: every element's irradiance is what its leaf and all its ancestors gathered.
+    pub fn push(&self, gathered: &[DVec3]) -> Vec<DVec3> {
+        let mut acc = gathered.to_vec();
+        for i in (0..self.nodes.len()).rev() {
+            if let Some(kids) = self.nodes[i].kids {
+                let v = acc[i];
+                for k in kids {
+                    acc[k as usize] += v;
+                }
+            }
+        }
+        self.leaf.iter().map(|&n| acc[n as usize]).collect()
+    }
+
+    /// Pull: every node's radiosity is the area-weighted mean of its elements' `b_elements`.
+    pub fn pull(&self, b_elements: &[DVec3]) -> Vec<DVec3> {
+        let mut b = vec![DVec3::ZERO; self.nodes.len()];
+        for (e, &n) in self.leaf.iter().enumerate() {
+            b[n as usize] = b_elements[e];
+        }
+        for i in 0..self.nodes.len() {
+            if let Some([x, y]) = self.nodes[i].kids {
+                let (a, c) = (&self.nodes[x as usize], &self.nodes[y as usize]);
+                let area = a.area + c.area;
+                b[i] = if area > 0.0 {
+                    (b[x as usize] * a.area + b[y as usize] * c.area) / area
+                } else {
+                    DVec3::ZERO
+                };
+            }
+        }
+        b
+    }
+
+    /// Number of cluster nodes (spanning several polygons).
+    pub fn clusters(&self) -> usize {
+        self.nodes
+            .iter()
+            .filter(|n| n.polygon == NO_POLYGON)
+            .count()
+    }
+}
+
+/// True when the bounding box of `n` lies above (or touches) the horizon of `(p, normal)`.
+fn box_above(p: DVec3, normal: DVec3, n: &Node) -> bool {
+    let tol = 1e-9 * (n.radius + n.center.distance(p));
+    (0..8).all(|c| {
+        let q = DVec3::new(
+            if c & 1 == 0 { n.min.x } else { n.max.x },
+            if c & 2 == 0 { n.min.y } else { n.max.y },
+            if c & 4 == 0 { n.min.z } else { n.max.z },
+        );
+        normal.dot(q - p) >= -tol
+    })
+}
+
+/// Up to four sample points of a node (see the module doc).
+fn node_samples(n: &Node, elements: &[Element], vis: &Visibility) -> Vec<Sample> {
+    let at = |p: DVec3, e: &Element| {
+        let sp = SurfacePoint::new(p, e.normal, e.polygon, vis);
+        Sample {
+            p,
+            n: e.normal,
+            ray: sp.ray_origin,
+            polygon: e.polygon,
+        }
+    };
+    let count = (n.hi - n.lo) as usize;
+    if count == 1 {
+        let e = &elements[n.lo as usize];
+        let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
+        let mut out = vec![at(c, e)];
+        out.extend(e.p.iter().map(|q| at((c + *q) * 0.5, e)));
+        return out;
+    }
+    let m = count.min(4);
+    (0..m)
+        .map(|k| {
+            let e = &elements[n.lo as usize + (2 * k + 1) * count / (2 * m)];
+            at((e.p[0] + e.p[1] + e.p[2]) / 3.0, e)
+        })
+        .collect()
+}
+
+/// The indirect light at every vertex of `meshes`, added to their direct light `direct_h`, by
+/// hierarchical radiosity. Fills the powers, `unshot_fraction`, `hierarchical` and `warnings`
+/// of `stats` and adds the rays cast.
+pub fn indirect(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    direct_h: &[Vec<DVec3>],
+    options: &SolveOptions,
+    stats: &mut SolveStats,
+    progress: &crate::stats::Progress<'_>,
+) -> Vec<Vec<DVec3>> {
+    let mut hs = HierStats {
+        tolerance: options.hr_tolerance,
+        ..Default::default()
+    };
+    let start = Instant::now();
+    let Some(h) = Hierarchy::build(scene, vis, meshes, direct_h) else {
+        stats.hierarchical = Some(hs);
+        return direct_h.to_vec();
+    };
+    hs.nodes = h.nodes.len();
+    hs.elements = h.elements.len();
+    hs.clusters = h.clusters();
+    hs.build_seconds = start.elapsed().as_secs_f64();
+    let mean = |c: DVec3| c.element_sum() / 3.0;
+    let els = &h.elements;
+    let reflected_direct: Vec<DVec3> = els.iter().map(|e| e.rho * e.direct).collect();
+    let initial: f64 = els
+        .iter()
+        .zip(&reflected_direct)
+        .map(|(e, b)| e.area * mean(*b))
+        .sum();
+    stats.direct_power = els.iter().map(|e| e.area * mean(e.direct)).sum();
+    let mut indirect = vec![DVec3::ZERO; els.len()];
+    let mut b_el = reflected_direct.clone();
+    let mut left = 0.0;
+    if initial > 0.0 {
+        let mut tolerance = options.hr_tolerance;
+        for pass in 0..REFINE_PASSES {
+            progress("indirect light", pass as u64, REFINE_PASSES as u64);
+            let t = Instant::now();
+            let b_scalar: Vec<f64> = h.pull(&b_el).iter().map(|b| mean(*b)).collect();
+            let links = loop {
+                let (links, refinements, rays) = h.link(vis, &b_scalar, tolerance * initial);
+                hs.refinements += refinements;
+                hs.rays += rays;
+                if links.len() <= MAX_LINKS {
+                    break links;
+                }
+                stats.warnings.push(format!(
+                    "hierarchical radiosity: {} links at tolerance {tolerance:e} exceed the cap \
+                     {MAX_LINKS}; refined again at {:e}",
+                    links.len(),
+                    tolerance * 4.0
+                ));
+                tolerance *= 4.0;
+            };
+            hs.tolerance = tolerance;
+            hs.links = links.len();
+            hs.link_seconds += t.elapsed().as_secs_f64();
+            let t = Instant::now();
+            let mut iterations = 0usize;
+            // Each pass restarts from the reflected direct light: the links changed.
+            b_el.clone_from(&reflected_direct);
+            loop {
+                let gathered = h.gather(&links, &h.pull(&b_el));
+                indirect = h.push(&gathered);
+                let next: Vec<DVec3> = els
+                    .iter()
+                    .zip(&indirect)
+                    .map(|(e, hi)| e.rho * (e.direct + *hi))
+                    .collect();
+                left = els
+                    .iter()
+                    .zip(next.iter().zip(&b_el))
+                    .map(|(e, (n, o))| e.area * mean((*n - *o).abs()))
+                    .sum();
+                b_el = next;
+                iterations += 1;
+                match options.bounces {
+                    Some(n) if iterations >= n as usize => break,
+                    Some(_) => {}
+                    None if left <= options.tolerance * initial => break,
+                    None if iterations >= MAX_ITERATIONS => {
+                        stats.warnings.push(format!(
+                            "hierarchical radiosity: not converged after {MAX_ITERATIONS} \
+                             iterations (change {:e} of the reflected direct power)",
+                            left / initial
+                        ));
+                        break;
+                    }
+                    None => {}
+                }
+            }
+            hs.iterations += iterations;
+            hs.solve_seconds += t.elapsed().as_secs_f64();
+        }
+    }
+    let t = Instant::now();
+    stats.absorbed_power = els
+        .iter()
+        .zip(&indirect)
+        .map(|(e, hi)| e.area * mean((DVec3::ONE - e.rho) * (e.direct + *hi)))
+        .sum();
+    stats.unshot_fraction = if initial > 0.0 { left / initial } else { 0.0 };
+    // Vertex values: area-weighted mean of the elements using each vertex copy.
+    let mut per_mesh: Vec<Vec<(u32, f64, DVec3)>> = vec![Vec::new(); meshes.len()];
+    for (e, hi) in els.iter().zip(&indirect) {
+        per_mesh[e.mesh].push((e.triangle as u32, e.area, *hi));
+    }
+    let out = meshes
+        .par_iter()
+        .zip(direct_h)
+        .zip(&per_mesh)
+        .map(|((m, dh), items)| {
+            let mut sum = vec![DVec3::ZERO; m.vertices.len()];
+            let mut weight = vec![0.0; m.vertices.len()];
+            for &(t, a, hi) in items {
+                for &v in &m.triangles[t as usize] {
+                    sum[v as usize] += hi * a;
+                    weight[v as usize] += a;
+                }
+            }
+            dh.iter()
+                .zip(sum.iter().zip(&weight))
+                .map(|(&d, (&s, &w))| if w > 0.0 { d + s / w } else { d })
+                .collect()
+        })
+        .collect();
+    hs.vertex_seconds = t.elapsed().as_secs_f64();
+    stats.rays += hs.rays;
+    stats.hierarchical = Some(hs);
+    out
+}

@@ -1,0 +1,197 @@
+//! `--solver hierarchical` against closed forms, the progressive solver and itself.
+
+use crate::{bake, no_progress, quick, scratch};
+use glam::DVec3;
+use penumbra::fixtures::{self, GlbBuilder, Material, horizontal_rect};
+use penumbra::light::luminance;
+use penumbra::solve::Solver;
+use penumbra::solve::hierarchical::Hierarchy;
+use penumbra::visibility::Visibility;
+use penumbra::{Bake, BakeOptions};
+
+fn hierarchical(mut o: BakeOptions) -> BakeOptions {
+    o.solve.solver = Solver::Hierarchical;
+    o
+}
+
+/// Furnace: B = M/(1-rho) at every vertex, to the progressive test's tolerance
+/// (`known_answers::furnace_radiosity_is_m_over_one_minus_rho`). Not met yet: see the ignore
+/// reason.
+#[test]
+#[ignore = "per-vertex furnace error is 5.5% at hr-tolerance 1e-5: a coarse receiver node's K (4 samples) is pushed to all its elements; needs a K-variation oracle"]
+fn hierarchical_furnace_radiosity_is_m_over_one_minus_rho() {
+    let (rho, m) = (0.5, 1.0);
+    let b = bake(&fixtures::furnace_box_with(rho, m), &hierarchical(quick()));
+    let expected = m / (1.0 - rho);
+    let mut worst: f64 = 0.0;
+    for values in &b.solution.irradiance {
+        for h in values {
+            worst = worst.max(((m + rho * h.x) / expected - 1.0).abs());
+        }
+    }
+    assert!(worst < 1e-3, "worst relative error of B {worst}");
+    let s = &b.stats.solve;
+    assert!(s.hierarchical.as_ref().is_some_and(|h| h.links > 0));
+    assert!(
+        (s.absorbed_power / s.emitted_power - 1.0).abs() < 0.005,
+        "absorbed {} vs emitted {}",
+        s.absorbed_power,
+        s.emitted_power
+    );
+}
+
+/// Furnace energy balance: emitted = absorbed power (the progressive test's 0.5%), and the
+/// mean vertex radiosity is M/(1-rho) within 0.5%.
+#[test]
+fn hierarchical_furnace_energy_balance() {
+    let (rho, m) = (0.5, 1.0);
+    let b = bake(&fixtures::furnace_box_with(rho, m), &hierarchical(quick()));
+    let expected = m / (1.0 - rho);
+    let (mut sum, mut n) = (0.0, 0);
+    for values in &b.solution.irradiance {
+        for h in values {
+            sum += m + rho * h.x;
+            n += 1;
+        }
+    }
+    let mean = sum / n as f64;
+    assert!((mean / expected - 1.0).abs() < 0.005, "mean B {mean}");
+    let s = &b.stats.solve;
+    assert!(
+        (s.absorbed_power / s.emitted_power - 1.0).abs() < 0.005,
+        "absorbed {} vs emitted {}",
+        s.absorbed_power,
+        s.emitted_power
+    );
+}
+
+/// Two parallel unit squares at distance 1: the source plate (radiosity 1) gives the receiver
+/// plate a mean irradiance of F = 0.1998248957 (the closed form for parallel unit squares at
+/// unit distance), through the links the refinement builds.
+#[test]
+fn hierarchical_parallel_plates_form_factor() {
+    let mut g = GlbBuilder::new();
+    let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
+    g.add_mesh_node(
+        "receiver",
+        &horizontal_rect([-0.5, 0.5], [-0.5, 0.5], 0.0, true),
+        grey,
+    );
+    g.add_mesh_node(
+        "source",
+        &horizontal_rect([-0.5, 0.5], [-0.5, 0.5], 1.0, false),
+        grey,
+    );
+    let b = bake(&g.to_glb(), &quick());
+    let direct: Vec<Vec<DVec3>> = b
+        .meshes
+        .iter()
+        .map(|m| vec![DVec3::ZERO; m.vertices.len()])
+        .collect();
+    let vis = Visibility::new(&b.scene);
+    let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &direct).expect("elements");
+    let up = |e: &penumbra::solve::hierarchical::Element| e.normal.y > 0.0;
+    let b_el: Vec<DVec3> = h
+        .elements
+        .iter()
+        .map(|e| if up(e) { DVec3::ZERO } else { DVec3::ONE })
+        .collect();
+    let b_node = h.pull(&b_el);
+    let scalar: Vec<f64> = b_node.iter().map(|b| b.x).collect();
+    // One link may carry 1e-4 of the source's power (1 W).
+    let (links, _, _) = h.link(&vis, &scalar, 1e-4);
+    assert!(links.len() > 10, "{} links", links.len());
+    let got = h.push(&h.gather(&links, &b_node));
+    let (mut sum, mut area) = (0.0, 0.0);
+    for (e, v) in h.elements.iter().zip(&got) {
+        if up(e) {
+            sum += e.area * v.x;
+            area += e.area;
+        }
+    }
+    let f = sum / area;
+    assert!((f / 0.1998248957 - 1.0).abs() < 0.02, "F = {f}");
+    // The single root-to-root estimate of the two plates' surface nodes.
+    let roots: Vec<u32> = (0..h.nodes.len() as u32)
+        .filter(|&i| {
+            let n = &h.nodes[i as usize];
+            n.polygon != penumbra::light::NO_POLYGON
+                && h.nodes.iter().all(|p| {
+                    p.kids
+                        .is_none_or(|k| !k.contains(&i) || p.polygon != n.polygon)
+                })
+        })
+        .collect();
+    assert_eq!(roots.len(), 2);
+    let (r, s) = if h.nodes[roots[0] as usize].normal.y > 0.0 {
+        (roots[0], roots[1])
+    } else {
+        (roots[1], roots[0])
+    };
+    let t = h.transfer(&vis, r, s);
+    assert!(
+        (t.k / 0.1998248957 - 1.0).abs() < 0.15,
+        "single-link K = {}",
+        t.k
+    );
+}
+
+fn mean_luminance(b: &Bake) -> (f64, f64) {
+    let (mut all, mut ind, mut n) = (0.0, 0.0, 0);
+    for (h, d) in b.solution.irradiance.iter().zip(&b.solution.direct) {
+        for (h, d) in h.iter().zip(d) {
+            all += luminance(*h);
+            ind += luminance(*h - *d);
+            n += 1;
+        }
+    }
+    (all / n as f64, ind / n as f64)
+}
+
+/// Cornell box: the mean vertex irradiance of the hierarchical and the progressive solver agree.
+#[test]
+fn hierarchical_agrees_with_progressive_on_cornell_box() {
+    let bytes = fixtures::cornell_box();
+    let p = bake(&bytes, &quick());
+    let h = bake(&bytes, &hierarchical(quick()));
+    let (ap, ip) = mean_luminance(&p);
+    let (ah, ih) = mean_luminance(&h);
+    assert!(
+        ip > 0.2 * ap,
+        "indirect {ip} of {ap}: the scene must have indirect light"
+    );
+    assert!(
+        (ah / ap - 1.0).abs() < 0.03,
+        "mean H: hierarchical {ah} vs progressive {ap}"
+    );
+    assert!(
+        (ih / ip - 1.0).abs() < 0.08,
+        "mean indirect H: hierarchical {ih} vs progressive {ip}"
+    );
+}
+
+/// The bake's bytes do not depend on the thread count.
+#[test]
+fn hierarchical_bake_is_thread_count_independent() {
+    let dir = scratch("hierarchical-threads");
+    let inp = dir.join("in.glb");
+    std::fs::write(&inp, fixtures::box_on_floor()).unwrap();
+    let run = |threads: usize| {
+        let out = dir.join(format!("out-{threads}.glb"));
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| {
+            penumbra::bake_file(
+                &inp,
+                &penumbra::OutputFiles::glb(&out),
+                &hierarchical(quick()),
+                no_progress(),
+            )
+        })
+        .expect("bake succeeds");
+        std::fs::read(&out).unwrap()
+    };
+    assert_eq!(run(1), run(2));
+}
