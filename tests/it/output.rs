@@ -294,6 +294,13 @@ fn charts_that_do_not_fit_one_page_go_onto_more_pages() {
     assert_eq!(one.atlas.pages, 1);
     let (b, out) = bake_with(&input, &dir, "many", &paged(128));
     let pages = b.atlas.pages as usize;
+    // Deterministic bytes, also with one thread.
+    let one_thread = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .unwrap()
+        .install(|| bake_with(&input, &dir, "many-1", &paged(128)).1);
+    assert!(one_thread == out, "1 thread and the default pool differ");
     assert!(pages > 1, "{pages} pages");
     assert_eq!(b.atlas.texels_per_unit, 24.0, "the density is kept");
     assert_eq!(b.lightmap.pages(), pages);
