@@ -1,9 +1,13 @@
-//! Lightmap UV atlas: charts every mesh with xatlas and packs all charts into one atlas page.
+//! Lightmap UV atlas: charts every mesh with xatlas and packs all charts into one or more atlas
+//! pages.
 //!
 //! [`pack`] takes world-space triangle meshes, splits them into charts (groups of connected
 //! triangles that flatten with little distortion), parameterizes each chart and packs the charts
-//! into a single page of texels with a uniform texel density (`texels_per_unit` texels per scene
-//! unit) and a padding between charts. Each output mesh carries, for every output vertex (input
+//! into pages of texels with a uniform texel density (`texels_per_unit` texels per scene unit)
+//! and a padding between charts. With a fixed resolution everything goes on one page (the density
+//! is lowered until it fits); with a fixed density the charts spill onto as many pages of
+//! `page_size` texels as they need (each chart lies on one page; a mesh's charts may lie on
+//! several, see [`AtlasMesh::page`]). Each output mesh carries, for every output vertex (input
 //! vertices are split at chart seams), the input vertex it came from and its UV in texels.
 //!
 //! # The xatlas-rs traps this module works around
@@ -36,9 +40,12 @@
 //!   the page and treats a chart that reaches it as "does not fit" (see below).
 //! - **With a fixed `resolution`, charts that don't fit spill onto more atlas pages**
 //!   (`atlasCount > 1`), and a chart larger than the page gets UVs outside it, both silently.
-//!   [`pack`] wants one page: it re-packs (xatlas `PackCharts` on the same atlas, charts are not
-//!   recomputed) with a smaller `texels_per_unit` until everything fits, and then checks that every
-//!   UV lies in `[0, width] x [0, height]` and every charted vertex is on page 0.
+//!   With [`AtlasOptions::resolution`] [`pack`] wants one page: it re-packs (xatlas `PackCharts`
+//!   on the same atlas, charts are not recomputed) with a smaller `texels_per_unit` until
+//!   everything fits. With a fixed density it uses the pages (each vertex's `atlasIndex`), refuses
+//!   a chart that reached the page size ([`AtlasError::ChartTooLarge`]), and checks that every UV
+//!   lies in `[0, width] x [0, height]` and that the three corners of every triangle are on one
+//!   page.
 //! - **One large connected chart is very slow**: xatlas's chart growing and its parameterization
 //!   are both superlinear in the triangles of a chart (a flat 20k-triangle grid: 47 s; a bumpy one:
 //!   157 s) unless `ChartOptions::maxChartArea` is set. [`pack`] sets it so that a chart of
@@ -82,6 +89,11 @@ pub const MAX_RESOLUTION: u32 = 16384;
 /// Atlas side used when neither `texels_per_unit` nor `resolution` is given.
 pub const DEFAULT_RESOLUTION: u32 = 1024;
 
+/// Page side, in texels, used with a fixed `texels_per_unit` when no `page_size` is given: 2048
+/// is the largest size every WebGL2 / GLES3 device must support as a texture (4096 is common,
+/// not guaranteed), and 2048² RGB8 is 12 MiB of texture memory per page.
+pub const DEFAULT_PAGE_SIZE: u32 = 2048;
+
 /// How many times [`pack`] re-packs with a smaller texel density before giving up.
 const MAX_PACK_ATTEMPTS: u32 = 40;
 
@@ -121,16 +133,27 @@ pub enum AtlasError {
         texels_per_unit: f32,
         attempts: u32,
     },
-    /// Without a fixed resolution, the atlas (or one chart) would be wider than
-    /// [`MAX_RESOLUTION`] at the requested texel density.
+    /// With a fixed texel density, the pages together would hold more texels than one
+    /// [`MAX_RESOLUTION`]² page (`texels` is the side of a square of that many texels).
     #[error(
-        "an atlas at {texels_per_unit} texels per unit would need about {texels} texels a side, \
-         more than {max}; lower texels_per_unit or give a resolution"
+        "an atlas at {texels_per_unit} texels per unit would need about {texels}² texels, \
+         more than {max}²; lower texels_per_unit or give a resolution"
     )]
     TooLarge {
         texels_per_unit: f32,
         texels: u64,
         max: u32,
+    },
+    /// With a fixed texel density, a chart is larger than one page (`texels` is its size at
+    /// that density, about, when xatlas had to scale it down).
+    #[error(
+        "a chart is larger than one {page_size}x{page_size} page at {texels_per_unit} texels per \
+         unit (at least {texels} texels a side): raise the page size or lower texels_per_unit"
+    )]
+    ChartTooLarge {
+        page_size: u32,
+        texels_per_unit: f32,
+        texels: u32,
     },
     /// An output UV lies outside the atlas (checked after packing).
     #[error(
@@ -144,8 +167,11 @@ pub enum AtlasError {
         width: u32,
         height: u32,
     },
-    /// An output vertex is on an atlas page other than the first (checked after packing).
-    #[error("mesh {mesh}: output vertex {vertex} is on atlas page {page}, not on the single page")]
+    /// An output vertex is on an atlas page beyond the ones the atlas keeps (with a fixed
+    /// resolution: any page but the first; checked after packing).
+    #[error(
+        "mesh {mesh}: output vertex {vertex} is on atlas page {page}, beyond the atlas's pages"
+    )]
     NotOnePage {
         mesh: usize,
         vertex: usize,
@@ -169,8 +195,10 @@ pub struct AtlasInput<'a> {
 
 /// How to size the atlas.
 ///
-/// - `texels_per_unit` only: the page grows to fit the charts at that density (its size is the
-///   packed extent, not a power of two), up to [`MAX_RESOLUTION`].
+/// - `texels_per_unit` only: the density is kept. When the charts fit on one page of at most
+///   `page_size` texels a side, the page is the packed extent (not a power of two); else they are
+///   packed onto as many `page_size` x `page_size` pages as they need. A chart larger than a page
+///   is an error ([`AtlasError::ChartTooLarge`]).
 /// - `resolution` given (or neither, which means `resolution` = [`DEFAULT_RESOLUTION`]): the page
 ///   is exactly `resolution` x `resolution` texels. The density is `texels_per_unit` if given, else
 ///   estimated by xatlas from the surface area; if the charts do not fit on one page at that
@@ -184,6 +212,9 @@ pub struct AtlasOptions {
     pub resolution: Option<u32>,
     /// Texels of padding between charts (>= 2).
     pub padding: u32,
+    /// Largest page side, in texels, with `texels_per_unit` given and `resolution` not; more
+    /// pages are used when the charts need them. Ignored otherwise.
+    pub page_size: u32,
 }
 
 impl Default for AtlasOptions {
@@ -193,6 +224,7 @@ impl Default for AtlasOptions {
             texels_per_unit: None,
             resolution: None,
             padding: 2,
+            page_size: DEFAULT_PAGE_SIZE,
         }
     }
 }
@@ -211,28 +243,33 @@ pub struct AtlasMesh {
     /// Triangles over the output vertices; triangle k is input triangle k (same order, same
     /// count, and its corners come from input triangle k's corners in the same order).
     pub indices: Vec<u32>,
+    /// For each triangle, the page it lies on (0..[`Atlas::pages`]). Triangles left out of
+    /// every chart get the page of the mesh's first charted triangle.
+    pub page: Vec<u32>,
 }
 
-/// The packed atlas: one page of `width` x `height` texels.
+/// The packed atlas: `pages` pages of `width` x `height` texels each.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Atlas {
     /// Page width in texels.
     pub width: u32,
     /// Page height in texels.
     pub height: u32,
+    /// Number of pages (at least 1).
+    pub pages: u32,
     /// Texels per scene unit actually used (may be lower than requested, see [`AtlasOptions`]).
     pub texels_per_unit: f32,
     /// One output mesh per input, in input order.
     pub meshes: Vec<AtlasMesh>,
 }
 
-/// Charts and packs all meshes into one atlas page.
+/// Charts and packs all meshes into one or more atlas pages.
 ///
 /// Checks the inputs first (finite positions, indices in range, index count a multiple of 3;
 /// meshes with no triangles give an empty [`AtlasMesh`]) and the output after (one page, UVs
 /// inside it, triangle order kept). See the module documentation for what it works around in
-/// xatlas-rs, and [`AtlasOptions`] for how the page is sized (with a fixed resolution it lowers the
-/// texel density until all charts fit on one page).
+/// xatlas-rs, and [`AtlasOptions`] for how the pages are sized (with a fixed resolution it lowers
+/// the texel density until all charts fit on one page; with a fixed density it adds pages).
 pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, AtlasError> {
     let sizing = Sizing::from_options(options)?;
     let stats = check_inputs(inputs)?;
@@ -254,8 +291,11 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             }
             size
         }
-        Sizing::Grow { texels_per_unit } => {
-            // xatlas sizes a page for 75% utilization; refuse before it allocates a huge one.
+        Sizing::Pages {
+            texels_per_unit,
+            page_size,
+        } => {
+            // xatlas packs at about 75% utilization; refuse before it allocates huge pages.
             let side = (stats.area / 0.75).sqrt() * f64::from(texels_per_unit);
             if side > f64::from(MAX_RESOLUTION) {
                 return Err(AtlasError::TooLarge {
@@ -264,7 +304,17 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
                     max: MAX_RESOLUTION,
                 });
             }
-            MAX_RESOLUTION
+            let size = page_size.saturating_sub(options.padding + 1);
+            if size < 1 {
+                return Err(AtlasError::InvalidOptions {
+                    option: "page_size",
+                    reason: format!(
+                        "{} texels of padding leave no room on a {page_size}-texel page",
+                        options.padding
+                    ),
+                });
+            }
+            size
         }
     };
 
@@ -315,11 +365,20 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             Sizing::Fixed {
                 texels_per_unit, ..
             } => texels_per_unit.unwrap_or(0.0),
-            Sizing::Grow { texels_per_unit } => texels_per_unit,
+            Sizing::Pages {
+                texels_per_unit, ..
+            } => texels_per_unit,
         },
         resolution: match sizing {
             Sizing::Fixed { resolution, .. } => resolution,
-            Sizing::Grow { .. } => 0,
+            // First try one page that grows to the packed extent, when it will likely fit.
+            Sizing::Pages { page_size, .. }
+                if (stats.area / 0.75).sqrt() * f64::from(pack_options_tpu(&sizing))
+                    > f64::from(page_size) =>
+            {
+                page_size
+            }
+            Sizing::Pages { .. } => 0,
         },
         max_chart_size,
         block_align: false,
@@ -336,18 +395,44 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
     }
 
     let resolution = match sizing {
-        Sizing::Grow { texels_per_unit } => {
-            let meshes = output_meshes(&mut xatlas, added.len())?;
-            // A chart that reached `max_chart_size` may have been scaled down by xatlas.
-            let side = info.width.max(info.height);
-            if side > MAX_RESOLUTION || largest_chart(&meshes) > max_chart_size as f32 - 0.5 {
-                return Err(AtlasError::TooLarge {
-                    texels_per_unit,
-                    texels: u64::from(side.max(max_chart_size + 1)),
-                    max: MAX_RESOLUTION,
-                });
+        Sizing::Pages {
+            texels_per_unit,
+            page_size,
+        } => {
+            let grown = pack_options.resolution == 0;
+            let too_big = {
+                let meshes = output_meshes(&mut xatlas, added.len())?;
+                // A chart that reached `max_chart_size` may have been scaled down by xatlas.
+                let largest = largest_chart(&meshes);
+                if largest > max_chart_size as f32 - 0.5 {
+                    return Err(AtlasError::ChartTooLarge {
+                        page_size,
+                        texels_per_unit,
+                        texels: largest.ceil() as u32,
+                    });
+                }
+                info.width.max(info.height) > page_size
+            };
+            if grown && too_big {
+                // The grown page is too large: pack the same charts onto fixed pages.
+                pack_options.resolution = page_size;
+                // SAFETY: as for the re-packing below.
+                unsafe {
+                    ffi::pack_charts(handle, pack_options, None, ptr::null_mut());
+                    info = PackInfo::read(handle);
+                }
             }
-            return collect_output(inputs, &added, &meshes, &info);
+            let meshes = output_meshes(&mut xatlas, added.len())?;
+            if info.width.max(info.height) > page_size {
+                return Err(internal(
+                    0,
+                    format!(
+                        "a {}x{} page for a page size of {page_size}",
+                        info.width, info.height
+                    ),
+                ));
+            }
+            return collect_output(inputs, &added, &meshes, &info, true);
         }
         Sizing::Fixed { resolution, .. } => resolution,
     };
@@ -392,7 +477,7 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             // Done: re-pack at the best density that fit, unless that was the last packing.
             (_, Some(best)) if best == tried => {
                 let meshes = output_meshes(&mut xatlas, added.len())?;
-                return collect_output(inputs, &added, &meshes, &info);
+                return collect_output(inputs, &added, &meshes, &info, false);
             }
             (_, Some(best)) => best,
             (_, None) => {
@@ -439,8 +524,23 @@ enum Sizing {
         resolution: u32,
         texels_per_unit: Option<f32>,
     },
-    /// A page that grows to fit the charts at this density.
-    Grow { texels_per_unit: f32 },
+    /// This density, on one page that grows up to `page_size`, else on `page_size` pages.
+    Pages {
+        texels_per_unit: f32,
+        page_size: u32,
+    },
+}
+
+/// The density a [`Sizing`] asks xatlas for (0: xatlas estimates one).
+fn pack_options_tpu(sizing: &Sizing) -> f32 {
+    match *sizing {
+        Sizing::Fixed {
+            texels_per_unit, ..
+        } => texels_per_unit.unwrap_or(0.0),
+        Sizing::Pages {
+            texels_per_unit, ..
+        } => texels_per_unit,
+    }
 }
 
 impl Sizing {
@@ -472,7 +572,18 @@ impl Sizing {
                 resolution,
                 texels_per_unit,
             },
-            (None, Some(texels_per_unit)) => Sizing::Grow { texels_per_unit },
+            (None, Some(texels_per_unit)) => {
+                if !(1..=MAX_RESOLUTION).contains(&options.page_size) {
+                    return Err(AtlasError::InvalidOptions {
+                        option: "page_size",
+                        reason: format!("{} is not in 1..={MAX_RESOLUTION}", options.page_size),
+                    });
+                }
+                Sizing::Pages {
+                    texels_per_unit,
+                    page_size: options.page_size,
+                }
+            }
             (None, None) => Sizing::Fixed {
                 resolution: DEFAULT_RESOLUTION,
                 texels_per_unit: None,
@@ -607,13 +718,15 @@ fn collect_output(
     added: &[usize],
     meshes: &[xatlas_rs::Mesh<'_>],
     info: &PackInfo,
+    paged: bool,
 ) -> Result<Atlas, AtlasError> {
+    let pages = if paged { info.atlas_count.max(1) } else { 1 };
     let mut out = vec![AtlasMesh::default(); inputs.len()];
     for (&m, mesh) in added.iter().zip(meshes) {
         let input = &inputs[m];
         let (width, height) = (info.width, info.height);
         for (vertex, v) in mesh.vertices.iter().enumerate() {
-            if v.atlas_index != 0 && v.atlas_index != UNCHARTED {
+            if v.atlas_index != UNCHARTED && v.atlas_index >= pages {
                 return Err(AtlasError::NotOnePage {
                     mesh: m,
                     vertex,
@@ -667,15 +780,45 @@ fn collect_output(
                 ));
             }
         }
+        // Each triangle's page: its charted corners must agree.
+        let mut page = Vec::with_capacity(mesh.indices.len() / 3);
+        for (k, t) in mesh.indices.chunks_exact(3).enumerate() {
+            let mut on: Option<u32> = None;
+            for &i in t {
+                let a = mesh.vertices[i as usize].atlas_index;
+                if a == UNCHARTED {
+                    continue;
+                }
+                if on.is_some_and(|p| p != a) {
+                    return Err(internal(
+                        m,
+                        format!(
+                            "output triangle {k} has corners on pages {} and {a}",
+                            on.unwrap_or(a)
+                        ),
+                    ));
+                }
+                on = Some(a);
+            }
+            page.push(on.unwrap_or(UNCHARTED));
+        }
+        let first = page.iter().copied().find(|&p| p != UNCHARTED).unwrap_or(0);
+        for p in &mut page {
+            if *p == UNCHARTED {
+                *p = first;
+            }
+        }
         out[m] = AtlasMesh {
             xref: mesh.vertices.iter().map(|v| v.xref).collect(),
             uv: mesh.vertices.iter().map(|v| v.uv).collect(),
             indices: mesh.indices.to_vec(),
+            page,
         };
     }
     Ok(Atlas {
         width: info.width,
         height: info.height,
+        pages,
         texels_per_unit: info.texels_per_unit,
         meshes: out,
     })
@@ -1017,6 +1160,7 @@ mod tests {
             texels_per_unit,
             resolution,
             padding,
+            page_size: DEFAULT_PAGE_SIZE,
         }
     }
 
@@ -1262,6 +1406,56 @@ mod tests {
     }
 
     #[test]
+    fn with_a_fixed_density_charts_spill_onto_more_pages() {
+        let meshes: Vec<_> = (0..10)
+            .map(|i| quad(2.0 * i as f32, 0.0, 0.0, 1.0, 1.0))
+            .collect();
+        let inputs = inputs(&meshes);
+        let opts = AtlasOptions {
+            page_size: 128,
+            ..options(Some(64.0), None, 2)
+        };
+        let atlas = pack(&inputs, &opts).unwrap();
+        println!(
+            "10 unit quads at 64 texels per unit on 128² pages: {} pages of {}x{}",
+            atlas.pages, atlas.width, atlas.height
+        );
+        assert!(atlas.pages > 1);
+        assert!(atlas.width <= 128 && atlas.height <= 128);
+        assert_eq!(atlas.texels_per_unit, 64.0);
+        check_mapping(&inputs, &atlas);
+        let mut used = std::collections::BTreeSet::new();
+        for mesh in &atlas.meshes {
+            assert_eq!(mesh.page.len(), mesh.indices.len() / 3);
+            assert!(mesh.page.iter().all(|&p| p < atlas.pages));
+            used.extend(mesh.page.iter().copied());
+            // Density kept: each unit quad covers about 64² texels.
+            let area = uv_area(mesh);
+            assert!((area / 4096.0 - 1.0).abs() < 0.05, "{area}");
+        }
+        assert_eq!(used.len(), atlas.pages as usize, "every page is used");
+        // The same charts with a large page: one page.
+        let one = pack(&inputs, &options(Some(64.0), None, 2)).unwrap();
+        assert_eq!(one.pages, 1);
+    }
+
+    #[test]
+    fn with_a_fixed_density_a_chart_larger_than_the_page_is_an_error() {
+        let meshes = [quad(0.0, 0.0, 0.0, 4.0, 1.0)];
+        let opts = AtlasOptions {
+            page_size: 64,
+            ..options(Some(32.0), None, 2)
+        };
+        let err = pack(&inputs(&meshes), &opts).unwrap_err();
+        println!("{err}");
+        assert!(
+            matches!(err, AtlasError::ChartTooLarge { page_size: 64, .. }),
+            "{err}"
+        );
+        assert!(err.to_string().contains("64x64"), "{err}");
+    }
+
+    #[test]
     fn a_chart_larger_than_the_page_lowers_the_density() {
         let meshes = [quad(0.0, 0.0, 0.0, 4.0, 1.0)];
         let inputs = inputs(&meshes);
@@ -1414,10 +1608,16 @@ mod tests {
 
     /// Every bit of an atlas, for exact comparison.
     fn bits(atlas: &Atlas) -> Vec<u32> {
-        let mut out = vec![atlas.width, atlas.height, atlas.texels_per_unit.to_bits()];
+        let mut out = vec![
+            atlas.width,
+            atlas.height,
+            atlas.pages,
+            atlas.texels_per_unit.to_bits(),
+        ];
         for mesh in &atlas.meshes {
             out.push(mesh.xref.len() as u32);
             out.extend(&mesh.xref);
+            out.extend(&mesh.page);
             out.extend(mesh.uv.iter().flat_map(|uv| uv.map(f32::to_bits)));
             out.extend(&mesh.indices);
         }

@@ -4,7 +4,7 @@ use crate::atlas::{self, Atlas, AtlasInput, AtlasOptions};
 use crate::discontinuity::{self, DmOptions, Segment};
 use crate::error::{Error, Result};
 use crate::files::{self, Staged};
-use crate::lightmap::{self, Lightmap};
+use crate::lightmap::{self, Encoding, Lightmap};
 use crate::load::{self, Gltf};
 use crate::mesh::{self, Mesher, ReceiverMesh};
 use crate::scene::Scene;
@@ -30,6 +30,11 @@ pub struct BakeOptions {
     pub resolution: Option<u32>,
     /// Texels of padding between charts.
     pub padding: u32,
+    /// With `texels_per_unit` (and no `resolution`): the largest lightmap page side, texels
+    /// (16..=16384); charts that do not fit one page go onto more pages.
+    pub page_size: u32,
+    /// Transfer curve of the 8-bit lightmap images.
+    pub encoding: Encoding,
     /// Sub-samples per texel side (`n x n` per texel), 1..=8.
     pub supersample: u32,
 }
@@ -44,6 +49,8 @@ impl Default for BakeOptions {
             texels_per_unit: None,
             resolution: None,
             padding: 4,
+            page_size: atlas::DEFAULT_PAGE_SIZE,
+            encoding: Encoding::Srgb,
             supersample: 4,
         }
     }
@@ -97,6 +104,9 @@ impl BakeOptions {
         {
             return bad("--resolution", "must be between 16 and 16384");
         }
+        if !(16..=atlas::MAX_RESOLUTION).contains(&self.page_size) {
+            return bad("--page-size", "must be between 16 and 16384");
+        }
         if !(0.0..=1.0).contains(&self.dm_threshold) {
             return bad("--dm-threshold", "must be between 0 and 1");
         }
@@ -104,7 +114,8 @@ impl BakeOptions {
     }
 }
 
-/// Runs the pipeline on a loaded glTF: scene, visibility, mesh, solve, atlas, lightmap.
+/// Runs the pipeline on a loaded glTF: scene, visibility, atlas, discontinuity and mesh, solve,
+/// lightmap.
 pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Result<Bake> {
     options.check()?;
     let mut stats = Stats {
@@ -118,16 +129,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     let vis = stage(&mut t.visibility, "visibility", progress, || {
         Visibility::new(&scene)
     });
-    let (segments, meshes) = mesh_scene(&scene, &vis, options, &mut stats, progress);
-    if meshes.iter().all(|m| m.triangles.is_empty()) {
-        return Err(Error::EmptyScene {
-            path: gltf.path.clone(),
-        });
-    }
-    let t = &mut stats.timings_s;
-    let solution = stage(&mut t.solve, "solve", progress, || {
-        solve::radiosity(&scene, &vis, &meshes, &options.solve, progress)
-    });
+    // The atlas depends on the scene only: it runs before the expensive stages, so a request
+    // that cannot be packed fails in seconds.
     let atlas = stage(&mut t.atlas, "atlas", progress, || {
         pack_atlas(&scene, options)
     })
@@ -139,11 +142,24 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             item: gltf.instance_item(&scene.instances[mesh]),
             reason: format!("atlas: {reason}"),
         },
+        atlas::AtlasError::Empty => Error::EmptyScene {
+            path: gltf.path.clone(),
+        },
         error => Error::Atlas {
             path: gltf.path.clone(),
             error,
         },
     })?;
+    let (segments, meshes) = mesh_scene(&scene, &vis, options, &mut stats, progress);
+    if meshes.iter().all(|m| m.triangles.is_empty()) {
+        return Err(Error::EmptyScene {
+            path: gltf.path.clone(),
+        });
+    }
+    let t = &mut stats.timings_s;
+    let solution = stage(&mut t.solve, "solve", progress, || {
+        solve::radiosity(&scene, &vis, &meshes, &options.solve, progress)
+    });
     let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
     for (i, m) in meshes.iter().enumerate() {
         mesh_of_polygon[m.polygon] = i;
@@ -169,6 +185,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats.solve = solution.stats.clone();
     stats.lightmap_width = atlas.width;
     stats.lightmap_height = atlas.height;
+    stats.lightmap_pages = atlas.pages;
+    stats.lightmap_encoding = options.encoding.name().into();
     stats.texels_per_unit = atlas.texels_per_unit;
     stats.warnings = scene.warnings.clone();
     stats
@@ -245,8 +263,43 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::Atla
             texels_per_unit: options.texels_per_unit.map(|t| (t as f64 / scale) as f32),
             resolution: options.resolution,
             padding: options.padding,
+            page_size: options.page_size,
         },
-    )?;
+    )
+    .map_err(|error| {
+        // Densities in errors back to the scene's units.
+        let unscale = |t: f32| (t as f64 * scale) as f32;
+        match error {
+            atlas::AtlasError::ChartTooLarge {
+                page_size,
+                texels_per_unit,
+                texels,
+            } => atlas::AtlasError::ChartTooLarge {
+                page_size,
+                texels_per_unit: unscale(texels_per_unit),
+                texels,
+            },
+            atlas::AtlasError::TooLarge {
+                texels_per_unit,
+                texels,
+                max,
+            } => atlas::AtlasError::TooLarge {
+                texels_per_unit: unscale(texels_per_unit),
+                texels,
+                max,
+            },
+            atlas::AtlasError::DoesNotFit {
+                resolution,
+                texels_per_unit,
+                attempts,
+            } => atlas::AtlasError::DoesNotFit {
+                resolution,
+                texels_per_unit: unscale(texels_per_unit),
+                attempts,
+            },
+            error => error,
+        }
+    })?;
     atlas.texels_per_unit = (atlas.texels_per_unit as f64 * scale) as f32;
     Ok(atlas)
 }
@@ -325,7 +378,8 @@ pub fn meshes(
 pub struct OutputFiles {
     /// The lightmapped glb.
     pub glb: PathBuf,
-    /// The float lightmap (irradiance H, W/m², linear RGB) as OpenEXR.
+    /// The float lightmap (irradiance H, W/m², linear RGB) as OpenEXR: page 0 here, page `p`
+    /// >= 1 next to it as [`exr_page_path`] names it.
     pub exr: Option<PathBuf>,
     /// `--stats` JSON.
     pub stats: Option<PathBuf>,
@@ -368,15 +422,31 @@ pub fn bake_file(
     let stats_path = outputs.stats.as_ref().and_then(|_| paths.next());
     let mut result = bake(&gltf, options, progress)?;
     result.stats.timings_s.load += read_time;
+    // The EXRs of pages 1.. are known only now: check them too, with all the others.
+    let page_exrs: Vec<PathBuf> = match &outputs.exr {
+        Some(exr) => (1..result.atlas.pages)
+            .map(|p| exr_page_path(exr, p))
+            .collect(),
+        None => Vec::new(),
+    };
+    let page_paths = if page_exrs.is_empty() {
+        Vec::new()
+    } else {
+        let mut all = named.clone();
+        all.extend(page_exrs.iter().map(|p| ("--exr", p.as_path())));
+        files::check_outputs(&gltf.files_read(), &all)?.split_off(named.len())
+    };
     let mut write_time = 0.0;
     let mut staged = stage(&mut write_time, "write", progress, || -> Result<Staged> {
         let mut staged = Staged::new();
         if let Some(path) = &glb_path {
-            staged.add(path, &glb_bytes(&gltf, &mut result)?)?;
+            staged.add(path, &glb_bytes(&gltf, &mut result, options.encoding)?)?;
         }
         if let Some(path) = &exr_path {
             let map = &result.lightmap;
-            staged.add(path, &write::exr_bytes(&map.texels, map.width, map.height)?)?;
+            for (p, path) in std::iter::once(path).chain(&page_paths).enumerate() {
+                staged.add(path, &write::exr_bytes(map.page(p), map.width, map.height)?)?;
+            }
         }
         Ok(staged)
     })?;
@@ -393,12 +463,36 @@ pub fn bake_file(
     Ok(result)
 }
 
-/// A bake's result as lightmapped glb bytes (8-bit lightmap, its scale in
-/// `stats.lightmap_intensity`).
-pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake) -> Result<Vec<u8>> {
-    let (rgb, intensity) = bake.lightmap.to_rgb8();
-    let png = write::png_bytes(&rgb, bake.lightmap.width, bake.lightmap.height)?;
+/// Where `--exr FILE` puts page `page` (>= 1) of a multi-page lightmap: next to `FILE`, its
+/// stem plus `-<page>`, same extension (`light.exr` → `light-1.exr`, `light-2.exr`, ...).
+/// Page 0 is `FILE` itself.
+pub fn exr_page_path(exr: &Path, page: u32) -> PathBuf {
+    let stem = exr
+        .file_stem()
+        .map(|s| s.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let name = match exr.extension() {
+        Some(ext) => format!("{stem}-{page}.{}", ext.to_string_lossy()),
+        None => format!("{stem}-{page}"),
+    };
+    exr.with_file_name(name)
+}
+
+/// A bake's result as lightmapped glb bytes (one 8-bit PNG per page in `encoding`, their scale
+/// in `stats.lightmap_intensity`).
+pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake, encoding: Encoding) -> Result<Vec<u8>> {
+    let map = &bake.lightmap;
+    let (rgb, intensity) = map.to_rgb8(encoding);
+    let page_bytes = 3 * map.width as usize * map.height as usize;
+    let pngs = rgb
+        .chunks(page_bytes.max(1))
+        .map(|page| write::png_bytes(page, map.width, map.height))
+        .collect::<Result<Vec<_>>>()?;
     bake.stats.lightmap_intensity = intensity;
-    let image = LightmapImage { png, intensity };
+    let image = LightmapImage {
+        pngs,
+        intensity,
+        encoding,
+    };
     write::build(gltf, &bake.scene, &bake.atlas, &image)
 }

@@ -401,7 +401,10 @@ fn measure(
             ));
             let lightmap = if budget == picture_budget {
                 let path = bakes_dir.join(format!("{}.glb", method.name()));
-                crate::files::write_atomically(&path, &crate::bake::glb_bytes(gltf, &mut b)?)?;
+                crate::files::write_atomically(
+                    &path,
+                    &crate::bake::glb_bytes(gltf, &mut b, options.encoding)?,
+                )?;
                 let lightmap = b.lightmap.clone();
                 pictures.push((method, b, path));
                 lightmap
@@ -432,7 +435,7 @@ fn measure(
     }
     let vis = Visibility::new(&scene);
     let layout = reference::texel_layout(&baked, &scene, &vis, o.supersample)?;
-    if (layout.width, layout.height) != (atlas.width, atlas.height) {
+    if (layout.width, layout.height) != (atlas.width, atlas.height * atlas.pages) {
         return Err(compare_error(format!(
             "{}: its lightmap is {}x{}, the bake's {}x{}",
             path.display(),

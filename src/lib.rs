@@ -3,7 +3,7 @@
 //! The pipeline, one module per stage, in the order [`bake()`] calls them:
 //!
 //! ```text
-//! load ──► scene ──► visibility ──► discontinuity ──► mesh ──► solve ──► atlas ──► lightmap ──► write
+//! load ──► scene ──► visibility ──► atlas ──► discontinuity ──► mesh ──► solve ──► lightmap ──► write
 //! ```
 //!
 //! Units: lengths in scene units (glTF: metres); radiance in W/(m² sr), irradiance and exitance in
@@ -33,7 +33,8 @@ pub mod solve;
 /// Exact visible emitter parts (used by `solve`).
 pub mod backproject;
 
-/// UV atlas (xatlas).
+/// UV atlas (xatlas), packed right after the scene so an impossible request fails before the
+/// solve.
 pub mod atlas;
 
 /// Texels from the receiver meshes.

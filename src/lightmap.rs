@@ -2,7 +2,8 @@
 //! points its footprint covers, supersampled, then dilated into the padding.
 //!
 //! Texel `(x, y)` covers UV `[x, x+1] x [y, y+1]` in atlas texel units; row 0 is the top row of the
-//! image, as glTF's UV origin is the image's top-left corner.
+//! image, as glTF's UV origin is the image's top-left corner. An atlas of several pages gives a
+//! lightmap of as many pages of the same size, stored one after the other.
 
 use crate::atlas::Atlas;
 use crate::geometry::barycentric_2d;
@@ -11,14 +12,18 @@ use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
-/// A float RGB image of irradiance H (W/m², linear, without albedo).
+/// Float RGB images of irradiance H (W/m², linear, without albedo): one or more pages of
+/// `width` x `height` texels.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Lightmap {
+    /// Page width, texels.
     pub width: u32,
+    /// Page height, texels.
     pub height: u32,
-    /// Row-major, top row first.
+    /// Page after page ([`Lightmap::pages`] of them), each row-major, top row first.
     pub texels: Vec<DVec3>,
-    /// Fraction of each texel's sub-samples covered by geometry (0 for padding).
+    /// Fraction of each texel's sub-samples covered by geometry (0 for padding); same layout
+    /// as `texels` (empty for a map read back from a file).
     pub coverage: Vec<f32>,
 }
 
@@ -31,27 +36,104 @@ impl Lightmap {
             .fold(0.0, f64::max)
     }
 
-    /// 8-bit linear RGB: each channel `255 H / scale` quantized with a 4x4 ordered (Bayer)
-    /// dither, so slow gradients in dark regions do not band; `scale` is the returned factor
-    /// (the `MOZ_lightmap` intensity): H = value / 255 x scale, within one level.
-    pub fn to_rgb8(&self) -> (Vec<u8>, f64) {
+    /// 8-bit RGB of every page (page-major, then rows top first), each channel `v = H / scale`
+    /// (0..1) encoded by `encoding` and quantized with a 4x4 ordered (Bayer) dither in the encoded
+    /// domain, so slow gradients in dark regions do not band; `scale` is the returned factor
+    /// (W/m², the `MOZ_lightmap` intensity: the brightest channel of all pages): H =
+    /// `encoding.decode(code / 255)` x scale, within one code.
+    pub fn to_rgb8(&self, encoding: Encoding) -> (Vec<u8>, f64) {
         const BAYER: [f64; 16] = [
             0.0, 8.0, 2.0, 10.0, 12.0, 4.0, 14.0, 6.0, 3.0, 11.0, 1.0, 9.0, 15.0, 7.0, 13.0, 5.0,
         ];
         let max = self.max_value();
         let scale = if max > 0.0 { max } else { 1.0 };
         let w = self.width.max(1) as usize;
+        let n = (w * self.height as usize).max(1);
         let bytes = self
             .texels
             .iter()
             .enumerate()
             .flat_map(|(k, t)| {
-                let d = (BAYER[(k / w % 4) * 4 + k % w % 4] + 0.5) / 16.0;
-                t.to_array()
-                    .map(|c| (c / scale * 255.0 + d).floor().clamp(0.0, 255.0) as u8)
+                let (x, y) = (k % n % w, k % n / w);
+                let d = (BAYER[(y % 4) * 4 + x % 4] + 0.5) / 16.0;
+                t.to_array().map(|c| {
+                    let e = encoding.encode((c / scale).clamp(0.0, 1.0));
+                    (e * 255.0 + d).floor().clamp(0.0, 255.0) as u8
+                })
             })
             .collect();
         (bytes, scale)
+    }
+
+    /// Number of pages (`texels.len() / (width x height)`).
+    pub fn pages(&self) -> usize {
+        let n = self.width as usize * self.height as usize;
+        self.texels.len().checked_div(n).unwrap_or(0)
+    }
+
+    /// The texels of page `p` (row-major, top row first).
+    pub fn page(&self, p: usize) -> &[DVec3] {
+        let n = self.width as usize * self.height as usize;
+        &self.texels[p * n..(p + 1) * n]
+    }
+}
+
+/// How the 8-bit lightmap maps codes to values: the transfer curve between the stored code
+/// (0..255, / 255) and the linear value `v = H / scale` (0..1).
+#[derive(
+    Clone,
+    Copy,
+    Debug,
+    PartialEq,
+    Eq,
+    Default,
+    clap::ValueEnum,
+    serde::Serialize,
+    serde::Deserialize,
+)]
+#[serde(rename_all = "lowercase")]
+pub enum Encoding {
+    /// The sRGB transfer curve (IEC 61966-2-1): about 4x finer steps than linear at 1% of the
+    /// maximum. Clients decode it as an sRGB texture (three.js: `SRGBColorSpace`).
+    #[default]
+    Srgb,
+    /// No curve: code / 255 = v (clients: a non-colour / linear texture, three.js
+    /// `NoColorSpace`).
+    Linear,
+}
+
+impl Encoding {
+    /// The name written into the file (`extras.penumbra.encoding`).
+    pub fn name(self) -> &'static str {
+        match self {
+            Encoding::Srgb => "srgb",
+            Encoding::Linear => "linear",
+        }
+    }
+
+    /// The encoding of a name as written into the file; `None` for an unknown one.
+    pub fn from_name(name: &str) -> Option<Encoding> {
+        match name {
+            "srgb" => Some(Encoding::Srgb),
+            "linear" => Some(Encoding::Linear),
+            _ => None,
+        }
+    }
+
+    /// Linear value (0..1) to encoded value (0..1).
+    pub fn encode(self, v: f64) -> f64 {
+        match self {
+            Encoding::Srgb => crate::render::linear_to_srgb(v),
+            Encoding::Linear => v,
+        }
+    }
+
+    /// Encoded value (0..1, i.e. code / 255) to linear value (0..1).
+    pub fn decode(self, e: f64) -> f64 {
+        match self {
+            Encoding::Srgb => crate::render::srgb_to_linear(e),
+            Encoding::Linear => e,
+        }
     }
 }
 
@@ -178,7 +260,9 @@ pub fn rasterize(
     supersample: u32,
     dilate: u32,
 ) -> Lightmap {
-    let (w, h) = (atlas.width as usize, atlas.height as usize);
+    // The pages are rasterized as one tall image, page p's rows at p x height.
+    let (w, page_h) = (atlas.width as usize, atlas.height as usize);
+    let h = page_h * atlas.pages.max(1) as usize;
     let locators: Vec<Locator> = meshes
         .iter()
         .zip(values)
@@ -196,9 +280,11 @@ pub fn rasterize(
         for (k, t) in am.indices.chunks_exact(3).enumerate() {
             let st = &scene.triangles[inst.first_triangle + k];
             let Some(poly) = st.polygon else { continue };
+            let top = (am.page.get(k).copied().unwrap_or(0) as usize * page_h) as f64;
             let uv = [0, 1, 2].map(|c| {
                 let u = am.uv[t[c] as usize];
-                DVec2::new(u[0] as f64, u[1] as f64)
+                // Clamped into the page, so that nothing spills onto the next one.
+                DVec2::new(u[0] as f64, top + (u[1] as f64).clamp(0.0, page_h as f64))
             });
             let world = [0, 1, 2].map(|c| inst.positions_world[am.xref[t[c] as usize] as usize]);
             tris.push(UvTri {
@@ -300,13 +386,24 @@ pub fn rasterize(
     map
 }
 
+/// [`dilate_page`] on every page of `map`, each on its own.
+pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
+    let n = map.width as usize * map.height as usize;
+    if n == 0 {
+        return;
+    }
+    for (texels, coverage) in map.texels.chunks_mut(n).zip(map.coverage.chunks(n)) {
+        dilate_page(texels, coverage, map.width, map.height, rings);
+    }
+}
+
 /// Fills uncovered texels, ring by ring outward from the covered ones, with the mean of their
 /// already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole image, so that
 /// bilinear filtering and every mipmap level at chart edges see chart colours, not black).
 /// Covered texels are never changed. Each texel is visited once per ring it borders.
-pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
-    let (w, h) = (map.width as usize, map.height as usize);
-    let mut filled: Vec<bool> = map.coverage.iter().map(|&c| c > 0.0).collect();
+fn dilate_page(texels: &mut [DVec3], coverage: &[f32], width: u32, height: u32, rings: u32) {
+    let (w, h) = (width as usize, height as usize);
+    let mut filled: Vec<bool> = coverage.iter().map(|&c| c > 0.0).collect();
     let neighbours = |i: usize| {
         let (x, y) = ((i % w) as i64, (i / w) as i64);
         (-1i64..=1)
@@ -333,12 +430,12 @@ pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
             .map(|&i| {
                 let (s, k) = neighbours(i)
                     .filter(|&j| filled[j])
-                    .fold((DVec3::ZERO, 0), |(s, k), j| (s + map.texels[j], k + 1));
+                    .fold((DVec3::ZERO, 0), |(s, k), j| (s + texels[j], k + 1));
                 s / k as f64
             })
             .collect();
         for (&i, v) in ring.iter().zip(values) {
-            map.texels[i] = v;
+            texels[i] = v;
             filled[i] = true;
         }
         frontier = ring;

@@ -210,19 +210,30 @@ struct BakeArgs {
     /// links, more accurate).
     #[arg(long, default_value_t = penumbra::solve::DEFAULT_HR_TOLERANCE)]
     hr_tolerance: f64,
-    /// Lightmap density in texels per scene unit (metre). Default: derived from --resolution.
+    /// Lightmap density in texels per scene unit (metre), kept as given: charts that do not fit
+    /// one --page-size page go onto more pages. Default: derived from --resolution.
     #[arg(long, conflicts_with = "resolution")]
     texels_per_unit: Option<f32>,
-    /// Lightmap width and height in texels [default: 1024 when --texels-per-unit is not given].
+    /// Lightmap width and height in texels, one page: the density is lowered until the scene
+    /// fits [default: 1024 when --texels-per-unit is not given].
     #[arg(long)]
     resolution: Option<u32>,
+    /// With --texels-per-unit: the largest lightmap page side, texels (16 to 16384); more
+    /// pages (images) are used when the charts need them.
+    #[arg(long, default_value_t = penumbra::atlas::DEFAULT_PAGE_SIZE)]
+    page_size: u32,
+    /// Transfer curve of the 8-bit lightmap PNGs: `srgb` (clients decode them as sRGB
+    /// textures) or `linear` (as non-colour data).
+    #[arg(long, value_enum, default_value_t = penumbra::lightmap::Encoding::Srgb)]
+    encoding: penumbra::lightmap::Encoding,
     /// Padding between charts, texels (at least 2).
     #[arg(long, default_value_t = 4)]
     padding: u32,
     /// Sub-samples per texel side (n x n per texel, 1 to 8): antialiases sharp shadows.
     #[arg(long, default_value_t = 4)]
     supersample: u32,
-    /// Also write the float lightmap (irradiance, W/m², linear) as OpenEXR.
+    /// Also write the float lightmap (irradiance, W/m², linear) as OpenEXR: page 0 to FILE,
+    /// page p >= 1 to FILE's stem plus `-p` (`light.exr`, `light-1.exr`, ...).
     #[arg(long, value_name = "FILE")]
     exr: Option<PathBuf>,
     /// Write run statistics (stage times, counts) as JSON.
@@ -474,6 +485,8 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         texels_per_unit: args.texels_per_unit,
         resolution: args.resolution,
         padding: args.padding,
+        page_size: args.page_size,
+        encoding: args.encoding,
         supersample: args.supersample,
     };
     let bars = Bars::new(args.quiet);
@@ -497,10 +510,16 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             eprintln!("warning: {}: {w}", args.input.display());
         }
         eprintln!(
-            "baked {} -> {}: {} elements, {}x{} lightmap, {:.2} s",
+            "baked {} -> {}: {} elements, {} lightmap page{} of {}x{}, {:.2} s",
             args.input.display(),
             args.output.display(),
             result.stats.elements,
+            result.stats.lightmap_pages,
+            if result.stats.lightmap_pages == 1 {
+                ""
+            } else {
+                "s"
+            },
             result.stats.lightmap_width,
             result.stats.lightmap_height,
             result.stats.timings_s.total

@@ -180,7 +180,10 @@ fn bad(gltf: &Gltf, item: String, reason: &str) -> Error {
 /// Reads the lightmap layout of a baked glb: the `TEXCOORD_1` triangles of every primitive
 /// whose material has `MOZ_lightmap`, rasterized into the grid of the lightmap image with `n x n`
 /// sub-samples per texel, as the bake does. `scene` must be `load::scene(gltf)` and `vis` its
-/// BVH (for the rays' start points). All lightmapped materials must share one lightmap size.
+/// BVH (for the rays' start points). All lightmapped materials must share one lightmap size. A
+/// multi-page lightmap (textures with `extras.penumbra.page`, see [`crate::write`]) gives one
+/// grid with the pages stacked top to bottom in page order: `height` is the page height times
+/// the number of pages.
 pub fn texel_layout(
     gltf: &Gltf,
     scene: &Scene,
@@ -194,8 +197,10 @@ pub fn texel_layout(
         });
     }
     // UV triangles (normalized) with their scene triangle.
-    let mut tris: Vec<([DVec2; 3], usize)> = Vec::new();
+    let mut tris: Vec<([DVec2; 3], usize, usize)> = Vec::new();
     let mut size: Option<(u32, u32)> = None;
+    // Page of each lightmap texture; each page has one texture.
+    let mut page_texture: std::collections::BTreeMap<usize, usize> = Default::default();
     let mut sizes = std::collections::BTreeMap::new();
     for inst in &scene.instances {
         let prim = gltf
@@ -237,6 +242,14 @@ pub fn texel_layout(
             ));
         }
         size = Some(dims);
+        let page = crate::render::texture_page(gltf, texture);
+        if *page_texture.entry(page).or_insert(texture) != texture {
+            return Err(bad(
+                gltf,
+                format!("texture {texture}"),
+                &format!("another texture is already lightmap page {page}"),
+            ));
+        }
         for k in 0..inst.indices.len() / 3 {
             let t = inst.first_triangle + k;
             if scene.triangles[t].polygon.is_none() {
@@ -246,7 +259,7 @@ pub fn texel_layout(
             if ids.iter().any(|&i| i as usize >= uv.len()) {
                 return Err(bad(gltf, item, "TEXCOORD_1 is shorter than POSITION"));
             }
-            tris.push((ids_to_uv(ids, &uv), t));
+            tris.push((ids_to_uv(ids, &uv), t, page));
         }
     }
     let (w, h) = size.ok_or_else(|| {
@@ -256,12 +269,19 @@ pub fn texel_layout(
             "no material has MOZ_lightmap: is this a baked file?",
         )
     })?;
-    let (wf, hf) = (w as f64, h as f64);
+    let pages = page_texture.keys().next_back().map_or(1, |&p| p + 1);
+    let page_h = h;
+    let h = u32::try_from(pages as u64 * u64::from(h))
+        .ok()
+        .filter(|&h| h <= 16384 * 64)
+        .ok_or_else(|| bad(gltf, "textures".into(), "too many lightmap pages"))?;
+    let (wf, hf) = (w as f64, page_h as f64);
     let n = supersample as usize;
     let mut samples: Vec<Vec<SurfacePoint>> = vec![Vec::new(); w as usize * h as usize];
     let mut claimed = vec![0u64; w as usize * h as usize];
-    for (uvn, t) in &tris {
-        let uv = uvn.map(|q| DVec2::new(q.x * wf, q.y * hf));
+    for (uvn, t, page) in &tris {
+        let top = (*page as f64) * hf;
+        let uv = uvn.map(|q| DVec2::new(q.x * wf, top + (q.y * hf).clamp(0.0, hf)));
         let area = (uv[1] - uv[0]).perp_dot(uv[2] - uv[0]);
         if area == 0.0 || !area.is_finite() {
             continue;

@@ -1,12 +1,14 @@
 //! Pictures of a baked glb as a client shows it: per pixel, the first surface hit, its
-//! `MOZ_lightmap` texel (bilinear) x intensity = irradiance H, shown as `albedo/pi x H` plus
-//! the surface's own emission, exposed and encoded as sRGB.
+//! `MOZ_lightmap` texel (bilinear, decoded by the texture's `extras.penumbra.encoding`: `srgb`
+//! or `linear`, linear when absent) x intensity = irradiance H, shown as `albedo/pi x H` plus
+//! the surface's own emission, exposed and encoded as sRGB. Each primitive reads the lightmap
+//! page its material's `MOZ_lightmap.index` names.
 //!
 //! It reads only the output file (TEXCOORD_1, the lightmap image, the materials), so it checks
 //! what a client would see, not the baker's internal state.
 
 use crate::error::{Error, Result};
-use crate::lightmap::Lightmap;
+use crate::lightmap::{Encoding, Lightmap};
 use crate::load::{self, Gltf};
 use crate::scene::Scene;
 use crate::visibility::Visibility;
@@ -102,11 +104,33 @@ impl Camera {
     }
 }
 
-/// Per instance: TEXCOORD_1 of every vertex, and the lightmap (texture index, intensity).
+/// Per instance: TEXCOORD_1 of every vertex, and the lightmap (texture index, its page,
+/// intensity).
 struct LightmapBinding {
     uv1: Vec<DVec2>,
     texture: usize,
+    page: usize,
     intensity: f64,
+}
+
+/// The encoding of a lightmap texture, from its `extras.penumbra.encoding` (absent: linear, as
+/// files written before the field existed). An unknown name is an error.
+pub fn texture_encoding(gltf: &Gltf, texture: usize) -> Result<Encoding> {
+    match gltf.json["textures"][texture]["extras"]["penumbra"]["encoding"].as_str() {
+        None => Ok(Encoding::Linear),
+        Some(name) => Encoding::from_name(name).ok_or_else(|| Error::BadItem {
+            path: gltf.path.clone(),
+            item: format!("texture {texture}"),
+            reason: format!("extras.penumbra.encoding {name:?} is neither \"srgb\" nor \"linear\""),
+        }),
+    }
+}
+
+/// The page of a lightmap texture, from its `extras.penumbra.page` (absent: 0).
+pub fn texture_page(gltf: &Gltf, texture: usize) -> usize {
+    gltf.json["textures"][texture]["extras"]["penumbra"]["page"]
+        .as_u64()
+        .unwrap_or(0) as usize
 }
 
 /// What a lightmapped surface shows.
@@ -191,6 +215,7 @@ pub fn render_radiance(
                     load::read_uri(&gltf.path, uri, "lightmap")?
                 }
             };
+            let encoding = texture_encoding(gltf, texture)?;
             let img = image::load_from_memory(&bytes)
                 .map_err(|e| bad(format!("texture {texture}"), &e.to_string()))?
                 .to_rgb32f();
@@ -199,7 +224,7 @@ pub fn render_radiance(
                 height: img.height(),
                 texels: img
                     .pixels()
-                    .map(|p| DVec3::from(p.0.map(f64::from)))
+                    .map(|p| DVec3::from(p.0.map(|c| encoding.decode(f64::from(c)))))
                     .collect(),
                 coverage: Vec::new(),
             });
@@ -207,6 +232,7 @@ pub fn render_radiance(
         bindings.push(Some(LightmapBinding {
             uv1,
             texture,
+            page: texture_page(gltf, texture),
             intensity,
         }));
     }
@@ -234,7 +260,7 @@ pub fn render_radiance(
                 (b, uv)
             });
             if let Shading::Colour(map) = shading {
-                return uv.map_or(DVec3::splat(0.02), |(_, uv)| sample_map(map, uv));
+                return uv.map_or(DVec3::splat(0.02), |(b, uv)| sample_page(map, b.page, uv));
             }
             let mut l = if tri.normal.dot(dir) < 0.0 {
                 mat.radiance
@@ -243,7 +269,7 @@ pub fn render_radiance(
             };
             if let Some((b, uv)) = uv {
                 let h = match shading {
-                    Shading::Irradiance(map) => sample_map(map, uv),
+                    Shading::Irradiance(map) => sample_page(map, b.page, uv),
                     _ => sample_map(&textures[&b.texture], uv) * b.intensity,
                 };
                 l += mat.rho / std::f64::consts::PI * h;
@@ -278,19 +304,25 @@ pub fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> imag
     img
 }
 
-/// Bilinear sample of a float map at normalized UV with clamp-to-edge, as the output's sampler
-/// says.
+/// Bilinear sample of a float map (its first page) at normalized UV with clamp-to-edge, as the
+/// output's sampler says.
 pub fn sample_map(map: &Lightmap, uv: DVec2) -> DVec3 {
+    sample_page(map, 0, uv)
+}
+
+/// [`sample_map`] on page `page` of a multi-page map (black when the map has no such page).
+pub fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
     let (w, h) = (map.width as usize, map.height as usize);
-    if w == 0 || h == 0 {
+    if w == 0 || h == 0 || map.texels.len() < (page + 1) * w * h {
         return DVec3::ZERO;
     }
+    let texels = &map.texels[page * w * h..(page + 1) * w * h];
     let x = (uv.x * w as f64 - 0.5).clamp(0.0, w as f64 - 1.0);
     let y = (uv.y * h as f64 - 0.5).clamp(0.0, h as f64 - 1.0);
     let (x0, y0) = (x.floor() as usize, y.floor() as usize);
     let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
     let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-    let t = |x: usize, y: usize| map.texels[y * w + x];
+    let t = |x: usize, y: usize| texels[y * w + x];
     (t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx) * (1.0 - fy)
         + (t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx) * fy
 }
@@ -301,5 +333,15 @@ pub fn linear_to_srgb(c: f64) -> f64 {
         12.92 * c
     } else {
         1.055 * c.powf(1.0 / 2.4) - 0.055
+    }
+}
+
+/// The sRGB electro-optical transfer function (IEC 61966-2-1), the inverse of
+/// [`linear_to_srgb`]: encoded value in [0,1] to linear.
+pub fn srgb_to_linear(e: f64) -> f64 {
+    if e <= 0.04045 {
+        e / 12.92
+    } else {
+        ((e + 0.055) / 1.055).powf(2.4)
     }
 }

@@ -12,10 +12,10 @@ pub type Progress<'a> = dyn Fn(&str, u64, u64) + Sync + 'a;
 pub struct Timings {
     pub load: f64,
     pub visibility: f64,
+    pub atlas: f64,
     pub discontinuity: f64,
     pub mesh: f64,
     pub solve: f64,
-    pub atlas: f64,
     pub lightmap: f64,
     pub write: f64,
     pub total: f64,
@@ -40,8 +40,13 @@ pub struct Stats {
     /// False when the indirect solve stopped on its shot limit before its tolerance (also a
     /// warning).
     pub converged: bool,
+    /// Size of each lightmap page, texels.
     pub lightmap_width: u32,
     pub lightmap_height: u32,
+    /// Number of lightmap pages (images).
+    pub lightmap_pages: u32,
+    /// Transfer curve of the 8-bit lightmap images: `srgb` or `linear`.
+    pub lightmap_encoding: String,
     pub texels_per_unit: f32,
     /// `MOZ_lightmap` intensity: H (W/m²) of a full-scale texel.
     pub lightmap_intensity: f64,

@@ -1,6 +1,15 @@
 //! Writing the lightmapped glb: the input with everything preserved, plus per lightmapped
-//! primitive a second UV set (`TEXCOORD_1`, and `TEXCOORD_0` where the input has none), the
-//! lightmap PNG in the binary chunk, and `MOZ_lightmap` on every lightmapped material.
+//! primitive a second UV set (`TEXCOORD_1`, and `TEXCOORD_0` where the input has none), one
+//! lightmap PNG per atlas page in the binary chunk, and `MOZ_lightmap` on every lightmapped
+//! material.
+//!
+//! Each page's texture carries the convention of its values in its `extras`:
+//! `{"penumbra": {"quantity": "irradiance", "units": "W/m^2", "encoding": "srgb" | "linear",
+//! "scale": <intensity>, "page": <p>}}`: decode the 8-bit value with `encoding`'s curve to a
+//! linear 0..1 value, times `scale` (= `MOZ_lightmap.intensity`) is the irradiance H in W/m².
+//! A primitive whose charts lie on several pages is split into one primitive per page, and a
+//! material used on several pages is cloned per page (each clone's `MOZ_lightmap.index` is its
+//! page's texture).
 //!
 //! The writer edits the file's own JSON, so whatever it does not touch (extensions, extras,
 //! animations, unknown properties) is kept as it was. All buffers are merged into the one GLB
@@ -11,8 +20,9 @@
 //! [`crate::files`] writes them (temporary file, then rename), so a failure never leaves a half
 //! file.
 
-use crate::atlas::Atlas;
+use crate::atlas::{Atlas, AtlasMesh};
 use crate::error::{Error, Result};
+use crate::lightmap::Encoding;
 use crate::load::Gltf;
 use crate::scene::Scene;
 use serde_json::{Value, json};
@@ -20,10 +30,12 @@ use std::collections::BTreeMap;
 
 /// The lightmap as it goes into the file.
 pub struct LightmapImage {
-    /// PNG bytes (8-bit linear RGB).
-    pub png: Vec<u8>,
-    /// `MOZ_lightmap` intensity: irradiance H = texel value (0..1) x intensity.
+    /// PNG bytes (8-bit RGB in `encoding`), one per atlas page, in page order.
+    pub pngs: Vec<Vec<u8>>,
+    /// `MOZ_lightmap` intensity, W/m²: irradiance H = decoded texel value (0..1) x intensity.
     pub intensity: f64,
+    /// Transfer curve of the PNGs' 8-bit values.
+    pub encoding: Encoding,
 }
 
 const ARRAY_BUFFER: u64 = 34962;
@@ -163,22 +175,44 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
         }
     }
 
-    // 3. The lightmap texture.
-    let png_view = push_view(&mut root, &mut bin, &image.png, None, None);
-    let images = array_mut(&mut root, "images");
-    images.push(
-        json!({"name": "penumbra lightmap", "bufferView": png_view, "mimeType": "image/png"}),
-    );
-    let image_index = images.len() - 1;
+    // 3. The lightmap textures, one per page, with their convention in `extras`.
+    if image.pngs.len() != atlas.pages.max(1) as usize {
+        return Err(Error::Image(format!(
+            "{} lightmap images for {} atlas pages",
+            image.pngs.len(),
+            atlas.pages
+        )));
+    }
     let samplers = array_mut(&mut root, "samplers");
     samplers.push(json!({"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}));
     let sampler_index = samplers.len() - 1;
-    let textures = array_mut(&mut root, "textures");
-    textures.push(
-        json!({"name": "penumbra lightmap", "sampler": sampler_index, "source": image_index}),
-    );
-    let texture_index = textures.len() - 1;
-    let moz = json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity});
+    let mut moz_of_page = Vec::new();
+    for (page, png) in image.pngs.iter().enumerate() {
+        let name = match page {
+            0 => "penumbra lightmap".to_string(),
+            p => format!("penumbra lightmap {p}"),
+        };
+        let png_view = push_view(&mut root, &mut bin, png, None, None);
+        let images = array_mut(&mut root, "images");
+        images.push(json!({"name": name, "bufferView": png_view, "mimeType": "image/png"}));
+        let image_index = images.len() - 1;
+        let textures = array_mut(&mut root, "textures");
+        textures.push(json!({
+            "name": name,
+            "sampler": sampler_index,
+            "source": image_index,
+            "extras": {"penumbra": {
+                "quantity": "irradiance",
+                "units": "W/m^2",
+                "encoding": image.encoding.name(),
+                "scale": image.intensity,
+                "page": page,
+            }},
+        }));
+        let texture_index = textures.len() - 1;
+        moz_of_page
+            .push(json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity}));
+    }
 
     // 4. Which nodes use each mesh, and which of those placements are lightmapped.
     let mut lit_nodes: BTreeMap<usize, BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
@@ -206,6 +240,18 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     // 5. Materials used by lightmapped primitives get MOZ_lightmap; a material also used by an
     //    unlit primitive is cloned first.
     let mut lit_material_uses: BTreeMap<Option<usize>, usize> = BTreeMap::new();
+    // The pages each material's lightmapped primitives lie on.
+    let mut material_pages: BTreeMap<Option<usize>, std::collections::BTreeSet<u32>> =
+        BTreeMap::new();
+    for (i, inst) in scene.instances.iter().enumerate() {
+        let mat = gltf.json["meshes"][inst.mesh]["primitives"][inst.primitive]["material"]
+            .as_u64()
+            .map(|x| x as usize);
+        material_pages
+            .entry(mat)
+            .or_default()
+            .extend(pages_of(&atlas.meshes[i]));
+    }
     let mut all_material_uses: BTreeMap<Option<usize>, usize> = BTreeMap::new();
     for (m, users) in &mesh_users {
         let prims = root["meshes"][*m]["primitives"]
@@ -246,35 +292,53 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             moved_uv1.insert(*mat, highest.max(1) + 1);
         }
     }
-    let mut material_map: BTreeMap<Option<usize>, usize> = BTreeMap::new();
+    // (material, page) -> the material index lightmapped primitives of that page use. The
+    // first page keeps the material itself unless an unlit primitive shares it; every other
+    // page gets a clone.
+    let mut material_map: BTreeMap<(Option<usize>, u32), usize> = BTreeMap::new();
     for (mat, lit) in &lit_material_uses {
         let shared = all_material_uses.get(mat).copied().unwrap_or(0) > *lit;
-        let index = match mat {
-            Some(i) if !shared => *i,
-            Some(i) => {
-                let mut copy = root["materials"][*i].clone();
-                if let Some(name) = copy["name"].as_str() {
-                    copy["name"] = json!(format!("{name} (lightmapped)"));
+        let pages: Vec<u32> = material_pages
+            .get(mat)
+            .map(|p| p.iter().copied().collect())
+            .unwrap_or_default();
+        let pages = if pages.is_empty() { vec![0] } else { pages };
+        for (n, &page) in pages.iter().enumerate() {
+            let suffix = match (pages.len(), page) {
+                (1, _) | (_, 0) => " (lightmapped)".to_string(),
+                (_, p) => format!(" (lightmap page {p})"),
+            };
+            let index = match mat {
+                Some(i) if !shared && n == 0 => *i,
+                Some(i) => {
+                    let mut copy = gltf.json["materials"][*i].clone();
+                    if let Some(name) = copy["name"].as_str() {
+                        copy["name"] = json!(format!("{name}{suffix}"));
+                    }
+                    let mats = array_mut(&mut root, "materials");
+                    mats.push(copy);
+                    mats.len() - 1
                 }
-                let mats = array_mut(&mut root, "materials");
-                mats.push(copy);
-                mats.len() - 1
+                None => {
+                    let mats = array_mut(&mut root, "materials");
+                    mats.push(json!({ "name": format!("default{suffix}") }));
+                    mats.len() - 1
+                }
+            };
+            let m = &mut root["materials"][index];
+            if let Some(&k) = moved_uv1.get(mat) {
+                retarget_tex_coord(m, 1, k);
             }
-            None => {
-                let mats = array_mut(&mut root, "materials");
-                mats.push(json!({"name": "default (lightmapped)"}));
-                mats.len() - 1
+            if !m["extensions"].is_object() {
+                m["extensions"] = json!({});
             }
-        };
-        let m = &mut root["materials"][index];
-        if let Some(&k) = moved_uv1.get(mat) {
-            retarget_tex_coord(m, 1, k);
+            let moz = moz_of_page
+                .get(page as usize)
+                .cloned()
+                .ok_or_else(|| Error::Image(format!("atlas page {page} has no lightmap image")))?;
+            m["extensions"]["MOZ_lightmap"] = moz;
+            material_map.insert((*mat, page), index);
         }
-        if !m["extensions"].is_object() {
-            m["extensions"] = json!({});
-        }
-        m["extensions"]["MOZ_lightmap"] = moz.clone();
-        material_map.insert(*mat, index);
     }
 
     // 6. New primitive data for every lightmapped placement; copies of shared meshes.
@@ -285,24 +349,35 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
         let mut in_place_taken = !users.iter().all(|n| nodes.contains_key(n));
         for (node, insts) in nodes {
             let mut mesh_json = gltf.json["meshes"][*mesh].clone();
+            // Each lightmapped primitive becomes one primitive per page it lies on.
+            let mut replaced: BTreeMap<usize, Vec<Value>> = BTreeMap::new();
             for &i in insts {
                 let inst = &scene.instances[i];
-                let prim = &mut mesh_json["primitives"][inst.primitive];
-                let mat = prim["material"].as_u64().map(|x| x as usize);
+                let original = &mesh_json["primitives"][inst.primitive];
+                let mat = original["material"].as_u64().map(|x| x as usize);
                 let uv1_to = moved_uv1.get(&mat).copied();
-                rewrite_primitive(
-                    gltf,
-                    &mut root,
-                    &mut bin,
-                    prim,
-                    inst,
-                    &atlas.meshes[i],
-                    atlas,
-                    uv1_to,
-                )?;
-                if let Some(&mi) = material_map.get(&mat) {
-                    prim["material"] = json!(mi);
+                let mut parts = Vec::new();
+                for (page, part) in split_by_page(&atlas.meshes[i]) {
+                    let mut prim = original.clone();
+                    rewrite_primitive(
+                        gltf, &mut root, &mut bin, &mut prim, inst, &part, atlas, uv1_to,
+                    )?;
+                    if let Some(&mi) = material_map.get(&(mat, page)) {
+                        prim["material"] = json!(mi);
+                    }
+                    parts.push(prim);
                 }
+                replaced.insert(inst.primitive, parts);
+            }
+            if let Some(prims) = mesh_json["primitives"].as_array_mut() {
+                let mut out = Vec::with_capacity(prims.len());
+                for (p, prim) in prims.drain(..).enumerate() {
+                    match replaced.remove(&p) {
+                        Some(parts) => out.extend(parts),
+                        None => out.push(prim),
+                    }
+                }
+                *prims = out;
             }
             if !in_place_taken {
                 root["meshes"][*mesh] = mesh_json;
@@ -325,6 +400,52 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     Ok(to_glb(&root, bin.data))
 }
 
+/// The pages a mesh's triangles lie on, ascending.
+fn pages_of(am: &AtlasMesh) -> std::collections::BTreeSet<u32> {
+    am.page.iter().copied().collect()
+}
+
+/// A mesh's triangles grouped by page: per page (ascending), an [`AtlasMesh`] of that page's
+/// triangles (in their order) over the vertices they use (in their order). A mesh on one page
+/// (or with no triangles) is returned as is, on its page.
+fn split_by_page(am: &AtlasMesh) -> Vec<(u32, AtlasMesh)> {
+    let pages = pages_of(am);
+    if pages.len() <= 1 {
+        return vec![(pages.first().copied().unwrap_or(0), am.clone())];
+    }
+    pages
+        .into_iter()
+        .map(|page| {
+            let mut remap = vec![u32::MAX; am.xref.len()];
+            let mut used: Vec<u32> = am
+                .indices
+                .chunks_exact(3)
+                .zip(&am.page)
+                .filter(|(_, p)| **p == page)
+                .flat_map(|(t, _)| t.iter().copied())
+                .collect();
+            used.sort_unstable();
+            used.dedup();
+            let mut part = AtlasMesh::default();
+            for (n, &v) in used.iter().enumerate() {
+                remap[v as usize] = n as u32;
+                part.xref.push(am.xref[v as usize]);
+                part.uv.push(am.uv[v as usize]);
+            }
+            for (t, _) in am
+                .indices
+                .chunks_exact(3)
+                .zip(&am.page)
+                .filter(|(_, p)| **p == page)
+            {
+                part.indices.extend(t.iter().map(|&v| remap[v as usize]));
+                part.page.push(page);
+            }
+            (page, part)
+        })
+        .collect()
+}
+
 /// Replaces one primitive's attributes by atlas-split copies plus the lightmap UVs.
 /// `uv1_to`: move the primitive's own TEXCOORD_1 to `TEXCOORD_<k>` (its material samples it).
 #[allow(clippy::too_many_arguments)]
@@ -334,7 +455,7 @@ fn rewrite_primitive(
     bin: &mut Bin,
     prim: &mut Value,
     inst: &crate::scene::Instance,
-    am: &crate::atlas::AtlasMesh,
+    am: &AtlasMesh,
     atlas: &Atlas,
     uv1_to: Option<u32>,
 ) -> Result<()> {

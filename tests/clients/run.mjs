@@ -10,7 +10,11 @@
 //     of the same file with the lightmap removed (MAD at least APPLIED_MIN_MAD).
 //  4. Self-tests: broken files must be caught (TEXCOORD_0 dropped: the validator reports an
 //     error; MOZ_lightmap.texCoord wrong: the three.js comparison fails; MOZ_lightmap removed:
-//     the "lightmap applied" check fails; the lightmap decoded as sRGB: the comparison fails).
+//     the "lightmap applied" check fails; the default (sRGB-encoded) lightmap decoded as linear,
+//     or a `--encoding linear` lightmap decoded as sRGB: the comparison fails).
+//  Besides the fixtures as they are, two variants go through 2-3: cornell-box baked with
+//  `--encoding linear`, and box-on-floor baked onto several small pages (`--texels-per-unit`,
+//  `--page-size`).
 //
 // Usage: node run.mjs [--only NAME,...] [--update-screenshot]
 //   PENUMBRA_BIN   the penumbra binary (default: <target>/release/penumbra, where <target> is
@@ -49,6 +53,7 @@ const APPLIED_MIN_MAD = 0.02;
  */
 const VIEWS = {
   'box-on-floor': { eye: [2.4, 1.6, 3.0], target: [0, 0.3, 0], yfov: 0.9 },
+  'box-on-floor-pages': { eye: [2.4, 1.6, 3.0], target: [0, 0.3, 0], yfov: 0.9 },
   'directional-light': { eye: [1.6, 1.2, 2.0], target: [0.1, 0, 0], yfov: 0.9 },
   'furnace-box': { eye: [0.35, 0.3, 0.4], target: [-0.2, -0.15, -0.5], yfov: 1.2, exposure: 0.8 },
   instanced: { eye: [1.5, 1.9, 2.2], target: [0, 0.6, 0], yfov: 0.9 },
@@ -266,7 +271,7 @@ async function validate(file) {
  * The three.js picture of `glb` against `penumbra render` of the same file, and against
  * three.js with the lightmap removed. Returns the numbers; `tag` names the output files.
  */
-async function compare(browser, glb, tag, { lightmapColorSpace = 'none' } = {}) {
+async function compare(browser, glb, tag, { lightmapColorSpace = 'file' } = {}) {
   const { json } = readGlb(glb);
   const exposure = exposureOf(json);
   const ref = path.join(OUT, `${tag}-penumbra.png`);
@@ -311,11 +316,21 @@ async function main() {
     .filter((n) => !only || only.includes(n))
     .sort();
   const baked = {};
-  for (const name of fixtures) {
+  // [name, fixture, extra bake options]
+  const bakes = fixtures.map((n) => [n, n, []]);
+  if (fixtures.includes('cornell-box')) bakes.push(['cornell-box-linear', 'cornell-box', ['--encoding', 'linear']]);
+  if (fixtures.includes('box-on-floor')) {
+    bakes.push(['box-on-floor-pages', 'box-on-floor', ['--texels-per-unit', '24', '--page-size', '128']]);
+  }
+  for (const [name, fixture, extra] of bakes) {
     const out = path.join(OUT, 'glb', `${name}.glb`);
     const t0 = Date.now();
     try {
-      penumbra(['bake', path.join(ROOT, 'fixtures', `${name}.glb`), out, '--quiet']);
+      penumbra(['bake', path.join(ROOT, 'fixtures', `${fixture}.glb`), out, '--quiet', ...extra]);
+      if (name === 'box-on-floor-pages') {
+        const pages = readGlb(out).json.textures.filter((t) => t.extras?.penumbra).length;
+        check('bake box-on-floor onto several pages', pages > 1, `${pages} lightmap pages`);
+      }
     } catch (e) {
       check(`bake ${name}`, false, e.message);
       continue;
@@ -400,8 +415,13 @@ async function main() {
         caught: (r) => r.applied < APPLIED_MIN_MAD, what: (r) => `mean |lit - without lightmap| ${fmt(r.applied)} vs minimum ${APPLIED_MIN_MAD}`,
       },
       {
-        name: 'client decodes the lightmap as sRGB',
-        tag: 'broken-srgb-decode', base: 'cornell-box', edit: () => {}, client: { lightmapColorSpace: 'srgb' },
+        name: 'client decodes the (sRGB) lightmap as linear',
+        tag: 'broken-linear-decode', base: 'cornell-box', edit: () => {}, client: { lightmapColorSpace: 'none' },
+        caught: (r) => r.mad >= MAD_TOLERANCE, what: (r) => `mean |diff| ${fmt(r.mad)} vs tolerance ${MAD_TOLERANCE}`,
+      },
+      {
+        name: 'client decodes a --encoding linear lightmap as sRGB',
+        tag: 'broken-srgb-decode', base: 'cornell-box-linear', edit: () => {}, client: { lightmapColorSpace: 'srgb' },
         caught: (r) => r.mad >= MAD_TOLERANCE, what: (r) => `mean |diff| ${fmt(r.mad)} vs tolerance ${MAD_TOLERANCE}`,
       },
     ];

@@ -95,7 +95,7 @@ fn uniformly_lit_plane_gives_a_flat_lightmap() {
     for t in &covered {
         assert!((*t - DVec3::ONE).abs().max_element() < 1e-9, "texel {t}");
     }
-    let (rgb, scale) = b.lightmap.to_rgb8();
+    let (rgb, scale) = b.lightmap.to_rgb8(penumbra::lightmap::Encoding::Srgb);
     assert!((scale - 1.0).abs() < 1e-9);
     let w = b.lightmap.width as usize;
     for (k, c) in b.lightmap.coverage.iter().enumerate() {
@@ -214,20 +214,26 @@ fn cornell_floor_direct_light_matches_reference() {
     }
 }
 
-/// The 8-bit lightmap times `intensity` is the irradiance, within one quantization level.
+/// The 8-bit lightmap, decoded by its encoding, times `intensity` is the irradiance, within one
+/// quantization level of the encoded value.
 #[test]
 fn png_values_times_intensity_give_the_irradiance() {
+    use penumbra::lightmap::Encoding;
     let b = bake(&fixtures::cornell_box(), &quick());
-    let (rgb, intensity) = b.lightmap.to_rgb8();
-    assert!((intensity - b.lightmap.max_value()).abs() < 1e-12);
-    for (k, h) in b.lightmap.texels.iter().enumerate() {
-        for c in 0..3 {
-            let shown = rgb[3 * k + c] as f64 / 255.0 * intensity;
-            assert!(
-                (shown - h[c]).abs() <= intensity / 255.0 + 1e-12,
-                "texel {k}: {shown} vs {}",
-                h[c]
-            );
+    for encoding in [Encoding::Srgb, Encoding::Linear] {
+        let (rgb, intensity) = b.lightmap.to_rgb8(encoding);
+        assert!((intensity - b.lightmap.max_value()).abs() < 1e-12);
+        for (k, h) in b.lightmap.texels.iter().enumerate() {
+            for c in 0..3 {
+                let code = rgb[3 * k + c] as f64 / 255.0;
+                let shown = encoding.decode(code) * intensity;
+                let exact = encoding.encode(h[c] / intensity);
+                assert!(
+                    (code - exact).abs() <= 1.0 / 255.0 + 1e-12,
+                    "{encoding:?} texel {k}: {shown} vs {}",
+                    h[c]
+                );
+            }
         }
     }
 }

@@ -65,7 +65,8 @@ impl Rng {
         z ^ (z >> 31)
     }
 
-    /// Uniform in [0, 1).
+    /// Uniform in [0, 1). (Not an `Iterator`: the stream never ends and yields `f64`.)
+    #[allow(clippy::should_implement_trait)]
     pub fn next(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }

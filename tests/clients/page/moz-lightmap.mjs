@@ -5,11 +5,13 @@
 //
 //   MOZ_lightmap: { index: <texture>, texCoord: <n>, intensity: <s> }
 //
-// The texel value (0..1, linear: no sRGB curve) x `intensity` is the irradiance H in W/m².
-// three's `lightMap` x `lightMapIntensity` is irradiance too, and Lambert shows it as
-// albedo/pi x H, which is what penumbra means.
+// The texel value, decoded by the curve the texture's `extras.penumbra.encoding` names ("srgb":
+// the sRGB transfer curve, penumbra's default; "linear" or absent: none), x `intensity` is the
+// irradiance H in W/m². three's `lightMap` x `lightMapIntensity` is irradiance too, and Lambert
+// shows it as albedo/pi x H, which is what penumbra means. Each lightmap page is its own texture;
+// a material names its page's texture in `index`.
 
-import { NoColorSpace } from 'three';
+import { NoColorSpace, SRGBColorSpace } from 'three';
 
 export class MozLightmapExtension {
   constructor(parser) {
@@ -22,7 +24,9 @@ export class MozLightmapExtension {
     if (!ext) return;
     const map = await this.parser.getDependency('texture', ext.index);
     map.channel = ext.texCoord ?? 0; // like any glTF textureInfo; TEXCOORD_n is three's uv channel n
-    map.colorSpace = NoColorSpace; // the values are linear irradiance, not sRGB colour
+    const encoding = this.parser.json.textures?.[ext.index]?.extras?.penumbra?.encoding;
+    // sRGB: three decodes the curve to linear when sampling; else the values are linear.
+    map.colorSpace = encoding === 'srgb' ? SRGBColorSpace : NoColorSpace;
     map.needsUpdate = true;
     materialParams.lightMap = map;
     materialParams.lightMapIntensity = ext.intensity ?? 1;

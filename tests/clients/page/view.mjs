@@ -68,10 +68,11 @@ function dispose(root) {
 
 /**
  * options: url (the glb), width, height, exposure (radiance shown as white, W/(m² sr)),
- * lightmapColorSpace ('none' as the extension means, or 'srgb' to break it on purpose).
+ * lightmapColorSpace ('file': as the texture's extras.penumbra.encoding says, through the
+ * plugin; 'srgb' or 'none' to override it, e.g. to break it on purpose).
  * Draws the glb, leaves the picture in the canvas, and returns what was loaded.
  */
-window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'none' }) {
+window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'file' }) {
   const r = rendererOfSize(width, height);
   const loader = new GLTFLoader();
   loader.register((parser) => new MozLightmapExtension(parser));
@@ -90,8 +91,8 @@ window.renderGlb = async function renderGlb({ url, width, height, exposure, ligh
     if (m.lightMap) {
       m.lightMapIntensity /= exposure;
       channels.add(m.lightMap.channel);
-      if (lightmapColorSpace === 'srgb') {
-        m.lightMap.colorSpace = THREE.SRGBColorSpace;
+      if (lightmapColorSpace !== 'file') {
+        m.lightMap.colorSpace = lightmapColorSpace === 'srgb' ? THREE.SRGBColorSpace : THREE.NoColorSpace;
         m.lightMap.needsUpdate = true;
       }
     }

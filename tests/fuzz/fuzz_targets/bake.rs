@@ -19,6 +19,6 @@ fuzz_target!(|data: &[u8]| {
     options.solve.patches = 16;
     options.solve.bounces = Some(1);
     if let Ok(mut bake) = penumbra::bake(&gltf, &options, &|_, _, _| {}) {
-        let _ = penumbra::bake::glb_bytes(&gltf, &mut bake);
+        let _ = penumbra::bake::glb_bytes(&gltf, &mut bake, penumbra::lightmap::Encoding::Srgb);
     }
 });
