@@ -37,8 +37,8 @@ impl Lightmap {
     }
 
     /// 8-bit RGB of every page (page-major, then rows top first), each channel `v = H / scale`
-    /// (0..1) encoded by `encoding` and quantized with a 4x4 ordered (Bayer) dither in the encoded
-    /// domain, so slow gradients in dark regions do not band; `scale` is the returned factor
+    /// (0..1) encoded by `encoding` and quantized: sRGB to the nearest code, linear with a 4x4
+    /// ordered (Bayer) dither so slow gradients in dark regions do not band; `scale` is the returned factor
     /// (W/m², the `MOZ_lightmap` intensity: the brightest channel of all pages): H =
     /// `encoding.decode(code / 255)` x scale, within one code.
     pub fn to_rgb8(&self, encoding: Encoding) -> (Vec<u8>, f64) {
@@ -55,7 +55,13 @@ impl Lightmap {
             .enumerate()
             .flat_map(|(k, t)| {
                 let (x, y) = (k % n % w, k % n / w);
-                let d = (BAYER[(y % 4) * 4 + x % 4] + 0.5) / 16.0;
+                // Linear codes are coarse where the light is dim: a 4x4 ordered dither hides
+                // their banding. sRGB codes are fine enough there, and a dither would add up to a
+                // code of noise (2% at a tenth of the maximum): round to the nearest code.
+                let d = match encoding {
+                    Encoding::Linear => (BAYER[(y % 4) * 4 + x % 4] + 0.5) / 16.0,
+                    Encoding::Srgb => 0.5,
+                };
                 t.to_array().map(|c| {
                     let e = encoding.encode((c / scale).clamp(0.0, 1.0));
                     (e * 255.0 + d).floor().clamp(0.0, 255.0) as u8
