@@ -21,6 +21,10 @@ pub mod scene;
 /// BVH ray queries.
 pub mod visibility;
 
+/// UV atlas (xatlas), packed right after the scene so an impossible request fails before the
+/// solve.
+pub mod atlas;
+
 /// Umbra, penumbra and contact segments per receiver.
 pub mod discontinuity;
 
@@ -32,10 +36,6 @@ pub mod solve;
 
 /// Exact visible emitter parts (used by `solve`).
 pub mod backproject;
-
-/// UV atlas (xatlas), packed right after the scene so an impossible request fails before the
-/// solve.
-pub mod atlas;
 
 /// Texels from the receiver meshes.
 pub mod lightmap;
