@@ -206,6 +206,18 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             "no surface receives any light (every emitter faces away from the receivers, or is blocked): the lightmap is black".into(),
         );
     }
+    let diverged = !(stats.solve.unshot_fraction <= 1.0)
+        || solution.irradiance.iter().flatten().any(|h| !h.is_finite());
+    if diverged {
+        return Err(Error::BadItem {
+            path: gltf.path.clone(),
+            item: "scene".into(),
+            reason: "the indirect light diverges: surfaces receive more light than they emit, \
+                     which happens where geometry is duplicated (coincident surfaces count twice); \
+                     remove the duplicates"
+                .into(),
+        });
+    }
     stats.converged =
         options.solve.bounces.is_some() || stats.solve.unshot_fraction <= options.solve.tolerance;
     if !stats.converged {

@@ -203,7 +203,11 @@ pub fn progressive(
             let limit = 100 * patches.len() + 1000;
             loop {
                 let total: f64 = (0..patches.len()).map(|i| power(i, &unshot)).sum();
-                if total <= tolerance * initial || shots >= limit {
+                // A shot passes on at most rho x (sum of form factors <= 1) of what it takes, so
+                // the unshot power never grows; where it does (the surfaces around a receiver
+                // are counted twice, as with coincident duplicated geometry) the solve diverges:
+                // stop, and `unshot_fraction` > 1 says so.
+                if total <= tolerance * initial || shots >= limit || !(total <= 2.0 * initial) {
                     break;
                 }
                 // The patch with the most unshot power; ties broken by index.

@@ -347,6 +347,25 @@ fn a_solve_stopped_on_its_cap_says_so() {
 }
 
 #[test]
+fn duplicated_geometry_that_makes_the_solve_diverge_is_an_error() {
+    // Every primitive of a closed box twice: each point sees every wall twice (form factors
+    // summing to 2), so with albedo 0.8 the bounces grow without end. Found by the mutation test
+    // on a real scene (a duplicated primitive): it ran to the shot limit and wrote a NaN
+    // lightmap with exit 0.
+    let twice = edit(&fixtures::furnace_box_with(0.8, 1.0), |j, _| {
+        for mesh in j["meshes"].as_array_mut().unwrap() {
+            let prims = mesh["primitives"].as_array_mut().unwrap();
+            let copy = prims.clone();
+            prims.extend(copy);
+        }
+    });
+    let (code, stderr, _) = bake_with_stats("diverge", &twice, &["--patches", "64"]);
+    assert_eq!(code, Some(1), "{stderr}");
+    assert!(stderr.contains("in.glb: scene: the indirect light diverges"), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}
+
+#[test]
 fn a_scene_that_receives_no_light_warns() {
     // The box-on-floor's light, moved under the floor: it faces down, at nothing.
     let away = edit(&fixtures::box_on_floor(), |j, _| {
