@@ -83,6 +83,9 @@ pub struct DmStats {
     pub hidden: usize,
     /// Wedge pieces below the significance threshold.
     pub dropped_threshold: usize,
+    /// (Area emitter, occluder edge or vertex) pairs whose wedges were not built: no piece of
+    /// them could reach the threshold (bound from the emitter's power and distance).
+    pub culled: usize,
     /// Wedge pieces dropped to stay within the element budget.
     pub dropped_budget: usize,
     /// Constraint pieces spade refused (they would have crossed another; should be 0).
@@ -226,56 +229,24 @@ pub fn segments(
         .map(|r| contacts(scene, &index, r, tol))
         .collect();
 
-    // Wedges of every light, in a fixed order.
-    let wedges = wedges(scene, &topo, extent, options.threshold);
-    stats.wedges = wedges.len();
-
-    // Intersect each wedge with the receivers it reaches; keep visible pieces.
-    struct Piece {
-        polygon: usize,
-        a: DVec3,
-        b: DVec3,
-        kind: Kind,
-        event: u32,
-        significance: f64,
-    }
-    let traced: Vec<(Vec<Piece>, usize)> = wedges
-        .par_iter()
-        .enumerate()
-        .map(|(event, w)| {
-            let mut out = Vec::new();
-            let mut hidden = 0;
-            for r in index.query(&w.hull) {
-                if w.skip.contains(&r) || !faces_light(scene, r, w) {
-                    continue;
-                }
-                for (a, b) in clip_wedge_to_polygon(scene, r, w, tol) {
-                    for (a, b, visible) in split_by_visibility(scene, vis, r, w, a, b, extent) {
-                        if !visible {
-                            hidden += 1;
-                            continue;
-                        }
-                        let n = scene.polygons[r].frame.n;
-                        let significance = unoccluded_irradiance(scene, w.light, (a + b) * 0.5, n);
-                        out.push(Piece {
-                            polygon: r,
-                            a,
-                            b,
-                            kind: w.kind,
-                            event: event as u32,
-                            significance,
-                        });
-                    }
-                }
-            }
-            (out, hidden)
-        })
-        .collect();
-    let mut pieces = Vec::new();
-    for (p, h) in traced {
-        pieces.extend(p);
-        stats.hidden += h;
-    }
+    // Wedges of every light, in a fixed order, in two passes. First the strongest area emitter
+    // and the punctual lights: their brightest piece is a lower bound of the final peak. Then
+    // the other area emitters, skipping every occluder feature too far from the emitter for
+    // any of its pieces to reach `threshold` of that bound (their pieces would be dropped
+    // below): significance before construction.
+    let strongest = strongest_emitter(scene);
+    let first = wedges(scene, &topo, extent, Pass::Strongest(strongest), 0.0);
+    let (mut pieces, hidden) = trace(scene, vis, &index, &first.wedges, 0, extent);
+    stats.hidden += hidden;
+    let peak_so_far = pieces.iter().map(|p| p.significance).fold(0.0, f64::max);
+    let cutoff = options.threshold * peak_so_far;
+    let rest = wedges(scene, &topo, extent, Pass::Others(strongest), cutoff);
+    let (more, hidden) = trace(scene, vis, &index, &rest.wedges, first.wedges.len(), extent);
+    pieces.extend(more);
+    stats.hidden += hidden;
+    stats.wedges = first.wedges.len() + rest.wedges.len();
+    stats.culled = first.culled + rest.culled;
+    let wedge_count = stats.wedges;
     // Significance relative to the brightest piece: an event where its light is faint cannot
     // cause a visible change.
     let peak = pieces.iter().map(|p| p.significance).fold(0.0, f64::max);
@@ -304,7 +275,7 @@ pub fn segments(
     stats.kept = pieces.len();
 
     let mut out: Vec<Vec<Segment>> = vec![Vec::new(); scene.polygons.len()];
-    let first_d0_event = wedges.len() as u32;
+    let first_d0_event = wedge_count as u32;
     let mut event = first_d0_event;
     for (r, segs) in d0.iter().enumerate() {
         let frame = &scene.polygons[r].frame;
@@ -331,6 +302,109 @@ pub fn segments(
         });
     }
     (out, stats)
+}
+
+/// A visible wedge piece on a receiver, before ranking.
+struct Piece {
+    polygon: usize,
+    a: DVec3,
+    b: DVec3,
+    kind: Kind,
+    event: u32,
+    /// Unoccluded irradiance of its light at its midpoint (luminance, W/m²).
+    significance: f64,
+}
+
+/// Intersects each wedge with the receivers it reaches and keeps the visible pieces; wedge `k`
+/// is event `first_event + k`. Returns the pieces and the number of hidden ones.
+fn trace(
+    scene: &Scene,
+    vis: &Visibility,
+    index: &PolygonIndex,
+    wedges: &[Wedge],
+    first_event: usize,
+    extent: f64,
+) -> (Vec<Piece>, usize) {
+    let tol = TOLERANCE * extent;
+    let traced: Vec<(Vec<Piece>, usize)> = wedges
+        .par_iter()
+        .enumerate()
+        .map(|(k, w)| {
+            let mut out = Vec::new();
+            let mut hidden = 0;
+            for r in index.query(&w.hull) {
+                if w.skip.contains(&r) || !faces_light(scene, r, w) {
+                    continue;
+                }
+                for (a, b) in clip_wedge_to_polygon(scene, r, w, tol) {
+                    for (a, b, visible) in split_by_visibility(scene, vis, r, w, a, b, extent) {
+                        if !visible {
+                            hidden += 1;
+                            continue;
+                        }
+                        let n = scene.polygons[r].frame.n;
+                        let significance = unoccluded_irradiance(scene, w.light, (a + b) * 0.5, n);
+                        out.push(Piece {
+                            polygon: r,
+                            a,
+                            b,
+                            kind: w.kind,
+                            event: (first_event + k) as u32,
+                            significance,
+                        });
+                    }
+                }
+            }
+            (out, hidden)
+        })
+        .collect();
+    let mut pieces = Vec::new();
+    let mut hidden = 0;
+    for (p, h) in traced {
+        pieces.extend(p);
+        hidden += h;
+    }
+    (pieces, hidden)
+}
+
+/// The area emitter with the most power (luminance of its radiance x area; ties: the first).
+fn strongest_emitter(scene: &Scene) -> Option<usize> {
+    let power = |p: usize| {
+        let poly = &scene.polygons[p];
+        luminance(scene.materials[poly.material].radiance) * poly.area
+    };
+    scene
+        .emitters()
+        .fold(None, |best: Option<usize>, e| match best {
+            Some(b) if power(b) >= power(e) => Some(b),
+            _ => Some(e),
+        })
+}
+
+/// Which lights a call of [`wedges`] builds.
+#[derive(Clone, Copy)]
+enum Pass {
+    /// This area emitter (if any) and every punctual light.
+    Strongest(Option<usize>),
+    /// Every area emitter but this one.
+    Others(Option<usize>),
+}
+
+/// Wedges built, and the (emitter, occluder feature) pairs skipped by the significance bound.
+struct Built {
+    wedges: Vec<Wedge>,
+    culled: usize,
+}
+
+/// Distance from `c` to the segment `a-b`.
+fn distance_to_segment(c: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let ab = b - a;
+    let t = if ab.length_squared() > 0.0 {
+        ((c - a).dot(ab) / ab.length_squared()).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    c.distance(a + ab * t)
 }
 
 /// A BVH over polygon bounding boxes, for "which receivers can this reach" queries.
@@ -565,23 +639,47 @@ fn clip_segment_to_polygon(
 }
 
 /// The wedges of every light, tangent to the occluders, in a fixed order.
-fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<Wedge> {
+///
+/// `pass` says which lights; `cutoff` (a significance, W/m² of luminance) skips an area
+/// emitter's wedges through an occluder edge or vertex where no piece could reach it. A piece
+/// lies beyond the occluder feature, seen from the emitter point that generates it, so it is at
+/// least the feature's distance from the emitter's centre less 3 emitter radii from every point
+/// of the emitter; its unoccluded irradiance is then at most `L A / d²` (and never more than
+/// `pi L`), with `L` the emitter's luminance and `A` its area.
+fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) -> Built {
     let tol = 1e-9 * extent;
     let far = 4.0 * extent;
     let mut out = Vec::new();
-    // Area emitters in scene order (significance is judged per piece later). Emitters carrying
-    // less than `threshold` of the strongest one's power are skipped outright.
-    let power = |p: usize| {
-        let poly = &scene.polygons[p];
-        scene.materials[poly.material].radiance.element_sum() * poly.area
-    };
-    let emitters: Vec<usize> = scene.emitters().collect();
-    let max_power = emitters.iter().map(|&e| power(e)).fold(0.0, f64::max);
+    let mut culled = 0;
+    let emitters: Vec<usize> = scene
+        .emitters()
+        .filter(|&e| match pass {
+            Pass::Strongest(s) => Some(e) == s,
+            Pass::Others(s) => Some(e) != s,
+        })
+        .collect();
     for &e in &emitters {
-        if power(e) < threshold * max_power {
-            continue;
-        }
         let poly = &scene.polygons[e];
+        let lum = luminance(scene.materials[poly.material].radiance);
+        let corners: Vec<DVec3> = poly
+            .boundary
+            .iter()
+            .map(|s| poly.frame.world_from_plane(s[0]))
+            .collect();
+        let centre = corners.iter().copied().sum::<DVec3>() / corners.len().max(1) as f64;
+        let radius = corners
+            .iter()
+            .map(|c| c.distance(centre))
+            .fold(0.0, f64::max);
+        let reaches = |d: f64| {
+            let d = (d - 3.0 * radius).max(0.0);
+            let bound = if d > 0.0 {
+                (lum * poly.area / (d * d)).min(std::f64::consts::PI * lum)
+            } else {
+                std::f64::consts::PI * lum
+            };
+            bound >= cutoff
+        };
         let ne = poly.frame.n;
         let verts: Vec<DVec3> = {
             let mut v: Vec<DVec3> = poly
@@ -610,6 +708,10 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<We
             }
             let (a, b) = (topo.points[wa as usize], topo.points[wb as usize]);
             if !in_front(a) && !in_front(b) {
+                continue;
+            }
+            if !reaches(distance_to_segment(centre, a, b)) {
+                culled += 1;
                 continue;
             }
             for &v in &verts {
@@ -652,6 +754,10 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<We
             if topo.vertex_polygons[w_id].iter().all(|&p| p == e) {
                 continue;
             }
+            if !reaches(w.distance(centre)) {
+                culled += 1;
+                continue;
+            }
             for &(e0, e1) in &edges {
                 let nw = (e1 - e0).cross(w - e0);
                 let Some(nw) = nw.try_normalize() else {
@@ -687,8 +793,13 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<We
             }
         }
     }
-    // Punctual lights: silhouette edges.
-    for (li, light) in scene.lights.iter().enumerate() {
+    // Punctual lights: silhouette edges (in the first pass).
+    let punctual = if matches!(pass, Pass::Strongest(_)) {
+        &scene.lights[..]
+    } else {
+        &[]
+    };
+    for (li, light) in punctual.iter().enumerate() {
         for (&(wa, wb), faces) in &topo.edges {
             let (a, b) = (topo.points[wa as usize], topo.points[wb as usize]);
             let mut skip: Vec<usize> = faces
@@ -749,7 +860,10 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, threshold: f64) -> Vec<We
             }
         }
     }
-    out
+    Built {
+        wedges: out,
+        culled,
+    }
 }
 
 /// The wedge swept by the rays from point `v` through edge `a-b`, beyond the edge (unit

@@ -361,7 +361,10 @@ fn duplicated_geometry_that_makes_the_solve_diverge_is_an_error() {
     });
     let (code, stderr, _) = bake_with_stats("diverge", &twice, &["--patches", "64"]);
     assert_eq!(code, Some(1), "{stderr}");
-    assert!(stderr.contains("in.glb: scene: the indirect light diverges"), "{stderr}");
+    assert!(
+        stderr.contains("in.glb: scene: the indirect light diverges"),
+        "{stderr}"
+    );
     assert!(!stderr.contains("panicked"), "{stderr}");
 }
 
