@@ -206,7 +206,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             "no surface receives any light (every emitter faces away from the receivers, or is blocked): the lightmap is black".into(),
         );
     }
-    let diverged = !(stats.solve.unshot_fraction <= 1.0)
+    let diverged = stats.solve.unshot_fraction.is_nan()
+        || stats.solve.unshot_fraction > 1.0
         || solution.irradiance.iter().flatten().any(|h| !h.is_finite());
     if diverged {
         return Err(Error::BadItem {

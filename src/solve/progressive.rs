@@ -207,7 +207,11 @@ pub fn progressive(
                 // the unshot power never grows; where it does (the surfaces around a receiver
                 // are counted twice, as with coincident duplicated geometry) the solve diverges:
                 // stop, and `unshot_fraction` > 1 says so.
-                if total <= tolerance * initial || shots >= limit || !(total <= 2.0 * initial) {
+                if total <= tolerance * initial
+                    || shots >= limit
+                    || total.is_nan()
+                    || total > 2.0 * initial
+                {
                     break;
                 }
                 // The patch with the most unshot power; ties broken by index.
