@@ -135,6 +135,11 @@ pub const REFINE_PASSES: usize = 2;
 /// are refined by the oracle when the link matters).
 const CONTOUR_ELEMENTS: u32 = 16;
 
+/// The refinement oracle's bound on how much one link's irradiance may vary across its
+/// receiver's sample points, as a fraction of the mean reflected direct radiosity `P / A`
+/// (dimensionless; see the module doc).
+pub const VARIATION: f64 = 1e-3;
+
 /// Most links; past it the refinement is redone with a 4× larger tolerance (a warning).
 pub const MAX_LINKS: usize = 30_000_000;
 
@@ -231,6 +236,17 @@ pub struct Link {
     /// Transport coefficient (dimensionless): mean irradiance over the receiver per unit
     /// radiosity of the source.
     pub k: f64,
+}
+
+/// What the refinement oracle decides for one link.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Decision {
+    /// Split the receiver (`true`) or the source.
+    Split(bool),
+    /// Keep the link with this `K`.
+    Keep(f64),
+    /// The link carries nothing.
+    Drop,
 }
 
 /// The estimate of one link.
@@ -656,12 +672,128 @@ impl Hierarchy {
         behind(nr, ns) || behind(ns, nr)
     }
 
+    /// The unoccluded point-to-source form factors at the receiver samples of `r ← s` when
+    /// both are surface nodes and the contour formula applies (see the module doc), else
+    /// `None`. Returns the per-sample values and their count.
+    fn point_factors(&self, r: u32, s: u32) -> Option<([f64; 4], usize)> {
+        let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
+        let sr = &self.samples[r as usize];
+        let contour = nr.polygon != NO_POLYGON
+            && ns.polygon != NO_POLYGON
+            && sr
+                .iter()
+                .all(|a| box_above(a.p, a.n, ns) || ns.hi - ns.lo <= CONTOUR_ELEMENTS);
+        if !contour {
+            return None;
+        }
+        let tris = &self.elements[ns.lo as usize..ns.hi as usize];
+        let outline = &self.outline[s as usize];
+        let mut f = [0.0; 4];
+        for (fi, a) in f.iter_mut().zip(sr) {
+            *fi = if box_above(a.p, a.n, ns) {
+                edge_contour_sum(a.p, a.n, outline).abs() / (2.0 * PI)
+            } else {
+                tris.iter()
+                    .map(|e| point_polygon_form_factor(a.p, a.n, &e.p))
+                    .sum::<f64>()
+            };
+        }
+        Some((f, sr.len().min(4)))
+    }
+
+    /// The refinement oracle for the link `r ← s` (see the module doc): `b_s` is the source's
+    /// radiosity (W/m², scalar), `threshold` the most power a link may carry (W), `variation`
+    /// the most the source's irradiance may vary across the receiver's samples (W/m²). Casts
+    /// only the shadow rays the decision needs (counted in `rays`).
+    fn decide(
+        &self,
+        vis: &Visibility,
+        r: u32,
+        s: u32,
+        (b_s, threshold, variation): (f64, f64, f64),
+        rays: &mut u64,
+    ) -> Decision {
+        let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
+        let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
+        let can_split = nr.kids.is_some() || ns.kids.is_some();
+        let larger = match (nr.kids, ns.kids) {
+            (Some(_), Some(_)) => nr.area >= ns.area,
+            (r, _) => r.is_some(),
+        };
+        let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
+            *rays += 1;
+            !vis.occluded_skipping(a.ray, b.ray, [a.polygon, b.polygon])
+        };
+        let Some((f, n)) = self.point_factors(r, s) else {
+            // A cluster end (or a large straddling source): the geometric bound decides, with
+            // no rays; a kept link is estimated by the sampled disk formula.
+            let gap = (nr.center.distance(ns.center) - nr.radius - ns.radius).max(0.0);
+            let bound = ns.area / (PI * gap * gap + ns.area);
+            if can_split && b_s * bound * nr.area > threshold {
+                return Decision::Split(larger);
+            }
+            let t = self.transfer(vis, r, s);
+            *rays += t.rays;
+            return if t.k > 0.0 {
+                Decision::Keep(t.k)
+            } else {
+                Decision::Drop
+            };
+        };
+        let f = &f[..n];
+        let unoccluded = f.iter().sum::<f64>() / n as f64;
+        if unoccluded <= 0.0 {
+            return Decision::Drop;
+        }
+        let (lo, hi) = f.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        });
+        let vary = nr.kids.is_some() && b_s * (hi - lo) > variation;
+        let heavy = can_split && b_s * unoccluded * nr.area > threshold;
+        let (mut seen, mut tested) = (0u32, 0u32);
+        for a in sr {
+            for b in ss {
+                let dir = b.p - a.p;
+                if a.n.dot(dir) <= 0.0 || b.n.dot(dir) >= 0.0 {
+                    continue;
+                }
+                tested += 1;
+                if visible(a, b, rays) {
+                    seen += 1;
+                    if vary || heavy {
+                        // Not wholly hidden: the bound (the unoccluded transfer) stands.
+                        return Decision::Split(vary || larger);
+                    }
+                }
+            }
+        }
+        if tested == 0 {
+            if vary || heavy {
+                return Decision::Split(vary || larger);
+            }
+            return Decision::Keep(unoccluded);
+        }
+        if seen == 0 {
+            return Decision::Drop;
+        }
+        Decision::Keep(unoccluded * f64::from(seen) / f64::from(tested))
+    }
+
     /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
-    /// radiosity the oracle uses, `threshold` the most power one link may carry (W). Links
-    /// sorted by receiver, then source. Returns the links, the refinements and the rays.
-    pub fn link(&self, vis: &Visibility, b: &[f64], threshold: f64) -> (Vec<Link>, u64, u64) {
+    /// radiosity the oracle uses, `threshold` the most power one link may carry (W) and
+    /// `variation` the most a surface source's irradiance may vary across a receiver's samples
+    /// (W/m²) before the receiver is split. Links sorted by receiver, then source. Returns the
+    /// links, the refinements and the rays.
+    pub fn link(
+        &self,
+        vis: &Visibility,
+        b: &[f64],
+        threshold: f64,
+        variation: f64,
+    ) -> (Vec<Link>, u64, u64) {
         let root = self.root();
-        let (mut links, refinements, rays) = self.refine(vis, b, threshold, root, root);
+        let (mut links, refinements, rays) =
+            self.refine(vis, b, (threshold, variation), root, root);
         links.sort_by_key(|l| (l.receiver, l.source));
         (links, refinements, rays)
     }
@@ -670,14 +802,14 @@ impl Hierarchy {
         &self,
         vis: &Visibility,
         b: &[f64],
-        threshold: f64,
+        limits: (f64, f64),
         r: u32,
         s: u32,
     ) -> (Vec<Link>, u64, u64) {
         let join = |pairs: Vec<(u32, u32)>| {
             let parts: Vec<(Vec<Link>, u64, u64)> = pairs
                 .into_par_iter()
-                .map(|(r, s)| self.refine(vis, b, threshold, r, s))
+                .map(|(r, s)| self.refine(vis, b, limits, r, s))
                 .collect();
             let mut out = (Vec::new(), 1u64, 0u64);
             for (l, n, k) in parts {
@@ -702,38 +834,31 @@ impl Hierarchy {
         if self.culled(r, s) {
             return (Vec::new(), 0, 0);
         }
-        let t = self.transfer(vis, r, s);
+        let mut rays = 0;
+        let d = self.decide(vis, r, s, (b[s as usize], limits.0, limits.1), &mut rays);
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
-        let power = b[s as usize] * t.bound * nr.area;
-        let split = match (nr.kids, ns.kids) {
-            _ if power <= threshold => None,
-            (Some(kr), Some(ks)) => Some(if nr.area >= ns.area {
-                [(kr[0], s), (kr[1], s)]
-            } else {
-                [(r, ks[0]), (r, ks[1])]
-            }),
-            (Some(kr), None) => Some([(kr[0], s), (kr[1], s)]),
-            (None, Some(ks)) => Some([(r, ks[0]), (r, ks[1])]),
-            (None, None) => None,
-        };
-        match split {
-            Some(pairs) => {
+        match d {
+            Decision::Split(receiver) => {
+                let pairs = match (receiver, nr.kids, ns.kids) {
+                    (true, Some(kr), _) => [(kr[0], s), (kr[1], s)],
+                    (_, _, Some(ks)) => [(r, ks[0]), (r, ks[1])],
+                    (_, Some(kr), None) => [(kr[0], s), (kr[1], s)],
+                    (_, None, None) => unreachable!("a split needs a node with children"),
+                };
                 let mut o = join(pairs.to_vec());
-                o.2 += t.rays;
+                o.2 += rays;
                 o
             }
-            None => {
-                let links = if t.k > 0.0 {
-                    vec![Link {
-                        receiver: r,
-                        source: s,
-                        k: t.k,
-                    }]
-                } else {
-                    Vec::new()
-                };
-                (links, 0, t.rays)
-            }
+            Decision::Keep(k) => (
+                vec![Link {
+                    receiver: r,
+                    source: s,
+                    k,
+                }],
+                0,
+                rays,
+            ),
+            Decision::Drop => (Vec::new(), 0, rays),
         }
     }
 
@@ -888,12 +1013,15 @@ pub fn indirect(
     let mut left = 0.0;
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
+        let total_area: f64 = els.iter().map(|e| e.area).sum();
+        let variation = VARIATION * initial / total_area;
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
             let t = Instant::now();
             let b_scalar: Vec<f64> = h.pull(&b_el).iter().map(|b| mean(*b)).collect();
             let links = loop {
-                let (links, refinements, rays) = h.link(vis, &b_scalar, tolerance * initial);
+                let (links, refinements, rays) =
+                    h.link(vis, &b_scalar, tolerance * initial, variation);
                 hs.refinements += refinements;
                 hs.rays += rays;
                 if links.len() <= MAX_LINKS {
