@@ -1,7 +1,8 @@
 //! Bakes one glb with `--solver progressive` and `--solver hierarchical` in the same run and
 //! prints the solve and bake seconds, the hierarchical counters and the difference of the
 //! vertex irradiance (luminance) between the two, relative to the progressive mean:
-//! `cargo run --release --example hier_compare -- scene.glb [hr_tolerance] [budget]`.
+//! `cargo run --release --example hier_compare -- scene.glb [hr_tolerance] [budget]`
+//! (`PATCHES=n` in the environment sets the progressive solver's patch count).
 
 use penumbra::light::luminance;
 use penumbra::solve::Solver;
@@ -19,6 +20,10 @@ fn main() -> anyhow::Result<()> {
     let mut options = BakeOptions::default();
     if let Some(b) = budget {
         options.budget = b;
+    }
+    // The progressive solver's patch count (a reference run with finer patches).
+    if let Ok(p) = std::env::var("PATCHES") {
+        options.solve.patches = p.parse()?;
     }
     let mut runs = Vec::new();
     for solver in [Solver::Progressive, Solver::Hierarchical] {

@@ -732,6 +732,13 @@ impl Hierarchy {
             if can_split && b_s * bound * nr.area > threshold {
                 return Decision::Split(larger);
             }
+            // A large surface source straddling the receiver's horizon: the disk estimate is
+            // crude near the horizon (a contact), so the source is split until the bound on
+            // the irradiance it gives is within the variation limit.
+            let surfaces = nr.polygon != NO_POLYGON && ns.polygon != NO_POLYGON;
+            if surfaces && ns.kids.is_some() && b_s * bound > variation {
+                return Decision::Split(false);
+            }
             let t = self.transfer(vis, r, s);
             *rays += t.rays;
             return if t.k > 0.0 {
