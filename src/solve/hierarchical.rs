@@ -236,6 +236,13 @@ pub struct Link {
     /// Transport coefficient (dimensionless): mean irradiance over the receiver per unit
     /// radiosity of the source.
     pub k: f64,
+    /// The oracle's power factor (scene units²): the link carries at most `B_s × power` (W);
+    /// zero when neither end can be split.
+    pub power: f64,
+    /// The oracle's irradiance factor (dimensionless): `B_s × spread` bounds how much the
+    /// link's irradiance varies across the receiver (or, for a straddling source, the
+    /// disk estimate's error); zero when splitting cannot reduce it.
+    pub spread: f64,
 }
 
 /// What the refinement oracle decides for one link.
@@ -243,8 +250,8 @@ pub struct Link {
 enum Decision {
     /// Split the receiver (`true`) or the source.
     Split(bool),
-    /// Keep the link with this `K`.
-    Keep(f64),
+    /// Keep the link with this `K`, power factor and spread (see [`Link`]).
+    Keep(f64, f64, f64),
     /// The link carries nothing.
     Drop,
 }
@@ -741,8 +748,14 @@ impl Hierarchy {
             }
             let t = self.transfer(vis, r, s);
             *rays += t.rays;
+            let power = if can_split { bound * nr.area } else { 0.0 };
+            let spread = if surfaces && ns.kids.is_some() {
+                bound
+            } else {
+                0.0
+            };
             return if t.k > 0.0 {
-                Decision::Keep(t.k)
+                Decision::Keep(t.k, power, spread)
             } else {
                 Decision::Drop
             };
@@ -755,8 +768,14 @@ impl Hierarchy {
         let (lo, hi) = f.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
             (lo.min(x), hi.max(x))
         });
-        let vary = nr.kids.is_some() && b_s * (hi - lo) > variation;
-        let heavy = can_split && b_s * unoccluded * nr.area > threshold;
+        let spread = if nr.kids.is_some() { hi - lo } else { 0.0 };
+        let power = if can_split {
+            unoccluded * nr.area
+        } else {
+            0.0
+        };
+        let vary = b_s * spread > variation;
+        let heavy = b_s * power > threshold;
         let (mut seen, mut tested) = (0u32, 0u32);
         for a in sr {
             for b in ss {
@@ -778,12 +797,16 @@ impl Hierarchy {
             if vary || heavy {
                 return Decision::Split(vary || larger);
             }
-            return Decision::Keep(unoccluded);
+            return Decision::Keep(unoccluded, power, spread);
         }
         if seen == 0 {
             return Decision::Drop;
         }
-        Decision::Keep(unoccluded * f64::from(seen) / f64::from(tested))
+        Decision::Keep(
+            unoccluded * f64::from(seen) / f64::from(tested),
+            power,
+            spread,
+        )
     }
 
     /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
@@ -803,6 +826,38 @@ impl Hierarchy {
             self.refine(vis, b, (threshold, variation), root, root);
         links.sort_by_key(|l| (l.receiver, l.source));
         (links, refinements, rays)
+    }
+
+    /// Refines existing `links` with new source radiosities `b` (W/m², scalar): a link the
+    /// oracle still accepts is kept as it is (no new estimate), the others are refined from
+    /// their node pair as in [`Hierarchy::link`]. Same return as [`Hierarchy::link`].
+    pub fn relink(
+        &self,
+        vis: &Visibility,
+        links: &[Link],
+        b: &[f64],
+        threshold: f64,
+        variation: f64,
+    ) -> (Vec<Link>, u64, u64) {
+        let parts: Vec<(Vec<Link>, u64, u64)> = links
+            .par_iter()
+            .map(|l| {
+                let bs = b[l.source as usize];
+                if bs * l.power > threshold || bs * l.spread > variation {
+                    self.refine(vis, b, (threshold, variation), l.receiver, l.source)
+                } else {
+                    (vec![*l], 0, 0)
+                }
+            })
+            .collect();
+        let mut out = (Vec::with_capacity(links.len()), 0u64, 0u64);
+        for (l, n, k) in parts {
+            out.0.extend(l);
+            out.1 += n;
+            out.2 += k;
+        }
+        out.0.sort_by_key(|l| (l.receiver, l.source));
+        out
     }
 
     fn refine(
@@ -856,11 +911,13 @@ impl Hierarchy {
                 o.2 += rays;
                 o
             }
-            Decision::Keep(k) => (
+            Decision::Keep(k, power, spread) => (
                 vec![Link {
                     receiver: r,
                     source: s,
                     k,
+                    power,
+                    spread,
                 }],
                 0,
                 rays,
@@ -1022,13 +1079,16 @@ pub fn indirect(
         let mut tolerance = options.hr_tolerance;
         let total_area: f64 = els.iter().map(|e| e.area).sum();
         let variation = VARIATION * initial / total_area;
+        let mut previous: Option<Vec<Link>> = None;
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
             let t = Instant::now();
             let b_scalar: Vec<f64> = h.pull(&b_el).iter().map(|b| mean(*b)).collect();
             let links = loop {
-                let (links, refinements, rays) =
-                    h.link(vis, &b_scalar, tolerance * initial, variation);
+                let (links, refinements, rays) = match &previous {
+                    Some(p) => h.relink(vis, p, &b_scalar, tolerance * initial, variation),
+                    None => h.link(vis, &b_scalar, tolerance * initial, variation),
+                };
                 hs.refinements += refinements;
                 hs.rays += rays;
                 if links.len() <= MAX_LINKS {
@@ -1041,6 +1101,7 @@ pub fn indirect(
                     tolerance * 4.0
                 ));
                 tolerance *= 4.0;
+                previous = None;
             };
             hs.tolerance = tolerance;
             hs.links = links.len();
@@ -1081,6 +1142,7 @@ pub fn indirect(
             }
             hs.iterations += iterations;
             hs.solve_seconds += t.elapsed().as_secs_f64();
+            previous = Some(links);
         }
     }
     let t = Instant::now();
