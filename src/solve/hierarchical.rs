@@ -775,11 +775,9 @@ impl Hierarchy {
             } else {
                 0.0
             };
-            return if t.k > 0.0 {
-                Decision::Keep(t.k, power, spread)
-            } else {
-                Decision::Drop
-            };
+            // A zero estimate is kept (as `K = 0`) for the next pass to test again: four
+            // samples of a cluster may miss what it sees.
+            return Decision::Keep(t.k, power, spread);
         };
         let f = &f[..n];
         let unoccluded = f.iter().sum::<f64>() / n as f64;
@@ -817,7 +815,8 @@ impl Hierarchy {
             return Decision::Keep(unoccluded, power, spread);
         }
         if seen == 0 {
-            return Decision::Drop;
+            // Hidden at every tested pair: kept as `K = 0` for the next pass to test again.
+            return Decision::Keep(0.0, power, spread);
         }
         Decision::Keep(
             unoccluded * f64::from(seen) / f64::from(tested),
@@ -829,7 +828,7 @@ impl Hierarchy {
     /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
     /// radiosity the oracle uses, `threshold` the most power one link may carry (W) and
     /// `variation` the most a surface source's irradiance may vary across a receiver's samples
-    /// (W/m²) before the receiver is split. Links sorted by receiver, then source. Returns the
+    /// (W/m²) before the receiver is split. Links sorted by receiver, then source (including links of zero `K`, estimated hidden, that a later pass may refine). Returns the
     /// links, the refinements and the rays.
     pub fn link(
         &self,
@@ -928,7 +927,7 @@ impl Hierarchy {
                 o.2 += rays;
                 o
             }
-            Decision::Keep(k, power, spread) => (
+            Decision::Keep(k, power, spread) if k > 0.0 || power > 0.0 || spread > 0.0 => (
                 vec![Link {
                     receiver: r,
                     source: s,
@@ -939,7 +938,7 @@ impl Hierarchy {
                 0,
                 rays,
             ),
-            Decision::Drop => (Vec::new(), 0, rays),
+            Decision::Keep(..) | Decision::Drop => (Vec::new(), 0, rays),
         }
     }
 
@@ -1121,6 +1120,9 @@ pub fn indirect(
                 previous = None;
             };
             hs.tolerance = tolerance;
+            // Links of zero `K` stay only for the next pass's oracle.
+            let all = links;
+            let links: Vec<Link> = all.iter().filter(|l| l.k > 0.0).copied().collect();
             hs.links = links.len();
             hs.link_seconds += t.elapsed().as_secs_f64();
             let t = Instant::now();
@@ -1159,7 +1161,7 @@ pub fn indirect(
             }
             hs.iterations += iterations;
             hs.solve_seconds += t.elapsed().as_secs_f64();
-            previous = Some(links);
+            previous = Some(all);
         }
     }
     let t = Instant::now();
