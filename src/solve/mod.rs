@@ -100,8 +100,8 @@ pub struct SolveOptions {
     pub hr_tolerance: f64,
 }
 
-/// Default of [`SolveOptions::hr_tolerance`].
-pub const DEFAULT_HR_TOLERANCE: f64 = 1e-5;
+/// Default of [`SolveOptions::hr_tolerance`]: on the 20x20 box grid 7.9x faster than 1e-5 is 2.9x, with the furnace still within 1e-3 at every vertex (see [`hierarchical`]).
+pub const DEFAULT_HR_TOLERANCE: f64 = 3e-5;
 
 impl Default for SolveOptions {
     fn default() -> Self {
