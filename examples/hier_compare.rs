@@ -1,7 +1,8 @@
 //! Bakes one glb with `--solver progressive` and `--solver hierarchical` in the same run and
 //! prints the solve and bake seconds, the hierarchical counters and the difference of the
 //! vertex irradiance (luminance) between the two, relative to the progressive mean:
-//! `cargo run --release --example hier_compare -- scene.glb [hr_tolerance] [budget]`.
+//! `cargo run --release --example hier_compare -- scene.glb [hr_tolerance] [budget]`
+//! (`PATCHES=n` in the environment sets the progressive solver's patch count).
 
 use penumbra::light::luminance;
 use penumbra::solve::Solver;
@@ -19,6 +20,10 @@ fn main() -> anyhow::Result<()> {
     let mut options = BakeOptions::default();
     if let Some(b) = budget {
         options.budget = b;
+    }
+    // The progressive solver's patch count (a reference run with finer patches).
+    if let Ok(p) = std::env::var("PATCHES") {
+        options.solve.patches = p.parse()?;
     }
     let mut runs = Vec::new();
     for solver in [Solver::Progressive, Solver::Hierarchical] {
@@ -61,12 +66,25 @@ fn main() -> anyhow::Result<()> {
             ind_p += a - d;
             ind_h += b - d;
             n += 1;
-            diffs.push((b - a).abs());
+            diffs.push(((b - a).abs(), m, v, a, b, d));
         }
     }
     let mean = sum_p / n as f64;
-    let mean_diff = diffs.iter().sum::<f64>() / n as f64;
-    let max_diff = diffs.iter().copied().fold(0.0, f64::max);
+    let mean_diff = diffs.iter().map(|d| d.0).sum::<f64>() / n as f64;
+    let max_diff = diffs.iter().map(|d| d.0).fold(0.0, f64::max);
+    // The worst vertices: where they are and both solvers' values (luminance).
+    diffs.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for &(_, m, v, a, b, d) in diffs.iter().take(5) {
+        let mesh = &p.meshes[m];
+        let poly = &p.scene.polygons[mesh.polygon];
+        let x = poly.frame.world_from_plane(mesh.vertices[v]);
+        println!(
+            "  worst: mesh {m} (polygon {}, normal {:.2}) vertex {v} at ({:.3}, {:.3}, {:.3}): direct {d:.4}, progressive {a:.4}, hierarchical {b:.4}",
+            mesh.polygon, poly.frame.n, x.x, x.y, x.z
+        );
+    }
+    let p95 = diffs[n / 20].0;
+    println!("  95th percentile |dH| {:.4} of the mean H", p95 / mean);
     println!(
         "mean H: progressive {:.5}, hierarchical {:.5} (ratio {:.4}); mean indirect: {:.5} vs {:.5} (ratio {:.4})",
         mean,

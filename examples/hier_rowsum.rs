@@ -19,12 +19,12 @@ fn main() -> anyhow::Result<()> {
     let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
     let vis = Visibility::new(&b.scene);
     let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).unwrap();
-    for tol in [1e-3, 1e-4, 1e-5, 1e-6] {
+    for (tol, var) in [(1e-3, 1e-2), (1e-4, 1e-2), (1e-4, 1e-3), (1e-5, 1e-3)] {
         let ones = vec![DVec3::ONE; h.elements.len()];
         let bn = h.pull(&ones);
         let sc: Vec<f64> = bn.iter().map(|b| b.x).collect();
         let total: f64 = h.elements.iter().map(|e| e.area).sum();
-        let (links, _, _) = h.link(&vis, &sc, tol * total);
+        let (links, _, _) = h.link(&vis, &sc, tol * total, var);
         let got = h.push(&h.gather(&links, &bn));
         let mean: f64 = h
             .elements
@@ -43,7 +43,7 @@ fn main() -> anyhow::Result<()> {
             })
             .count();
         println!(
-            "tol {tol:e}: links {} (leaf-leaf {leaf_links}), row sum mean {mean:.4} min {min:.4} max {max:.4}",
+            "tol {tol:e} variation {var:e}: links {} (leaf-leaf {leaf_links}), row sum mean {mean:.4} min {min:.4} max {max:.4}",
             links.len()
         );
     }

@@ -202,7 +202,7 @@ struct BakeArgs {
     patches: usize,
     /// Indirect-light solver: `progressive` (coarse patches, final gather at every vertex) or
     /// `hierarchical` (experimental: hierarchical radiosity with clustering over the mesh
-    /// elements; energy balance holds, single vertices can be off by several percent).
+    /// elements; see the README for its measured status).
     #[arg(long, value_enum, default_value_t = Solver::Progressive)]
     solver: Solver,
     /// Hierarchical solver: the most power one link may carry before it is refined, as a

@@ -100,8 +100,10 @@ pub struct SolveOptions {
     pub hr_tolerance: f64,
 }
 
-/// Default of [`SolveOptions::hr_tolerance`].
-pub const DEFAULT_HR_TOLERANCE: f64 = 1e-5;
+/// Default of [`SolveOptions::hr_tolerance`]: at 3e-5 the 20x20 box grid's indirect solve was
+/// 7.9x faster than progressive's (2.9x at 1e-5), and the furnace holds to 1e-3 at every vertex
+/// (see [`hierarchical`]).
+pub const DEFAULT_HR_TOLERANCE: f64 = 3e-5;
 
 impl Default for SolveOptions {
     fn default() -> Self {
