@@ -645,7 +645,8 @@ fn clip_segment_to_polygon(
 /// lies beyond the occluder feature, seen from the emitter point that generates it, so it is at
 /// least the feature's distance from the emitter's centre less 3 emitter radii from every point
 /// of the emitter; its unoccluded irradiance is then at most `L A / d²` (and never more than
-/// `pi L`), with `L` the emitter's luminance and `A` its area.
+/// `pi L`), with `L` the emitter's luminance and `A` its area. The same bound limits how far
+/// beyond its feature a wedge's hull (the receivers queried) reaches.
 fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) -> Built {
     let tol = 1e-9 * extent;
     let far = 4.0 * extent;
@@ -679,6 +680,16 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
                 std::f64::consts::PI * lum
             };
             bound >= cutoff
+        };
+        // How far beyond a feature at distance `d` from the centre a wedge can still carry a
+        // piece above `cutoff`: pieces farther out are dropped anyway, so receivers beyond it
+        // need not be queried (`far` bounds the wedge's hull).
+        let reach_from = |d: f64| {
+            if cutoff > 0.0 {
+                far.min((lum * poly.area / cutoff).sqrt() + 3.0 * radius + d)
+            } else {
+                far
+            }
         };
         let ne = poly.frame.n;
         let verts: Vec<DVec3> = {
@@ -714,6 +725,7 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
                 culled += 1;
                 continue;
             }
+            let far = reach_from(a.distance(centre).max(b.distance(centre)));
             for &v in &verts {
                 let facing = |t: usize| {
                     let tri = &scene.triangles[t];
@@ -758,6 +770,7 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
                 culled += 1;
                 continue;
             }
+            let far = reach_from(w.distance(centre));
             for &(e0, e1) in &edges {
                 let nw = (e1 - e0).cross(w - e0);
                 let Some(nw) = nw.try_normalize() else {
