@@ -650,7 +650,7 @@ mod tests {
 
     #[test]
     fn square_occluder_profile() {
-        // ../shared/reference: source [-0.5,0.5]^2 at height 2, occluder the same at height 1.
+        // The known square-occluder case: source [-0.5,0.5]^2 at height 2, occluder the same at height 1.
         let src: Vec<DVec3> = [(-0.5, -0.5), (0.5, -0.5), (0.5, 0.5), (-0.5, 0.5)]
             .iter()
             .map(|&(x, z)| DVec3::new(x, 2.0, z))

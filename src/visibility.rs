@@ -3,7 +3,7 @@
 //!
 //! Triangles are stored in f32 relative to the scene's centre, so precision does not depend on
 //! where the scene sits. The binary BVH2 is used rather than obvhs's 8-wide CWBVH, which misses
-//! hits very close to the ray origin (see DESIGN). Offsets scale with the scene's extent.
+//! hits very close to the ray origin (measured in `benches/stages.rs`). Offsets scale with the scene's extent.
 //!
 //! For benchmarks only, [`record_rays`] makes every ray query remember the ray as the BVH sees
 //! it, so that a bake's rays can be replayed against other traversal loops

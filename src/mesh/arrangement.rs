@@ -1,7 +1,7 @@
 //! The planar arrangement of a polygon's outline and its discontinuity segments: every segment
 //! split at every crossing, T-junction and overlap, with near-coincident points merged, so that
 //! the pieces can go into spade with `try_add_constraint` without ever crossing (spade's own
-//! splitting panics on such inputs; see DESIGN).
+//! splitting panics on such inputs; see the README, "Insertion").
 //!
 //! Intersections are computed in f64; points closer than `tol` are merged into the first one
 //! seen, so the result depends only on the order of the input.

@@ -27,7 +27,7 @@ fn floor_form_factor(direct: &Direct, vis: &Visibility, p: DVec3, radiance: f64)
 /// profile tolerances are relative to.
 const SQUARE_PEAK: f64 = 0.0734776348;
 
-/// ../shared/reference: square source [-0.5,0.5]^2 at height 2, square occluder at height 1,
+/// Known answer (exact contour integral): square source [-0.5,0.5]^2 at height 2, square occluder at height 1,
 /// along the receiver's x axis (y = 0).
 const SQUARE_PROFILE: [(f64, f64); 12] = [
     (0.0, 0.0),

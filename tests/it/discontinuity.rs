@@ -38,7 +38,7 @@ fn world(b: &Bake, poly: usize, s: &Segment) -> (DVec3, DVec3) {
     (f.world_from_plane(s.a), f.world_from_plane(s.b))
 }
 
-/// Square source over a square occluder (../shared/reference): every wedge segment on the
+/// Square source over a square occluder (a closed-form case, see `direct.rs`): every wedge segment on the
 /// floor lies on the umbra lines |x| = 0.5 or |z| = 0.5, or on the penumbra lines |x| = 1.5 or
 /// |z| = 1.5, to 1e-6, and none reaches into the fully lit region.
 #[test]
