@@ -19,7 +19,7 @@
 //!    again (a) through penumbra's [`Visibility`] API, from world coordinates, as the stages
 //!    call it, and (b) through a plain obvhs loop: a `Bvh2` built here from the same
 //!    triangles, centred and in f32 as `visibility.rs` does (so both answer the same queries;
-//!    the 8-wide CWBVH misses near-origin hits, see DESIGN), queried with `ray_traverse` /
+//!    the 8-wide CWBVH misses near-origin hits, measured below), queried with `ray_traverse` /
 //!    `ray_traverse_miss` and obvhs's own triangle test. For reference, (c) the same loop over
 //!    obvhs's `CwBvh`, with its disagreements. Each on one thread and on all (rayon); best of 3,
 //!    the loops interleaved. Agreement of the hit/miss answers is printed.

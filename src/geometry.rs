@@ -60,19 +60,22 @@ fn contour_form_factor(p: DVec3, n: DVec3, clipped: &[DVec3]) -> f64 {
 /// `r_i` and `r_(i+1)`, in radians; signed by the winding. The form factor is its absolute value
 /// over `2 pi` (see [`point_polygon_form_factor`]). Edges through `p` contribute nothing.
 pub fn contour_sum(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
-    let mut sum = 0.0;
-    for i in 0..poly.len() {
-        let a = poly[i] - p;
-        let b = poly[(i + 1) % poly.len()] - p;
-        let c = a.cross(b);
-        let cl = c.length();
-        if cl <= 0.0 {
-            continue;
-        }
-        // atan2 keeps the angle accurate for tiny and near-straight angles.
-        sum += cl.atan2(a.dot(b)) * n.dot(c) / cl;
+    (0..poly.len())
+        .map(|i| contour_term(p, n, poly[i], poly[(i + 1) % poly.len()]))
+        .sum()
+}
+
+/// One edge's term of [`contour_sum`]: `gamma n · normalize(r_a x r_b)` for the directed edge
+/// `a -> b` seen from `p`; 0 for an edge through `p`.
+pub fn contour_term(p: DVec3, n: DVec3, a: DVec3, b: DVec3) -> f64 {
+    let (a, b) = (a - p, b - p);
+    let c = a.cross(b);
+    let cl = c.length();
+    if cl <= 0.0 {
+        return 0.0;
     }
-    sum
+    // atan2 keeps the angle accurate for tiny and near-straight angles.
+    cl.atan2(a.dot(b)) * n.dot(c) / cl
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -359,17 +359,10 @@ fn outlines(nodes: &[Node], elements: &[Element]) -> Vec<Vec<Edge>> {
 /// [`crate::geometry::contour_sum`]); the form factor is its absolute value over `2 pi` when
 /// the edges bound a region entirely above the horizon of `p`.
 fn edge_contour_sum(p: DVec3, n: DVec3, edges: &[Edge]) -> f64 {
-    let mut sum = 0.0;
-    for &(_, _, a, b) in edges {
-        let (a, b) = (a - p, b - p);
-        let c = a.cross(b);
-        let cl = c.length();
-        if cl <= 0.0 {
-            continue;
-        }
-        sum += cl.atan2(a.dot(b)) * n.dot(c) / cl;
-    }
-    sum
+    edges
+        .iter()
+        .map(|&(_, _, a, b)| crate::geometry::contour_term(p, n, a, b))
+        .sum()
 }
 
 struct Builder<'a> {

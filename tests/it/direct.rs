@@ -153,7 +153,7 @@ fn cornell_with_light_at(y_mm: f64) -> Scene {
     scene
 }
 
-/// The Cornell floor points of ../shared/reference: (x, z) in mm and F.
+/// Cornell floor points with their published exact direct-light form factors: (x, z) in mm and F.
 const CORNELL_FLOOR: [(f64, f64, f64); 5] = [
     (278.0, 279.6, 0.010476),
     (100.0, 400.0, 0.010761),

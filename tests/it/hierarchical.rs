@@ -1,6 +1,6 @@
 //! `--solver hierarchical` against closed forms, the progressive solver and itself.
 
-use crate::{bake, no_progress, quick, scratch};
+use crate::{bake, quick, scratch};
 use glam::DVec3;
 use penumbra::fixtures::{self, GlbBuilder, Material, horizontal_rect};
 use penumbra::light::luminance;
@@ -175,24 +175,8 @@ fn hierarchical_agrees_with_progressive_on_cornell_box() {
 #[test]
 fn hierarchical_bake_is_thread_count_independent() {
     let dir = scratch("hierarchical-threads");
-    let inp = dir.join("in.glb");
-    std::fs::write(&inp, fixtures::box_on_floor()).unwrap();
-    let run = |threads: usize| {
-        let out = dir.join(format!("out-{threads}.glb"));
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| {
-            penumbra::bake_file(
-                &inp,
-                &penumbra::OutputFiles::glb(&out),
-                &hierarchical(quick()),
-                no_progress(),
-            )
-        })
-        .expect("bake succeeds");
-        std::fs::read(&out).unwrap()
-    };
+    let input = fixtures::box_on_floor();
+    let options = hierarchical(quick());
+    let run = |threads| crate::output::bake_to_file_with(&input, &dir, threads, &options);
     assert_eq!(run(1), run(2));
 }

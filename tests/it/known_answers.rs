@@ -143,7 +143,7 @@ fn progressive_refinement_agrees_with_gauss_seidel() {
     );
 }
 
-/// Square source over a square occluder (../shared/reference): the direct profile on the floor
+/// Square source over a square occluder (closed-form contour integrals): the direct profile on the floor
 /// along the x axis. Sampled visibility, so the tolerance follows the sample count.
 #[test]
 fn square_occluder_profile_matches_reference() {
@@ -179,7 +179,7 @@ fn square_occluder_profile_matches_reference() {
     assert!((e.form_factor(DVec3::ZERO, DVec3::Y) - 0.0734776348).abs() < 1e-9);
 }
 
-/// The Cornell box floor points of ../shared/reference (units mm, light at y = 548.7).
+/// Cornell box floor points with their exact form factors (units mm, light at y = 548.7).
 #[test]
 fn cornell_floor_direct_light_matches_reference() {
     let scene = scene_of(&fixtures::cornell_box());

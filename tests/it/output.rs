@@ -13,6 +13,16 @@ pub fn split_glb(bytes: &[u8]) -> (Value, Vec<u8>) {
 }
 
 fn bake_to_file(input: &[u8], dir: &Path, threads: usize) -> Vec<u8> {
+    bake_to_file_with(input, dir, threads, &quick())
+}
+
+/// Bakes `input` through `bake_file` on `threads` threads with `options`; the output's bytes.
+pub fn bake_to_file_with(
+    input: &[u8],
+    dir: &Path,
+    threads: usize,
+    options: &penumbra::BakeOptions,
+) -> Vec<u8> {
     let inp = dir.join("in.glb");
     let out = dir.join(format!("out-{threads}.glb"));
     std::fs::write(&inp, input).unwrap();
@@ -24,7 +34,7 @@ fn bake_to_file(input: &[u8], dir: &Path, threads: usize) -> Vec<u8> {
         penumbra::bake_file(
             &inp,
             &penumbra::OutputFiles::glb(&out),
-            &quick(),
+            options,
             no_progress(),
         )
     })
