@@ -1,17 +1,26 @@
-//! Debug: row sums of the hierarchical links (B = 1 everywhere) on the furnace box.
+//! Debug: row sums of the hierarchical links with B = 1 on every element, against a ray-cast
+//! estimate of the same quantity (the cosine-weighted fraction of each element's hemisphere
+//! that sees a reflecting receiver): `cargo run --release --example hier_rowsum -- [scene.glb]
+//! [tol] [budget]` (the furnace box when no scene is given).
 use glam::DVec3;
-use penumbra::solve::hierarchical::Hierarchy;
+use penumbra::solve::hierarchical::{Hierarchy, Limits, VARIATION};
 use penumbra::visibility::Visibility;
 use penumbra::{BakeOptions, load};
 use std::path::Path;
 
 fn main() -> anyhow::Result<()> {
-    let gltf = load::from_bytes(
-        penumbra::fixtures::furnace_box_with(0.5, 1.0),
-        Path::new("f.glb"),
-    )?;
+    let mut args = std::env::args().skip(1);
+    let gltf = match args.next() {
+        Some(p) => load::read(Path::new(&p))?,
+        None => load::from_bytes(
+            penumbra::fixtures::furnace_box_with(0.5, 1.0),
+            Path::new("f.glb"),
+        )?,
+    };
+    let tol: f64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(3e-5);
+    let budget: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(4000);
     let mut o = BakeOptions {
-        budget: 2000,
+        budget,
         resolution: Some(128),
         ..Default::default()
     };
@@ -19,32 +28,80 @@ fn main() -> anyhow::Result<()> {
     let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
     let vis = Visibility::new(&b.scene);
     let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).unwrap();
-    for (tol, var) in [(1e-3, 1e-2), (1e-4, 1e-2), (1e-4, 1e-3), (1e-5, 1e-3)] {
-        let ones = vec![DVec3::ONE; h.elements.len()];
-        let bn = h.pull(&ones);
-        let sc: Vec<f64> = bn.iter().map(|b| b.x).collect();
-        let total: f64 = h.elements.iter().map(|e| e.area).sum();
-        let (links, _, _) = h.link(&vis, &sc, tol * total, var);
-        let got = h.push(&h.gather(&links, &bn));
-        let mean: f64 = h
-            .elements
-            .iter()
-            .zip(&got)
-            .map(|(e, g)| e.area * g.x)
-            .sum::<f64>()
-            / total;
-        let min = got.iter().map(|g| g.x).fold(9.0, f64::min);
-        let max = got.iter().map(|g| g.x).fold(0.0, f64::max);
-        let leaf_links = links
-            .iter()
-            .filter(|l| {
-                h.nodes[l.receiver as usize].kids.is_none()
-                    && h.nodes[l.source as usize].kids.is_none()
-            })
-            .count();
+    let ones = vec![DVec3::ONE; h.elements.len()];
+    let bn = h.pull(&ones);
+    let total: f64 = h.elements.iter().map(|e| e.area).sum();
+    let limits = Limits {
+        power: tol * total,
+        variation: VARIATION,
+        source: 1.0,
+    };
+    let (links, _, _) = h.link(&vis, &h.sources(&ones), limits);
+    let got = h.push(&h.gather(&links, &bn));
+    // Reflecting receivers: the polygons of the hierarchy with reflectance.
+    let mut reflects = vec![false; b.scene.polygons.len()];
+    for e in &h.elements {
+        reflects[e.polygon] |= e.rho.max_element() > 0.0;
+    }
+    // Ray-cast estimate per element: stratified cosine-weighted directions from the centroid.
+    let n = 32usize;
+    let mut per_poly: std::collections::BTreeMap<usize, (f64, f64, f64)> = Default::default();
+    let (mut worst, mut sum_h, mut sum_r) = (Vec::new(), 0.0, 0.0);
+    for (e, g) in h.elements.iter().zip(&got) {
+        let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
+        let nrm = e.normal;
+        let t = if nrm.x.abs() < 0.9 {
+            DVec3::X
+        } else {
+            DVec3::Y
+        };
+        let u = nrm.cross(t).normalize();
+        let v = nrm.cross(u);
+        let origin = c + nrm * vis.epsilon() * 4.0;
+        let mut hits = 0usize;
+        for i in 0..n {
+            for j in 0..n {
+                let (a, bb) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                let r = a.sqrt();
+                let phi = 2.0 * std::f64::consts::PI * bb;
+                let d = u * r * phi.cos() + v * r * phi.sin() + nrm * (1.0 - a).sqrt();
+                if let Some(hit) = vis.first_hit(origin, d, 1e30)
+                    && let Some(p) = b.scene.triangles[hit.triangle].polygon
+                    && reflects[p]
+                    && b.scene.triangles[hit.triangle].normal.dot(d) < 0.0
+                {
+                    hits += 1;
+                }
+            }
+        }
+        let r = hits as f64 / (n * n) as f64;
+        let entry = per_poly.entry(e.polygon).or_default();
+        entry.0 += e.area * g.x;
+        entry.1 += e.area * r;
+        entry.2 += e.area;
+        sum_h += e.area * g.x;
+        sum_r += e.area * r;
+        worst.push(((g.x - r).abs(), e.polygon, c, g.x, r));
+    }
+    println!(
+        "links {}: area-weighted row sum {:.4}, ray-cast {:.4}",
+        links.len(),
+        sum_h / total,
+        sum_r / total
+    );
+    for (p, (hs, rs, a)) in &per_poly {
         println!(
-            "tol {tol:e} variation {var:e}: links {} (leaf-leaf {leaf_links}), row sum mean {mean:.4} min {min:.4} max {max:.4}",
-            links.len()
+            "  polygon {p}: normal {:.2} row sum {:.4} ray-cast {:.4}",
+            b.scene.polygons[*p].frame.n,
+            hs / a,
+            rs / a
+        );
+    }
+    worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+    for w in worst.iter().take(8) {
+        println!(
+            "  worst: polygon {} at {:.3}: row sum {:.4} ray-cast {:.4}",
+            w.1, w.2, w.3, w.4
         );
     }
     Ok(())

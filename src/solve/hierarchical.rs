@@ -175,6 +175,14 @@ const CONTOUR_ELEMENTS: u32 = 16;
 /// (dimensionless; see the module doc).
 pub const VARIATION: f64 = 1e-3;
 
+/// The refinement oracle's bound on the irradiance a source's non-uniformity may misplace, as a
+/// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
+pub const SOURCE_VARIATION: f64 = 0.1;
+
+/// Distance, in bounding radii of a surface source node, past which its form factor is the
+/// disk formula instead of the exact contour sum (see [`Hierarchy::point_factor`]).
+pub const FAR_FIELD: f64 = 6.0;
+
 /// Most links; past it the refinement is redone with a 4× larger tolerance (a warning).
 pub const MAX_LINKS: usize = 30_000_000;
 
@@ -278,6 +286,29 @@ pub struct Link {
     /// link's irradiance varies across the receiver (or, for a straddling source, the
     /// disk estimate's error); zero when splitting cannot reduce it.
     pub spread: f64,
+    /// The oracle's source factor (dimensionless): `ΔB_s × reach` bounds the error of treating
+    /// the source as uniform (its radiosity spread `ΔB_s` times the most the receiver can see
+    /// of it); zero when the source has no children.
+    pub reach: f64,
+}
+
+/// The source radiosities the refinement oracle reads, per node (W/m², mean over RGB).
+#[derive(Clone, Debug)]
+pub struct Sources {
+    /// Area-weighted mean radiosity.
+    pub b: Vec<f64>,
+    /// Largest minus smallest radiosity of the node's elements.
+    pub spread: Vec<f64>,
+}
+
+/// The oracle's limits: the most power one link may carry (W), the most a source's irradiance
+/// may vary across a receiver (W/m²), the most irradiance a source's non-uniformity may
+/// misplace (W/m²).
+#[derive(Clone, Copy, Debug)]
+pub struct Limits {
+    pub power: f64,
+    pub variation: f64,
+    pub source: f64,
 }
 
 /// What the refinement oracle decides for one link.
@@ -285,8 +316,8 @@ pub struct Link {
 enum Decision {
     /// Split the receiver (`true`) or the source.
     Split(bool),
-    /// Keep the link with this `K`, power factor and spread (see [`Link`]).
-    Keep(f64, f64, f64),
+    /// Keep the link with this `K`, power factor, spread and reach (see [`Link`]).
+    Keep(f64, f64, f64, f64),
     /// The link carries nothing.
     Drop,
 }
@@ -351,6 +382,51 @@ fn outlines(nodes: &[Node], elements: &[Element]) -> Vec<Vec<Edge>> {
             }
         };
         out.push(edges);
+    }
+    out
+}
+
+/// The outline `edges` with every run of collinear edges through vertices of degree two merged
+/// into one edge: Lambert's contour term of a straight edge is the sum of its pieces' terms
+/// (they span one plane through the point), so the sum is unchanged and costs fewer terms (a
+/// polygon boundary split at many mesh vertices becomes its few sides).
+fn merge_collinear(edges: &[Edge]) -> Vec<Edge> {
+    use std::collections::HashMap;
+    let (mut from, mut into): (HashMap<u32, Vec<usize>>, HashMap<u32, Vec<usize>>) =
+        Default::default();
+    for (i, e) in edges.iter().enumerate() {
+        from.entry(e.0).or_default().push(i);
+        into.entry(e.1).or_default().push(i);
+    }
+    let straight = |a: DVec3, b: DVec3, c: DVec3| {
+        let (u, v) = (b - a, c - b);
+        u.dot(v) > 0.0
+            && u.cross(v).length_squared() <= 1e-24 * u.length_squared() * v.length_squared()
+    };
+    // The edge that continues `e` straight on through a vertex joining only the two of them.
+    let next = |e: &Edge| match (from.get(&e.1).map(Vec::as_slice), into.get(&e.1)) {
+        (Some(&[j]), Some(v)) if v.len() == 1 && straight(e.2, e.3, edges[j].3) => Some(j),
+        _ => None,
+    };
+    let continues = |j: usize| {
+        into.get(&edges[j].0)
+            .is_some_and(|v| v.len() == 1 && next(&edges[v[0]]) == Some(j))
+    };
+    let mut used = vec![false; edges.len()];
+    let mut out = Vec::new();
+    // Runs from their first edge; then whatever is left (a closed loop cannot be straight).
+    let heads = (0..edges.len()).filter(|&i| !continues(i));
+    for i in heads.chain(0..edges.len()) {
+        if used[i] {
+            continue;
+        }
+        used[i] = true;
+        let mut e = edges[i];
+        while let Some(j) = next(&e).filter(|&j| !used[j]) {
+            used[j] = true;
+            e = (e.0, edges[j].1, e.2, edges[j].3);
+        }
+        out.push(e);
     }
     out
 }
@@ -528,6 +604,9 @@ impl Hierarchy {
                     lo = lo.min(*q);
                     hi = hi.max(*q);
                 }
+                if enclosed(scene, vis, &p, poly.frame.n, m.polygon) {
+                    continue;
+                }
                 ids.push(items.len() as u32);
                 items.push(Element {
                     mesh: mi,
@@ -561,7 +640,10 @@ impl Hierarchy {
             .par_iter()
             .map(|n| node_samples(n, &b.elements, vis))
             .collect();
-        let outline = outlines(&b.nodes, &b.elements);
+        let outline = outlines(&b.nodes, &b.elements)
+            .into_iter()
+            .map(|o| merge_collinear(&o))
+            .collect();
         Some(Hierarchy {
             elements: b.elements,
             nodes: b.nodes,
@@ -595,21 +677,8 @@ impl Hierarchy {
             !vis.occluded_skipping(a.ray, b.ray, [a.polygon, b.polygon])
         };
         if contour {
-            let tris = &self.elements[ns.lo as usize..ns.hi as usize];
-            let outline = &self.outline[s as usize];
-            let unoccluded = sr
-                .iter()
-                .map(|a| {
-                    if box_above(a.p, a.n, ns) {
-                        edge_contour_sum(a.p, a.n, outline).abs() / (2.0 * PI)
-                    } else {
-                        tris.iter()
-                            .map(|e| point_polygon_form_factor(a.p, a.n, &e.p))
-                            .sum::<f64>()
-                    }
-                })
-                .sum::<f64>()
-                / sr.len() as f64;
+            let unoccluded =
+                sr.iter().map(|a| self.point_factor(a, s)).sum::<f64>() / sr.len() as f64;
             if unoccluded <= 0.0 {
                 return Transfer {
                     k: 0.0,
@@ -721,19 +790,35 @@ impl Hierarchy {
         if !contour {
             return None;
         }
-        let tris = &self.elements[ns.lo as usize..ns.hi as usize];
-        let outline = &self.outline[s as usize];
         let mut f = [0.0; 4];
         for (fi, a) in f.iter_mut().zip(sr) {
-            *fi = if box_above(a.p, a.n, ns) {
-                edge_contour_sum(a.p, a.n, outline).abs() / (2.0 * PI)
-            } else {
-                tris.iter()
-                    .map(|e| point_polygon_form_factor(a.p, a.n, &e.p))
-                    .sum::<f64>()
-            };
+            *fi = self.point_factor(a, s);
         }
         Some((f, sr.len().min(4)))
+    }
+
+    /// The unoccluded form factor from the sample `a` to the surface node `s`: past
+    /// [`FAR_FIELD`] bounding radii, the disk formula `A cos_a cos_s / (π d² + A)` about the
+    /// node's centre (its error falls as `(radius / d)²`, under 3% there); nearer, Lambert's
+    /// contour formula over the node's outline when the node lies above the sample's horizon,
+    /// else per element, each clipped to the horizon.
+    fn point_factor(&self, a: &Sample, s: u32) -> f64 {
+        let ns = &self.nodes[s as usize];
+        let dir = ns.center - a.p;
+        let d2 = dir.length_squared();
+        if d2 > (FAR_FIELD * ns.radius).powi(2) {
+            let len = d2.sqrt();
+            let (ci, cj) = (a.n.dot(dir) / len, -ns.normal.dot(dir) / len);
+            return ns.area * ci.max(0.0) * cj.max(0.0) / (PI * d2 + ns.area);
+        }
+        if box_above(a.p, a.n, ns) {
+            edge_contour_sum(a.p, a.n, &self.outline[s as usize]).abs() / (2.0 * PI)
+        } else {
+            self.elements[ns.lo as usize..ns.hi as usize]
+                .iter()
+                .map(|e| point_polygon_form_factor(a.p, a.n, &e.p))
+                .sum::<f64>()
+        }
     }
 
     /// The refinement oracle for the link `r ← s` (see the module doc): `b_s` is the source's
@@ -745,9 +830,11 @@ impl Hierarchy {
         vis: &Visibility,
         r: u32,
         s: u32,
-        (b_s, threshold, variation): (f64, f64, f64),
+        (b_s, spread_s): (f64, f64),
+        limits: Limits,
         rays: &mut u64,
     ) -> Decision {
+        let (threshold, variation) = (limits.power, limits.variation);
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
         let can_split = nr.kids.is_some() || ns.kids.is_some();
@@ -774,6 +861,11 @@ impl Hierarchy {
             if surfaces && ns.kids.is_some() && b_s * bound > variation {
                 return Decision::Split(false);
             }
+            // A non-uniform source: its mean radiosity misplaces up to `ΔB_s K̂`.
+            let reach = if ns.kids.is_some() { bound } else { 0.0 };
+            if spread_s * reach > limits.source {
+                return Decision::Split(false);
+            }
             let t = self.transfer(vis, r, s);
             *rays += t.rays;
             let power = if can_split { bound * nr.area } else { 0.0 };
@@ -784,7 +876,7 @@ impl Hierarchy {
             };
             // A zero estimate is kept (as `K = 0`) for the next pass to test again: four
             // samples of a cluster may miss what it sees.
-            return Decision::Keep(t.k, power, spread);
+            return Decision::Keep(t.k, power, spread, reach);
         };
         let f = &f[..n];
         let unoccluded = f.iter().sum::<f64>() / n as f64;
@@ -796,8 +888,13 @@ impl Hierarchy {
         });
         let spread = if nr.kids.is_some() { hi - lo } else { 0.0 };
         let power = if can_split { unoccluded * nr.area } else { 0.0 };
+        let reach = if ns.kids.is_some() { hi } else { 0.0 };
         let vary = b_s * spread > variation;
         let heavy = b_s * power > threshold;
+        let uneven = spread_s * reach > limits.source;
+        // The receiver when its irradiance varies; the larger node when the link is heavy;
+        // else the source (it is uneven).
+        let split = Decision::Split(vary || (heavy && larger));
         let (mut seen, mut tested) = (0u32, 0u32);
         for a in sr {
             for b in ss {
@@ -808,27 +905,28 @@ impl Hierarchy {
                 tested += 1;
                 if visible(a, b, rays) {
                     seen += 1;
-                    if vary || heavy {
+                    if vary || heavy || uneven {
                         // Not wholly hidden: the bound (the unoccluded transfer) stands.
-                        return Decision::Split(vary || larger);
+                        return split;
                     }
                 }
             }
         }
         if tested == 0 {
-            if vary || heavy {
-                return Decision::Split(vary || larger);
+            if vary || heavy || uneven {
+                return split;
             }
-            return Decision::Keep(unoccluded, power, spread);
+            return Decision::Keep(unoccluded, power, spread, reach);
         }
         if seen == 0 {
             // Hidden at every tested pair: kept as `K = 0` for the next pass to test again.
-            return Decision::Keep(0.0, power, spread);
+            return Decision::Keep(0.0, power, spread, reach);
         }
         Decision::Keep(
             unoccluded * f64::from(seen) / f64::from(tested),
             power,
             spread,
+            reach,
         )
     }
 
@@ -837,16 +935,9 @@ impl Hierarchy {
     /// `variation` the most a surface source's irradiance may vary across a receiver's samples
     /// (W/m²) before the receiver is split. Links sorted by receiver, then source (including links of zero `K`, estimated hidden, that a later pass may refine). Returns the
     /// links, the refinements and the rays.
-    pub fn link(
-        &self,
-        vis: &Visibility,
-        b: &[f64],
-        threshold: f64,
-        variation: f64,
-    ) -> (Vec<Link>, u64, u64) {
+    pub fn link(&self, vis: &Visibility, b: &Sources, limits: Limits) -> (Vec<Link>, u64, u64) {
         let root = self.root();
-        let (mut links, refinements, rays) =
-            self.refine(vis, b, (threshold, variation), root, root);
+        let (mut links, refinements, rays) = self.refine(vis, b, limits, root, root);
         links.sort_by_key(|l| (l.receiver, l.source));
         (links, refinements, rays)
     }
@@ -858,16 +949,18 @@ impl Hierarchy {
         &self,
         vis: &Visibility,
         links: &[Link],
-        b: &[f64],
-        threshold: f64,
-        variation: f64,
+        b: &Sources,
+        limits: Limits,
     ) -> (Vec<Link>, u64, u64) {
         let parts: Vec<(Vec<Link>, u64, u64)> = links
             .par_iter()
             .map(|l| {
-                let bs = b[l.source as usize];
-                if bs * l.power > threshold || bs * l.spread > variation {
-                    self.refine(vis, b, (threshold, variation), l.receiver, l.source)
+                let (bs, ds) = (b.b[l.source as usize], b.spread[l.source as usize]);
+                if bs * l.power > limits.power
+                    || bs * l.spread > limits.variation
+                    || ds * l.reach > limits.source
+                {
+                    self.refine(vis, b, limits, l.receiver, l.source)
                 } else {
                     (vec![*l], 0, 0)
                 }
@@ -886,8 +979,8 @@ impl Hierarchy {
     fn refine(
         &self,
         vis: &Visibility,
-        b: &[f64],
-        limits: (f64, f64),
+        b: &Sources,
+        limits: Limits,
         r: u32,
         s: u32,
     ) -> (Vec<Link>, u64, u64) {
@@ -920,7 +1013,8 @@ impl Hierarchy {
             return (Vec::new(), 0, 0);
         }
         let mut rays = 0;
-        let d = self.decide(vis, r, s, (b[s as usize], limits.0, limits.1), &mut rays);
+        let source = (b.b[s as usize], b.spread[s as usize]);
+        let d = self.decide(vis, r, s, source, limits, &mut rays);
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         match d {
             Decision::Split(receiver) => {
@@ -934,17 +1028,22 @@ impl Hierarchy {
                 o.2 += rays;
                 o
             }
-            Decision::Keep(k, power, spread) if k > 0.0 || power > 0.0 || spread > 0.0 => (
-                vec![Link {
-                    receiver: r,
-                    source: s,
-                    k,
-                    power,
-                    spread,
-                }],
-                0,
-                rays,
-            ),
+            Decision::Keep(k, power, spread, reach)
+                if k > 0.0 || power > 0.0 || spread > 0.0 || reach > 0.0 =>
+            {
+                (
+                    vec![Link {
+                        receiver: r,
+                        source: s,
+                        k,
+                        power,
+                        spread,
+                        reach,
+                    }],
+                    0,
+                    rays,
+                )
+            }
             Decision::Keep(..) | Decision::Drop => (Vec::new(), 0, rays),
         }
     }
@@ -1011,6 +1110,28 @@ impl Hierarchy {
         b
     }
 
+    /// The oracle's view of the element radiosities `b_elements`: per node its mean and spread
+    /// (mean over RGB).
+    pub fn sources(&self, b_elements: &[DVec3]) -> Sources {
+        let mean = |c: DVec3| c.element_sum() / 3.0;
+        let b = self.pull(b_elements).iter().map(|b| mean(*b)).collect();
+        let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); self.nodes.len()];
+        for (e, &n) in self.leaf.iter().enumerate() {
+            let x = mean(b_elements[e]);
+            range[n as usize] = (x, x);
+        }
+        for i in 0..self.nodes.len() {
+            if let Some([x, y]) = self.nodes[i].kids {
+                let (a, c) = (range[x as usize], range[y as usize]);
+                range[i] = (a.0.min(c.0), a.1.max(c.1));
+            }
+        }
+        Sources {
+            b,
+            spread: range.iter().map(|(lo, hi)| (hi - lo).max(0.0)).collect(),
+        }
+    }
+
     /// Number of cluster nodes (spanning several polygons).
     pub fn clusters(&self) -> usize {
         self.nodes
@@ -1018,6 +1139,29 @@ impl Hierarchy {
             .filter(|n| n.polygon == NO_POLYGON)
             .count()
     }
+}
+
+/// True when an element faces only the inside of closed geometry: every one of a fixed set of
+/// rays from its centroid (the normal and eight directions 60° from it) hits the back of a
+/// surface. So the floor under a box standing on it, which no light reaches and no one sees,
+/// neither receives nor reflects: it would otherwise dilute the radiosity of every coarse node
+/// that contains it.
+fn enclosed(scene: &Scene, vis: &Visibility, p: &[DVec3; 3], n: DVec3, polygon: usize) -> bool {
+    let c = (p[0] + p[1] + p[2]) / 3.0;
+    let origin = SurfacePoint::new(c, n, polygon, vis).ray_origin;
+    let t = if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y };
+    let u = n.cross(t).normalize();
+    let v = n.cross(u);
+    let (s, co) = (60f64.to_radians().sin(), 60f64.to_radians().cos());
+    std::iter::once(n)
+        .chain((0..8).map(|k| {
+            let a = k as f64 * PI / 4.0;
+            n * co + (u * a.cos() + v * a.sin()) * s
+        }))
+        .all(|d| {
+            vis.first_hit(origin, d, f64::INFINITY)
+                .is_some_and(|h| scene.triangles[h.triangle].normal.dot(d) > 0.0)
+        })
 }
 
 /// True when the bounding box of `n` lies above (or touches) the horizon of `(p, normal)`.
@@ -1102,15 +1246,21 @@ pub fn indirect(
         let mut tolerance = options.hr_tolerance;
         let total_area: f64 = els.iter().map(|e| e.area).sum();
         let variation = VARIATION * initial / total_area;
+        let source_variation = SOURCE_VARIATION * initial / total_area;
         let mut previous: Option<Vec<Link>> = None;
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
             let t = Instant::now();
-            let b_scalar: Vec<f64> = h.pull(&b_el).iter().map(|b| mean(*b)).collect();
+            let sources = h.sources(&b_el);
             let links = loop {
+                let limits = Limits {
+                    power: tolerance * initial,
+                    variation,
+                    source: source_variation,
+                };
                 let (links, refinements, rays) = match &previous {
-                    Some(p) => h.relink(vis, p, &b_scalar, tolerance * initial, variation),
-                    None => h.link(vis, &b_scalar, tolerance * initial, variation),
+                    Some(p) => h.relink(vis, p, &sources, limits),
+                    None => h.link(vis, &sources, limits),
                 };
                 hs.refinements += refinements;
                 hs.rays += rays;

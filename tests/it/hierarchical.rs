@@ -5,7 +5,7 @@ use glam::DVec3;
 use penumbra::fixtures::{self, GlbBuilder, Material, horizontal_rect};
 use penumbra::light::luminance;
 use penumbra::solve::Solver;
-use penumbra::solve::hierarchical::Hierarchy;
+use penumbra::solve::hierarchical::{Hierarchy, Limits};
 use penumbra::visibility::Visibility;
 use penumbra::{Bake, BakeOptions};
 
@@ -97,10 +97,14 @@ fn hierarchical_parallel_plates_form_factor() {
         .map(|e| if up(e) { DVec3::ZERO } else { DVec3::ONE })
         .collect();
     let b_node = h.pull(&b_el);
-    let scalar: Vec<f64> = b_node.iter().map(|b| b.x).collect();
     // One link may carry 1e-4 of the source's power (1 W), and vary by 1e-3 W/m² across its
-    // receiver.
-    let (links, _, _) = h.link(&vis, &scalar, 1e-4, 1e-3);
+    // receiver; the source is uniform.
+    let limits = Limits {
+        power: 1e-4,
+        variation: 1e-3,
+        source: 1e-3,
+    };
+    let (links, _, _) = h.link(&vis, &h.sources(&b_el), limits);
     assert!(links.len() > 10, "{} links", links.len());
     let got = h.push(&h.gather(&links, &b_node));
     let (mut sum, mut area) = (0.0, 0.0);

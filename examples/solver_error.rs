@@ -1,0 +1,79 @@
+//! Bakes one glb with each solver and measures every lightmap against one Monte Carlo
+//! reference, by region (`penumbra compare`'s measure):
+//! `cargo run --release --example solver_error -- scene.glb [spp] [budget] [hr_tolerance]`.
+
+use penumbra::compare::{classify, lightmap_error, mean_lit_irradiance};
+use penumbra::reference::{ReferenceOptions, reference_with, texel_layout};
+use penumbra::solve::Solver;
+use penumbra::visibility::Visibility;
+use penumbra::{BakeOptions, load};
+use std::path::Path;
+
+fn main() -> anyhow::Result<()> {
+    let mut args = std::env::args().skip(1);
+    let path = args
+        .next()
+        .ok_or_else(|| anyhow::anyhow!("usage: solver_error SCENE.glb [SPP] [BUDGET] [TOL]"))?;
+    let spp: u32 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(256);
+    let budget: Option<usize> = args.next().map(|s| s.parse()).transpose()?;
+    let tol: Option<f64> = args.next().map(|s| s.parse()).transpose()?;
+    let gltf = load::read(Path::new(&path))?;
+    // `RES` and `SS` in the environment: lightmap size and sub-samples per texel side.
+    let env = |k: &str, d: u32| {
+        std::env::var(k)
+            .ok()
+            .and_then(|v| v.parse().ok())
+            .unwrap_or(d)
+    };
+    let mut options = BakeOptions {
+        resolution: Some(env("RES", 256)),
+        supersample: env("SS", 4),
+        ..BakeOptions::default()
+    };
+    if let Some(b) = budget {
+        options.budget = b;
+    }
+    if let Some(t) = tol {
+        options.solve.hr_tolerance = t;
+    }
+    let mut bakes = Vec::new();
+    for solver in [Solver::Progressive, Solver::Hierarchical] {
+        let mut o = options.clone();
+        o.solve.solver = solver;
+        let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
+        bakes.push((solver, b));
+    }
+    let tmp = std::env::temp_dir().join("penumbra-solver-error.glb");
+    let bytes = penumbra::bake::glb_bytes(&gltf, &mut bakes[0].1, options.encoding)?;
+    std::fs::write(&tmp, bytes)?;
+    let baked = load::read(&tmp)?;
+    let scene = load::scene(&baked)?;
+    let vis = Visibility::new(&scene);
+    let layout = texel_layout(&baked, &scene, &vis, options.supersample)?;
+    let refmap = reference_with(
+        &scene,
+        &vis,
+        &layout,
+        &ReferenceOptions {
+            spp,
+            seed: 0,
+            bounces_max: None,
+            supersample: options.supersample,
+        },
+    );
+    let texels_per_unit = bakes[0].1.atlas.texels_per_unit as f64;
+    let regions = classify(&refmap, 3.0 / texels_per_unit);
+    let scale = mean_lit_irradiance(&refmap, &regions);
+    for (solver, b) in &bakes {
+        let (all, by) = lightmap_error(&b.lightmap, &refmap, &regions, scale);
+        print!(
+            "{solver:?}: solve {:.2} s, elements {}: all rmse {:.4} max {:.3}",
+            b.stats.timings_s.solve, b.stats.elements, all.rmse, all.max
+        );
+        for (r, e) in by {
+            print!(" | {} rmse {:.4} max {:.3}", r.name(), e.rmse, e.max);
+        }
+        println!();
+    }
+    Ok(())
+}
