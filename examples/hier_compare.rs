@@ -2,7 +2,8 @@
 //! prints the solve and bake seconds, the hierarchical counters and the difference of the
 //! vertex irradiance (luminance) between the two, relative to the progressive mean:
 //! `cargo run --release --example hier_compare -- scene.glb [hr_tolerance] [budget]`
-//! (`PATCHES=n` in the environment sets the progressive solver's patch count).
+//! (`PATCHES=n` in the environment sets the progressive solver's patch count, `PER_POLYGON=1`
+//! prints the mean indirect light of each polygon).
 
 use penumbra::light::luminance;
 use penumbra::solve::Solver;
@@ -67,6 +68,23 @@ fn main() -> anyhow::Result<()> {
             ind_h += b - d;
             n += 1;
             diffs.push(((b - a).abs(), m, v, a, b, d));
+        }
+    }
+    // Per polygon: mean indirect (luminance) of both solvers over its vertices.
+    let mut per: std::collections::BTreeMap<usize, (f64, f64, usize)> = Default::default();
+    for &(_, m, _, a, b, d) in &diffs {
+        let e = per.entry(p.meshes[m].polygon).or_default();
+        e.0 += a - d;
+        e.1 += b - d;
+        e.2 += 1;
+    }
+    if std::env::var("PER_POLYGON").is_ok() {
+        for (poly, (a, b, k)) in &per {
+            println!(
+                "  polygon {poly}: mean indirect progressive {:.4}, hierarchical {:.4} ({k} vertices)",
+                a / *k as f64,
+                b / *k as f64
+            );
         }
     }
     let mean = sum_p / n as f64;

@@ -200,10 +200,10 @@ struct BakeArgs {
     /// Target number of coarse patches for the indirect solve.
     #[arg(long, default_value_t = 1024)]
     patches: usize,
-    /// Indirect-light solver: `progressive` (coarse patches, final gather at every vertex) or
-    /// `hierarchical` (experimental: hierarchical radiosity with clustering over the mesh
-    /// elements; see the README for its measured status).
-    #[arg(long, value_enum, default_value_t = Solver::Progressive)]
+    /// Indirect-light solver: `hierarchical` (hierarchical radiosity with clustering over the
+    /// mesh elements) or `progressive` (coarse patches, final gather at every vertex; the
+    /// comparator, slower on large scenes).
+    #[arg(long, value_enum, default_value_t = Solver::Hierarchical)]
     solver: Solver,
     /// Hierarchical solver: the most power one link may carry before it is refined, as a
     /// fraction of the total reflected direct power (dimensionless, in (0, 1]; smaller: more

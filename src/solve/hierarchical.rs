@@ -23,7 +23,11 @@
 //! # Hierarchy
 //!
 //! * **Leaves**: the triangles of every [`ReceiverMesh`] (one *element* each), with their
-//!   direct irradiance = the mean of their three vertices' exact direct values.
+//!   direct irradiance = the mean of their three vertices' exact direct values. An element
+//!   that faces only the inside of closed geometry (the floor under a box standing on it: all
+//!   of nine fixed rays from its centroid hit the back of a surface) is left out: no light
+//!   reaches it and no one sees it, and as part of a coarse source it would dilute that
+//!   source's mean radiosity.
 //! * **Surface nodes**: per receiver polygon, a binary tree of its elements, split at the
 //!   median element centroid along the longer axis of their bounding box in the polygon's 2D
 //!   frame. A surface node lies in one plane and has that plane's normal.
@@ -47,11 +51,13 @@
 //!
 //! * **Surface to surface** (both nodes in one plane each): the exact unoccluded
 //!   point-to-polygon form factor (Lambert's contour formula) from each receiver sample to the
-//!   source, averaged over the receiver samples, times the visible fraction of the 4 × 4
+//!   source (the disk formula below, about the source's centre, once the sample is more than
+//!   [`FAR_FIELD`] bounding radii away), averaged over the receiver samples, times the visible fraction of the 4 × 4
 //!   sample pairs. When the source's bounding box is above the sample's horizon the contour
 //!   sum runs over the source node's *outline* only (its element edges whose reverse is not in
 //!   the node: interior edges cancel in the contour sum), so a large source costs its boundary,
-//!   not its area; a source straddling the horizon with at most `CONTOUR_ELEMENTS` elements is
+//!   not its area (collinear runs of outline edges are merged into one: a straight edge's term
+//!   is the sum of its pieces'); a source straddling the horizon with at most `CONTOUR_ELEMENTS` elements is
 //!   summed per element, each clipped to the horizon ([`point_polygon_form_factor`]); a larger
 //!   straddling source falls to the disk estimate below.
 //! * **Otherwise** (either end a cluster, or a large straddling source): per sample pair `(i, j)` the disk
@@ -102,6 +108,15 @@
 //!   for the whole source from each receiver point. A large surface source straddling the
 //!   receiver's horizon (estimated by the disk formula, crude at a contact) is split while
 //!   `B_s K̂` exceeds the same limit.
+//! * **Source uniformity**: a link gathers `K B̄_s`, the source's *mean* radiosity, so it
+//!   misplaces up to `ΔB_s K̂`, with `ΔB_s` the spread of the source's element radiosities and
+//!   `K̂` the largest point form factor at the receiver's samples (the geometric bound for a
+//!   cluster end). The source is split while that exceeds [`SOURCE_VARIATION`] × `P / A`.
+//!   This is not noise but a bias: the parts of a source that face a receiver most directly
+//!   are usually its brightest too (the middle of a floor under a ceiling light), so the mean
+//!   underestimates. Measured on the Cornell box against the Monte Carlo reference: without
+//!   this test the bake's RMSE was 7.5% of the lit mean (mean indirect light 12% low); with it
+//!   at 0.1, 3.0%; at 0.03, 1.9%.
 //!
 //! A self-link of a cluster becomes the four links between its two children; a link between
 //! two leaves is kept as it is. Only the shadow rays the decision needs are cast: none for a
@@ -177,7 +192,7 @@ pub const VARIATION: f64 = 1e-3;
 
 /// The refinement oracle's bound on the irradiance a source's non-uniformity may misplace, as a
 /// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
-pub const SOURCE_VARIATION: f64 = 0.1;
+pub const SOURCE_VARIATION: f64 = 0.03;
 
 /// Distance, in bounding radii of a surface source node, past which its form factor is the
 /// disk formula instead of the exact contour sum (see [`Hierarchy::point_factor`]).
@@ -1301,6 +1316,12 @@ pub fn indirect(
                     .sum();
                 b_el = next;
                 iterations += 1;
+                // Each bounce carries at most rho (< 1) of the previous one, so the change
+                // shrinks; where it grows (surfaces counted twice, as with duplicated
+                // geometry) the solve diverges: stop, and `unshot_fraction` > 1 says so.
+                if left.is_nan() || left > 2.0 * initial {
+                    break;
+                }
                 match options.bounces {
                     Some(n) if iterations >= n as usize => break,
                     Some(_) => {}

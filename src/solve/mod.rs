@@ -65,12 +65,11 @@ pub enum DirectMethod {
 #[serde(rename_all = "lowercase")]
 pub enum Solver {
     /// Progressive refinement over coarse patches, then a final gather at every vertex
-    /// ([`progressive`]).
-    #[default]
+    /// ([`progressive`]): the comparator.
     Progressive,
-    /// Hierarchical radiosity with clustering over the mesh elements ([`hierarchical`]).
-    /// Experimental: energy balance holds, but single vertices can be off by several percent
-    /// (see the module doc).
+    /// Hierarchical radiosity with clustering over the mesh elements ([`hierarchical`]): the
+    /// default.
+    #[default]
     Hierarchical,
 }
 
@@ -114,7 +113,7 @@ impl Default for SolveOptions {
             bounces: None,
             patches: 1024,
             tolerance: 1e-3,
-            solver: Solver::Progressive,
+            solver: Solver::Hierarchical,
             hr_tolerance: DEFAULT_HR_TOLERANCE,
         }
     }

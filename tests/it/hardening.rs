@@ -334,7 +334,8 @@ fn a_solve_stopped_on_its_cap_says_so() {
     // A closed box of albedo 0.99 needs about 690 sweeps for a 0.1% tolerance: far past the
     // shot limit of 100 per patch.
     let glb = fixtures::furnace_box_with(0.99, 1.0);
-    let (code, stderr, stats) = bake_with_stats("cap", &glb, &["--patches", "16"]);
+    let args = ["--solver", "progressive", "--patches", "16"];
+    let (code, stderr, stats) = bake_with_stats("cap", &glb, &args);
     assert_eq!(code, Some(0), "{stderr}");
     assert_eq!(stats["converged"], json!(false));
     assert!(stderr.contains("stopped on its shot limit"), "{stderr}");
@@ -359,13 +360,18 @@ fn duplicated_geometry_that_makes_the_solve_diverge_is_an_error() {
             prims.extend(copy);
         }
     });
-    let (code, stderr, _) = bake_with_stats("diverge", &twice, &["--patches", "64"]);
-    assert_eq!(code, Some(1), "{stderr}");
-    assert!(
-        stderr.contains("in.glb: scene: the indirect light diverges"),
-        "{stderr}"
-    );
-    assert!(!stderr.contains("panicked"), "{stderr}");
+    for args in [
+        &["--solver", "progressive", "--patches", "64"][..],
+        &["--solver", "hierarchical"],
+    ] {
+        let (code, stderr, _) = bake_with_stats("diverge", &twice, args);
+        assert_eq!(code, Some(1), "{args:?}: {stderr}");
+        assert!(
+            stderr.contains("in.glb: scene: the indirect light diverges"),
+            "{args:?}: {stderr}"
+        );
+        assert!(!stderr.contains("panicked"), "{args:?}: {stderr}");
+    }
 }
 
 #[test]
