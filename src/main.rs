@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use penumbra::files::write_atomically;
 use penumbra::load::Gltf;
 use penumbra::mesh::Mesher;
-use penumbra::solve::{DirectMethod, SolveOptions, Solver};
+use penumbra::solve::{DirectMethod, FormFactors, SolveOptions, Solver};
 use penumbra::{BakeOptions, OutputFiles, bake_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -200,11 +200,27 @@ struct BakeArgs {
     /// Target number of coarse patches for the indirect solve.
     #[arg(long, default_value_t = 1024)]
     patches: usize,
-    /// Indirect-light solver: `progressive` (coarse patches, final gather at every vertex) or
+    /// Indirect-light solver: `progressive` (coarse patches, final gather at every vertex),
     /// `hierarchical` (experimental: hierarchical radiosity with clustering over the mesh
-    /// elements; see the README for its measured status).
+    /// elements; see the README for its measured status) or `matrix` (classic radiosity: every
+    /// pair of the progressive solver's patches in a form-factor matrix, Gauss-Seidel; n²
+    /// memory, refused past --matrix-memory).
     #[arg(long, value_enum, default_value_t = Solver::Progressive)]
     solver: Solver,
+    /// Form factors of the progressive and matrix solvers: `closed-form` (contour formula,
+    /// ray-cast visibility), `raycast` (Wallace et al. 1989: 16 disks per patch) or `hemicube`
+    /// (Cohen and Greenberg 1985; the area emitters' light then goes through the hemicube too,
+    /// instead of --direct).
+    #[arg(long, value_enum, default_value_t = FormFactors::ClosedForm)]
+    form_factors: FormFactors,
+    /// Hemicube form factors: cells across the hemicube's top face (even, 2 to 2048; 3 R² cells
+    /// in all).
+    #[arg(long, default_value_t = penumbra::solve::hemicube::DEFAULT_RESOLUTION)]
+    hemicube_resolution: u32,
+    /// Matrix solver: the most memory its n x n form-factor matrix (8 bytes an entry) may take,
+    /// MiB; more patches than fit are refused before the bake starts.
+    #[arg(long, value_name = "MIB", default_value_t = penumbra::solve::matrix::DEFAULT_MEMORY_MIB)]
+    matrix_memory: u64,
     /// Hierarchical solver: the most power one link may carry before it is refined, as a
     /// fraction of the total reflected direct power (dimensionless, in (0, 1]; smaller: more
     /// links, more accurate).
@@ -480,6 +496,9 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             patches: args.patches,
             solver: args.solver,
             hr_tolerance: args.hr_tolerance,
+            form_factors: args.form_factors,
+            hemicube_resolution: args.hemicube_resolution,
+            matrix_memory_mib: args.matrix_memory,
             ..SolveOptions::default()
         },
         texels_per_unit: args.texels_per_unit,
