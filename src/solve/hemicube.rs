@@ -187,10 +187,21 @@ impl Hemicube {
                 let m0 = m.dot(local[0]);
                 // Image in cell units: x in [0, r], y in [0, rows].
                 let scale = r as f64 / 2.0;
-                let img: Vec<DVec2> = clipped
-                    .iter()
-                    .map(|q| DVec2::new((q.x / q.z + 1.0) * scale, (q.y / q.z - y_min) * scale))
-                    .collect();
+                let mut img: Vec<DVec2> = Vec::with_capacity(clipped.len());
+                for q in &clipped {
+                    let c = DVec2::new((q.x / q.z + 1.0) * scale, (q.y / q.z - y_min) * scale);
+                    // Corners the clipping left a rounding error apart would make an edge of
+                    // no length and random direction, whose inside test cuts the polygon.
+                    if img.last().is_none_or(|l: &DVec2| l.distance(c) > 1e-9) {
+                        img.push(c);
+                    }
+                }
+                while img.len() > 1 && img[0].distance(img[img.len() - 1]) <= 1e-9 {
+                    img.pop();
+                }
+                if img.len() < 3 {
+                    continue;
+                }
                 let area2: f64 = (0..img.len())
                     .map(|i| img[i].perp_dot(img[(i + 1) % img.len()]))
                     .sum();
@@ -202,9 +213,12 @@ impl Hemicube {
                     (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
                     |(lo, hi), q| (lo.min(*q), hi.max(*q)),
                 );
-                // Cells whose centre (i + 0.5) lies within the bounding box.
-                let first = |a: f64| (a - 0.5).ceil().max(0.0) as usize;
-                let last = |b: f64, len: usize| ((b - 0.5).floor().min(len as f64 - 1.0)) as i64;
+                // Cells whose centre (i + 0.5) lies within the bounding box, widened by the
+                // inside test's tolerance (a column of centres on a shared axis-aligned edge
+                // must not fall out of both triangles' boxes).
+                let first = |a: f64| (a - 0.5 - 1e-7).ceil().max(0.0) as usize;
+                let last =
+                    |b: f64, len: usize| ((b - 0.5 + 1e-7).floor().min(len as f64 - 1.0)) as i64;
                 let (i0, j0) = (first(lo.x), first(lo.y));
                 let (i1, j1) = (last(hi.x, r), last(hi.y, rows));
                 if i1 < i0 as i64 || j1 < j0 as i64 {
@@ -213,9 +227,12 @@ impl Hemicube {
                 for j in j0..=j1 as usize {
                     for i in i0..=i1 as usize {
                         let c = DVec2::new(i as f64 + 0.5, j as f64 + 0.5);
+                        // Inside or within 1e-7 cell widths of an edge: a centre on the edge
+                        // two triangles share goes to both (the depth test then keeps the
+                        // first), never to neither through rounding.
                         let inside = (0..img.len()).all(|e| {
                             let (a, b) = (img[e], img[(e + 1) % img.len()]);
-                            sign * (b - a).perp_dot(c - a) >= 0.0
+                            sign * (b - a).perp_dot(c - a) >= -1e-7 * (b - a).length()
                         });
                         if !inside {
                             continue;
