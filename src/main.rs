@@ -45,9 +45,11 @@ struct CompareArgs {
     /// Element budgets of the sweep, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "250,1000,4000,16000")]
     budgets: Vec<usize>,
-    /// Methods (mesher-direct), comma-separated, from: uniform-exact, uniform-sampled,
-    /// adaptive-exact, adaptive-sampled, discontinuity-exact, discontinuity-sampled [default:
-    /// all].
+    /// Methods (mesher-direct[-solver][-form factors]), comma-separated, from: uniform-exact,
+    /// uniform-sampled, adaptive-exact, adaptive-sampled, discontinuity-exact,
+    /// discontinuity-sampled, discontinuity-exact-matrix, discontinuity-exact-hierarchical,
+    /// discontinuity-hemicube, discontinuity-matrix-hemicube, uniform-matrix-hemicube,
+    /// discontinuity-exact-raycast [default: all but the last].
     #[arg(long, value_delimiter = ',', value_parser = parse_method)]
     methods: Vec<penumbra::compare::Method>,
     /// Lightmap width and height (every bake and the reference share one layout).
@@ -80,11 +82,11 @@ struct CompareArgs {
 }
 
 fn parse_method(s: &str) -> Result<penumbra::compare::Method, String> {
-    penumbra::compare::Method::all()
+    penumbra::compare::Method::known()
         .into_iter()
         .find(|m| m.name() == s)
         .ok_or_else(|| {
-            let names: Vec<String> = penumbra::compare::Method::all()
+            let names: Vec<String> = penumbra::compare::Method::known()
                 .iter()
                 .map(|m| m.name())
                 .collect();

@@ -174,6 +174,11 @@ pub struct SolveStats {
     pub form_factors: Option<FormFactors>,
     pub patches: usize,
     pub shots: usize,
+    /// Wall time of the indirect solve (patches, their solve and the final gather; or the
+    /// hierarchical solve), seconds.
+    pub indirect_seconds: f64,
+    /// Wall time of the patch solve alone (progressive refinement or the matrix), seconds.
+    pub patch_solve_seconds: f64,
     pub rays: u64,
     /// Unshot power left at the end, relative to the power first received.
     pub unshot_fraction: f64,
@@ -289,6 +294,7 @@ pub fn radiosity(
     stats.direct = direct.stats();
     stats.direct.seconds = start.elapsed().as_secs_f64();
 
+    let start = Instant::now();
     let irradiance = if options.bounces == Some(0) && !emitters_in_solve {
         direct_h.clone()
     } else {
@@ -309,6 +315,7 @@ pub fn radiosity(
         }
     };
     stats.rays += direct.rays.load(Ordering::Relaxed);
+    stats.indirect_seconds = start.elapsed().as_secs_f64();
     stats.emitted_power = emitted_power;
     Solution {
         irradiance,

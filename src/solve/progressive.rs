@@ -323,10 +323,12 @@ pub fn indirect(
         })
         .collect();
     let system = PatchSystem::new(&patches, patch_direct, emission);
+    let start = std::time::Instant::now();
     let patch_h = match options.solver {
         Solver::Matrix => super::matrix::solve(&kernel, &system, options, stats),
         _ => refine(&kernel, &system, options.bounces, options.tolerance, stats),
     };
+    stats.patch_solve_seconds = start.elapsed().as_secs_f64();
     stats.hemicube = kernel.hemicube_stats();
     stats.direct_power = system.power(&system.direct);
     stats.absorbed_power = patches

@@ -79,10 +79,7 @@ fn compare_writes_report_charts_and_pictures() {
     let options = CompareOptions {
         budgets: vec![300, 3000],
         methods: [Mesher::Uniform, Mesher::Discontinuity]
-            .map(|mesher| Method {
-                mesher,
-                direct: DirectMethod::Exact,
-            })
+            .map(|mesher| Method::new(mesher, DirectMethod::Exact))
             .to_vec(),
         resolution: 96,
         spp: 256,
