@@ -326,6 +326,9 @@ pub struct CompareOptions {
     pub picture_width: u32,
     /// Texels nearer than this many texel widths to another surface are in the contact region.
     pub contact_texels: f64,
+    /// Patch counts of the matrix-against-progressive scaling measure (run when a matrix method
+    /// is among `methods`; empty: none).
+    pub scaling_patches: Vec<usize>,
 }
 
 impl Default for CompareOptions {
@@ -340,6 +343,7 @@ impl Default for CompareOptions {
             picture_budget: 1000,
             picture_width: 300,
             contact_texels: 3.0,
+            scaling_patches: SCALING_PATCHES.to_vec(),
         }
     }
 }
@@ -682,7 +686,12 @@ pub fn compare(
     )?;
     let mut m = m;
     if options.methods.iter().any(|m| m.solver == Solver::Matrix) {
-        m.report.scaling = scaling(&gltf, &SCALING_PATCHES, options.matrix_memory_mib(), log)?;
+        m.report.scaling = scaling(
+            &gltf,
+            &options.scaling_patches,
+            options.matrix_memory_mib(),
+            log,
+        )?;
     }
     let mut files: Vec<String> = m
         .pictures
@@ -788,7 +797,7 @@ fn check(o: &CompareOptions) -> Result<()> {
     Ok(())
 }
 
-/// Patch counts of the scaling measure.
+/// Default patch counts of the scaling measure.
 const SCALING_PATCHES: [usize; 5] = [128, 256, 512, 1024, 2048];
 
 impl CompareOptions {

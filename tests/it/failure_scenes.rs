@@ -230,41 +230,31 @@ fn hemicube_fails_on_its_failure_scenes() {
         }
         (sq / norm).sqrt()
     };
-    let s = scene("far_small_emitter");
-    check("far_small_emitter");
-    let exact = bake(&s, Mesher::Uniform);
-    let mut o = BakeOptions {
-        mesher: Mesher::Uniform,
-        ..quick()
+    // The uniform mesh at the quick options, with `form_factors` at `resolution` cells.
+    let uniform = |s: &FailureScene, form_factors: FormFactors, resolution: u32| {
+        let mut o = BakeOptions {
+            mesher: Mesher::Uniform,
+            ..quick()
+        };
+        o.solve.form_factors = form_factors;
+        o.solve.hemicube_resolution = resolution;
+        crate::bake(&s.glb, &o)
     };
-    o.solve.form_factors = FormFactors::Hemicube;
-    let hemicube = crate::bake(&s.glb, &o);
-    let e = relative_rms(&hemicube, &exact);
+    check("far_small_emitter");
+    let s = scene("far_small_emitter");
+    let exact = uniform(&s, FormFactors::ClosedForm, 64);
+    let e = relative_rms(&uniform(&s, FormFactors::Hemicube, 64), &exact);
     eprintln!("far_small_emitter: hemicube vs closed-form relative RMS {e:.3}");
     assert!(e > 0.5, "{e}");
-    o.solve.hemicube_resolution = 512;
-    let fine = crate::bake(&s.glb, &o);
-    let e_fine = relative_rms(&fine, &exact);
+    let e_fine = relative_rms(&uniform(&s, FormFactors::Hemicube, 512), &exact);
     eprintln!("far_small_emitter: at 512 cells {e_fine:.3}");
     assert!(e_fine < 0.5 * e, "{e_fine} vs {e}");
 
     let s = scene("touching_shooter");
-    let b = crate::bake(
-        &s.glb,
-        &BakeOptions {
-            mesher: Mesher::Uniform,
-            ..quick()
-        },
-    );
+    let b = uniform(&s, FormFactors::ClosedForm, 64);
     assert_eq!(b.stats.area_emitters, 1);
     assert!(b.lightmap.texels.iter().all(|t| t.is_finite()));
-    let mut o = BakeOptions {
-        mesher: Mesher::Uniform,
-        ..quick()
-    };
-    o.solve.form_factors = FormFactors::Hemicube;
-    let h = crate::bake(&s.glb, &o);
-    let e = relative_rms(&h, &b);
+    let e = relative_rms(&uniform(&s, FormFactors::Hemicube, 64), &b);
     eprintln!("touching_shooter: hemicube vs closed-form relative RMS {e:.3}");
     assert!(e > 0.005 && e < 0.5, "{e}");
 }
