@@ -95,7 +95,7 @@ impl BakeOptions {
             return bad("--hr-tolerance", "must be in (0, 1]");
         }
         let r = self.solve.hemicube_resolution;
-        if !(solve::hemicube::RESOLUTION_RANGE.contains(&r) && r % 2 == 0) {
+        if !(solve::hemicube::RESOLUTION_RANGE.contains(&r) && r.is_multiple_of(2)) {
             return bad(
                 "--hemicube-resolution",
                 "must be an even number of cells between 2 and 2048",

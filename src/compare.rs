@@ -1,5 +1,7 @@
 //! `penumbra compare`: speed against accuracy, measured. Every method (mesher x direct-light
-//! method) bakes the scene over a sweep of element budgets into the same lightmap layout; an
+//! method, and the other indirect solvers and form factors: classic matrix radiosity,
+//! hierarchical radiosity, hemicube form factors, see [`Method`]) bakes the scene over a sweep
+//! of element budgets into the same lightmap layout; an
 //! independent Monte Carlo reference ([`crate::reference`]) of that layout gives each texel's
 //! true irradiance; each bake's error is measured over all texels and by region, and charted
 //! against its elements and its time. A failure sweep repeats the measure on scenes built to

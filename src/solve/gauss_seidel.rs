@@ -24,7 +24,7 @@ pub fn sweeps(
     let scale = system.power(&source).max(f64::MIN_POSITIVE);
     let mut change = f64::INFINITY;
     let mut done = 0;
-    while done < max_sweeps && !(change <= tolerance) {
+    while done < max_sweeps && (change > tolerance || change.is_nan()) {
         let mut moved = 0.0;
         for i in 0..n {
             let row = f.row(i);

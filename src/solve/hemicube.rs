@@ -205,7 +205,7 @@ impl Hemicube {
                 let area2: f64 = (0..img.len())
                     .map(|i| img[i].perp_dot(img[(i + 1) % img.len()]))
                     .sum();
-                if !(area2.abs() > 0.0) {
+                if area2 == 0.0 || area2.is_nan() {
                     continue;
                 }
                 let sign = area2.signum();

@@ -199,7 +199,7 @@ fn matrix_memory_limit_is_refused_through_the_cli() {
     ] {
         let mut all: Vec<&std::ffi::OsStr> =
             vec!["bake".as_ref(), input.as_os_str(), output.as_os_str()];
-        all.extend(args.iter().map(|a| std::ffi::OsStr::new(a)));
+        all.extend(args.iter().map(std::ffi::OsStr::new));
         let run = penumbra(&all);
         assert_eq!(run.code, Some(1), "{args:?}: {}", run.stderr);
         assert!(run.stderr.contains(needle), "{args:?}: {}", run.stderr);
