@@ -9,9 +9,9 @@
 //!   term with one shadow ray.
 //! * **Indirect light** by progressive refinement (Cohen, Chen, Wallace, Greenberg, "A progressive
 //!   refinement approach to fast radiosity image generation", SIGGRAPH 1988) over coarse patches,
-//!   with ray-cast form factors (Wallace, Elmquist, Haines, "A ray tracing algorithm for
-//!   progressive radiosity", SIGGRAPH 1989): the point-to-patch form factor evaluated at the
-//!   receiver, exact for the unoccluded part and subdivided near the receiver. The converged
+//!   by default with the point-to-patch form factor evaluated at the receiver, exact for the
+//!   unoccluded part and subdivided near the receiver, with ray-cast visibility (after Wallace,
+//!   Elmquist, Haines, "A ray tracing algorithm for progressive radiosity", SIGGRAPH 1989). The converged
 //!   patch radiosities are then gathered at every mesh vertex (a final gather), so the mesh
 //!   vertices receive the indirect light without the patch resolution showing.
 //!

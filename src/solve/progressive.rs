@@ -1,8 +1,10 @@
 //! The indirect light by progressive refinement (Cohen, Chen, Wallace, Greenberg, "A progressive
 //! refinement approach to fast radiosity image generation", SIGGRAPH 1988) over coarse patches,
-//! with ray-cast form factors (Wallace, Elmquist, Haines, "A ray tracing algorithm for
-//! progressive radiosity", SIGGRAPH 1989), then a final gather of the converged patch
-//! radiosities at every mesh vertex.
+//! then a final gather of the converged patch radiosities at every mesh vertex. The form
+//! factors are [`super::form_factors`]'s (`--form-factors`): by default the exact unoccluded
+//! point-to-patch factor with ray-cast visibility (after Wallace, Elmquist, Haines, "A ray
+//! tracing algorithm for progressive radiosity", SIGGRAPH 1989). The patches, the patch system
+//! and the final gather are shared with classic radiosity ([`super::matrix`]).
 //!
 //! Irradiance `H` and radiosity `B` in W/m² per linear RGB channel; form factors dimensionless.
 
