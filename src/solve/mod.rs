@@ -76,7 +76,7 @@ pub enum DirectMethod {
 #[serde(rename_all = "lowercase")]
 pub enum Solver {
     /// Progressive refinement over coarse patches, then a final gather at every vertex
-    /// ([`progressive`]).
+    /// ([`progressive`](mod@progressive)).
     #[default]
     Progressive,
     /// Hierarchical radiosity with clustering over the mesh elements ([`hierarchical`]).
