@@ -94,6 +94,25 @@ impl BakeOptions {
         if !(self.solve.hr_tolerance > 0.0 && self.solve.hr_tolerance <= 1.0) {
             return bad("--hr-tolerance", "must be in (0, 1]");
         }
+        let r = self.solve.hemicube_resolution;
+        if !(solve::hemicube::RESOLUTION_RANGE.contains(&r) && r.is_multiple_of(2)) {
+            return bad(
+                "--hemicube-resolution",
+                "must be an even number of cells between 2 and 2048",
+            );
+        }
+        if self.solve.solver == solve::Solver::Hierarchical
+            && self.solve.form_factors != solve::FormFactors::ClosedForm
+        {
+            return bad(
+                "--form-factors",
+                "applies to the progressive and matrix solvers; the hierarchical solver has \
+                 form factors of its own",
+            );
+        }
+        if self.solve.matrix_memory_mib == 0 {
+            return bad("--matrix-memory", "must be at least 1 MiB");
+        }
         if let Some(t) = self.texels_per_unit
             && !(t.is_finite() && t > 0.0)
         {
@@ -126,6 +145,17 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     };
     let t = &mut stats.timings_s;
     let scene = stage(&mut t.load, "scene", progress, || load::scene(gltf))?;
+    // Classic radiosity's matrix is refused before any expensive stage.
+    if options.solve.solver == solve::Solver::Matrix && options.solve.bounces != Some(0) {
+        let n = solve::patches(&scene, options.solve.patches).len();
+        solve::matrix::check_memory(n, options.solve.matrix_memory_mib).map_err(|reason| {
+            Error::BadItem {
+                path: gltf.path.clone(),
+                item: "--solver matrix".into(),
+                reason,
+            }
+        })?;
+    }
     let vis = stage(&mut t.visibility, "visibility", progress, || {
         Visibility::new(&scene)
     });

@@ -1,5 +1,7 @@
 //! `penumbra compare`: speed against accuracy, measured. Every method (mesher x direct-light
-//! method) bakes the scene over a sweep of element budgets into the same lightmap layout; an
+//! method, and the other indirect solvers and form factors: classic matrix radiosity,
+//! hierarchical radiosity, hemicube form factors, see [`Method`]) bakes the scene over a sweep
+//! of element budgets into the same lightmap layout; an
 //! independent Monte Carlo reference ([`crate::reference`]) of that layout gives each texel's
 //! true irradiance; each bake's error is measured over all texels and by region, and charted
 //! against its elements and its time. A failure sweep repeats the measure on scenes built to
@@ -33,7 +35,7 @@ use crate::load::{self, Gltf};
 use crate::mesh::Mesher;
 use crate::reference::{self, ReferenceMap, ReferenceOptions};
 use crate::render::{self, Camera, Shading};
-use crate::solve::{Direct, DirectMethod, SurfacePoint};
+use crate::solve::{Direct, DirectMethod, FormFactors, Solver, SurfacePoint};
 use crate::visibility::Visibility;
 use crate::{Bake, BakeOptions};
 use glam::{DVec2, DVec3};
@@ -42,37 +44,128 @@ use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// A way to bake: a mesher and a direct-light method.
+/// A way to bake: a mesher, a direct-light method, an indirect solver and its form factors.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
 pub struct Method {
     pub mesher: Mesher,
     pub direct: DirectMethod,
+    pub solver: Solver,
+    pub form_factors: FormFactors,
 }
 
 impl Method {
-    /// `mesher-direct`, e.g. `discontinuity-exact`.
-    pub fn name(&self) -> String {
-        format!("{:?}-{:?}", self.mesher, self.direct).to_lowercase()
+    /// A mesher and direct-light method with the default solver (progressive, closed-form
+    /// form factors).
+    pub fn new(mesher: Mesher, direct: DirectMethod) -> Method {
+        Method {
+            mesher,
+            direct,
+            solver: Solver::Progressive,
+            form_factors: FormFactors::ClosedForm,
+        }
     }
 
-    /// Every mesher with exact and with sampled direct light.
+    /// `mesher-direct[-solver][-form factors]`, e.g. `discontinuity-exact`,
+    /// `discontinuity-exact-matrix`; the solver is named unless progressive, the form factors
+    /// unless closed-form. With hemicube form factors the direct-light method is left out
+    /// (the hemicube carries the area emitters' light): `uniform-matrix-hemicube`.
+    pub fn name(&self) -> String {
+        let mut name = format!("{:?}", self.mesher).to_lowercase();
+        if self.form_factors != FormFactors::Hemicube {
+            name = format!("{name}-{:?}", self.direct).to_lowercase();
+        }
+        if self.solver != Solver::Progressive {
+            name = format!("{name}-{}", self.solver.name());
+        }
+        if self.form_factors != FormFactors::ClosedForm {
+            name = format!("{name}-{}", self.form_factors.name());
+        }
+        name
+    }
+
+    /// Every mesher with exact and with sampled direct light (progressive, closed form).
     pub fn all() -> Vec<Method> {
         let meshers = [Mesher::Uniform, Mesher::Adaptive, Mesher::Discontinuity];
         meshers
             .iter()
             .flat_map(|&mesher| {
-                [DirectMethod::Exact, DirectMethod::Sampled].map(|direct| Method { mesher, direct })
+                [DirectMethod::Exact, DirectMethod::Sampled]
+                    .map(|direct| Method::new(mesher, direct))
             })
             .collect()
     }
 
-    /// Chart colour per mesher (sampled direct light is drawn dashed in the same colour).
+    /// The other solvers and form factors, on the discontinuity mesh (the same vertices as
+    /// `discontinuity-exact`, so only the indirect solve differs): classic radiosity
+    /// (`-matrix`), hierarchical radiosity, hemicube form factors with either patch solver;
+    /// and the whole classic 1985 pipeline, `uniform-matrix-hemicube`.
+    pub fn classic() -> Vec<Method> {
+        let d = Method::new(Mesher::Discontinuity, DirectMethod::Exact);
+        vec![
+            Method {
+                solver: Solver::Matrix,
+                ..d
+            },
+            Method {
+                solver: Solver::Hierarchical,
+                ..d
+            },
+            Method {
+                form_factors: FormFactors::Hemicube,
+                ..d
+            },
+            Method {
+                solver: Solver::Matrix,
+                form_factors: FormFactors::Hemicube,
+                ..d
+            },
+            Method {
+                mesher: Mesher::Uniform,
+                solver: Solver::Matrix,
+                form_factors: FormFactors::Hemicube,
+                ..d
+            },
+        ]
+    }
+
+    /// Every method `--methods` accepts: [`Method::all`], [`Method::classic`], and ray-cast
+    /// form factors on the discontinuity mesh (`discontinuity-exact-raycast`, not in the
+    /// default set: 16 rays per patch pair make it the slowest).
+    pub fn known() -> Vec<Method> {
+        let mut v = Method::all();
+        v.extend(Method::classic());
+        v.push(Method {
+            form_factors: FormFactors::Raycast,
+            ..Method::new(Mesher::Discontinuity, DirectMethod::Exact)
+        });
+        v
+    }
+
+    /// True for the default solver and form factors (progressive, closed form).
+    fn is_default_solve(&self) -> bool {
+        self.solver == Solver::Progressive && self.form_factors == FormFactors::ClosedForm
+    }
+
+    /// Chart colour per mesher (sampled direct light is drawn dashed in the same colour); per
+    /// solver and form factors for the others (dashed on the uniform mesh).
     fn colour(&self) -> (u8, u8, u8) {
-        match self.mesher {
-            Mesher::Uniform => (31, 119, 180),
-            Mesher::Adaptive => (255, 127, 14),
-            Mesher::Discontinuity => (44, 160, 44),
+        match (self.solver, self.form_factors) {
+            (Solver::Progressive, FormFactors::ClosedForm) => match self.mesher {
+                Mesher::Uniform => (31, 119, 180),
+                Mesher::Adaptive => (255, 127, 14),
+                Mesher::Discontinuity => (44, 160, 44),
+            },
+            (Solver::Matrix, FormFactors::Hemicube) => (127, 127, 127),
+            (Solver::Matrix, _) => (148, 103, 189),
+            (Solver::Hierarchical, _) => (140, 86, 75),
+            (_, FormFactors::Hemicube) => (227, 119, 194),
+            (_, FormFactors::Raycast) => (188, 189, 34),
         }
+    }
+
+    fn dashed(&self) -> bool {
+        self.direct == DirectMethod::Sampled
+            || (!self.is_default_solve() && self.mesher == Mesher::Uniform)
     }
 }
 
@@ -235,13 +328,16 @@ pub struct CompareOptions {
     pub picture_width: u32,
     /// Texels nearer than this many texel widths to another surface are in the contact region.
     pub contact_texels: f64,
+    /// Patch counts of the matrix-against-progressive scaling measure (run when a matrix method
+    /// is among `methods`; empty: none).
+    pub scaling_patches: Vec<usize>,
 }
 
 impl Default for CompareOptions {
     fn default() -> Self {
         CompareOptions {
             budgets: vec![250, 1000, 4000, 16000],
-            methods: Method::all(),
+            methods: Method::all().into_iter().chain(Method::classic()).collect(),
             resolution: 256,
             supersample: 4,
             spp: 1024,
@@ -249,6 +345,7 @@ impl Default for CompareOptions {
             picture_budget: 1000,
             picture_width: 300,
             contact_texels: 3.0,
+            scaling_patches: SCALING_PATCHES.to_vec(),
         }
     }
 }
@@ -259,8 +356,19 @@ pub struct Run {
     pub method: String,
     pub mesher: Mesher,
     pub direct: DirectMethod,
+    pub solver: Solver,
+    pub form_factors: FormFactors,
     pub budget: usize,
     pub elements: usize,
+    /// Coarse patches of the patch solvers (0 for hierarchical).
+    pub patches: usize,
+    /// Wall time of the indirect solve proper (the patch solve, or the hierarchical solve),
+    /// seconds.
+    pub indirect_seconds: f64,
+    /// Classic radiosity: the form-factor matrix's memory, bytes.
+    pub matrix_bytes: Option<u64>,
+    /// Hemicube form factors: hemicubes rendered.
+    pub hemicubes: Option<u64>,
     /// Wall time of the stages that depend on the method (discontinuity, mesh, solve,
     /// lightmap), seconds.
     pub seconds: f64,
@@ -287,6 +395,25 @@ pub struct SceneReport {
     pub reference_seconds: f64,
     pub reference_mean_relative_std_error: f64,
     pub runs: Vec<Run>,
+    /// Classic radiosity against progressive refinement as the patches grow (when the matrix
+    /// is among the methods; main scene only).
+    pub scaling: Vec<ScalingRow>,
+}
+
+/// One patch count of the scaling measure: the patch solve alone, matrix against progressive.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct ScalingRow {
+    pub patches: usize,
+    /// `n²` entries of 8 bytes.
+    pub matrix_bytes: u64,
+    /// Filling the matrix (closed-form form factors), seconds.
+    pub matrix_fill_seconds: f64,
+    /// Gauss-Seidel to convergence, seconds.
+    pub matrix_solve_seconds: f64,
+    pub matrix_sweeps: usize,
+    /// Progressive refinement to its tolerance (0.1% unshot), seconds.
+    pub progressive_seconds: f64,
+    pub progressive_shots: usize,
 }
 
 impl SceneReport {
@@ -369,8 +496,17 @@ fn measure(
                 ..BakeOptions::default()
             };
             options.solve.direct = method.direct;
+            options.solve.solver = method.solver;
+            options.solve.form_factors = method.form_factors;
             let start = Instant::now();
-            let mut b = crate::bake(gltf, &options, &|_, _, _| {})?;
+            let mut b = match crate::bake(gltf, &options, &|_, _, _| {}) {
+                // Classic radiosity only on scenes small enough for its matrix.
+                Err(Error::BadItem { item, reason, .. }) if item == "--solver matrix" => {
+                    log(&format!("{name}: {} skipped: {reason}", method.name()));
+                    break;
+                }
+                other => other?,
+            };
             let total_seconds = start.elapsed().as_secs_f64();
             match &atlas {
                 None => atlas = Some(b.atlas.clone()),
@@ -384,12 +520,19 @@ fn measure(
                 Some(_) => {}
             }
             let t = &b.stats.timings_s;
+            let s = &b.stats.solve;
             let run = Run {
                 method: method.name(),
                 mesher: method.mesher,
                 direct: method.direct,
+                solver: method.solver,
+                form_factors: method.form_factors,
                 budget,
                 elements: b.stats.elements,
+                patches: s.patches,
+                indirect_seconds: s.indirect_seconds,
+                matrix_bytes: s.matrix.as_ref().map(|m| m.bytes),
+                hemicubes: s.hemicube.as_ref().map(|h| h.hemicubes),
                 seconds: t.discontinuity + t.mesh + t.solve + t.lightmap,
                 total_seconds,
                 error: ErrorStats::default(),
@@ -496,6 +639,7 @@ fn measure(
         reference_seconds,
         reference_mean_relative_std_error: refmap.summary().mean_relative_std_error,
         runs: runs.into_iter().map(|(r, _)| r).collect(),
+        scaling: Vec::new(),
     };
     Ok(Measured {
         report,
@@ -542,6 +686,15 @@ pub fn compare(
         &bakes,
         log,
     )?;
+    let mut m = m;
+    if options.methods.iter().any(|m| m.solver == Solver::Matrix) {
+        m.report.scaling = scaling(
+            &gltf,
+            &options.scaling_patches,
+            options.matrix_memory_mib(),
+            log,
+        )?;
+    }
     let mut files: Vec<String> = m
         .pictures
         .iter()
@@ -561,19 +714,17 @@ pub fn compare(
         create_dir(&dir)?;
         let path = dir.join(format!("{}.glb", f.name));
         let gltf = load::from_bytes(f.glb.clone(), &path)?;
-        let m = measure(
-            &gltf,
-            &f.name,
-            &f.description,
-            &failure_options(options),
-            &dir,
-            log,
-        )?;
+        let fo = failure_options(options);
+        let m = measure(&gltf, &f.name, &f.description, &fo, &dir, log)?;
         files.extend(
             m.pictures
                 .iter()
                 .map(|(method, _, _)| format!("failure/{}/{}.glb", f.name, method.name())),
         );
+        log(&format!("{}: pictures", f.name));
+        let prefixed =
+            |file: &str, bytes: &[u8]| write(&format!("failure/{}/{file}", f.name), bytes);
+        files.extend(write_pictures(&m, &fo, &prefixed)?);
         sweep.push(m.report);
     }
 
@@ -648,13 +799,80 @@ fn check(o: &CompareOptions) -> Result<()> {
     Ok(())
 }
 
+/// Default patch counts of the scaling measure.
+const SCALING_PATCHES: [usize; 5] = [128, 256, 512, 1024, 2048];
+
+impl CompareOptions {
+    /// The matrix solver's memory limit of the bakes, MiB (the bake default).
+    fn matrix_memory_mib(&self) -> u64 {
+        crate::solve::matrix::DEFAULT_MEMORY_MIB
+    }
+}
+
+/// Classic radiosity against progressive refinement as the patches grow: the patch solve alone
+/// (closed-form form factors, to convergence), on the uniform mesh at a 250-element budget so
+/// the rest of the bake stays small. Patch counts whose matrix exceeds `limit_mib` are left out.
+fn scaling(
+    gltf: &Gltf,
+    counts: &[usize],
+    limit_mib: u64,
+    log: &dyn Fn(&str),
+) -> Result<Vec<ScalingRow>> {
+    let mut rows = Vec::new();
+    for &n in counts {
+        if crate::solve::matrix::check_memory(n, limit_mib).is_err() {
+            continue;
+        }
+        let mut o = BakeOptions {
+            mesher: Mesher::Uniform,
+            budget: 250,
+            resolution: Some(64),
+            supersample: 1,
+            ..BakeOptions::default()
+        };
+        o.solve.patches = n;
+        o.solve.solver = Solver::Matrix;
+        let matrix = crate::bake(gltf, &o, &|_, _, _| {})?;
+        o.solve.solver = Solver::Progressive;
+        let progressive = crate::bake(gltf, &o, &|_, _, _| {})?;
+        let Some(m) = matrix.stats.solve.matrix.clone() else {
+            continue;
+        };
+        let row = ScalingRow {
+            patches: m.patches,
+            matrix_bytes: m.bytes,
+            matrix_fill_seconds: m.form_factor_seconds,
+            matrix_solve_seconds: m.solve_seconds,
+            matrix_sweeps: m.sweeps,
+            progressive_seconds: progressive.stats.solve.patch_solve_seconds,
+            progressive_shots: progressive.stats.solve.shots,
+        };
+        log(&format!(
+            "scaling: {} patches: matrix {:.1} MiB, {:.2} s fill + {:.3} s solve; progressive {:.2} s, {} shots",
+            row.patches,
+            row.matrix_bytes as f64 / MIB,
+            row.matrix_fill_seconds,
+            row.matrix_solve_seconds,
+            row.progressive_seconds,
+            row.progressive_shots
+        ));
+        rows.push(row);
+    }
+    Ok(rows)
+}
+
+const MIB: f64 = (1u64 << 20) as f64;
+
 /// The failure sweep's settings: smaller lightmaps, fewer paths, exact direct light only.
 fn failure_options(o: &CompareOptions) -> CompareOptions {
+    // Exact direct light; of the other solvers only the hemicube's, which has scenes of its own
+    // here.
     let mut methods: Vec<Method> = o
         .methods
         .iter()
         .copied()
         .filter(|m| m.direct == DirectMethod::Exact)
+        .filter(|m| m.is_default_solve() || m.form_factors == FormFactors::Hemicube)
         .collect();
     if methods.is_empty() {
         methods = o.methods.clone();
@@ -680,6 +898,8 @@ fn series(report: &SceneReport, x: Axis, y: &dyn Fn(&Run) -> Option<f64>) -> Vec
         let m = Method {
             mesher: r.mesher,
             direct: r.direct,
+            solver: r.solver,
+            form_factors: r.form_factors,
         };
         if !methods.contains(&m) {
             methods.push(m);
@@ -690,7 +910,7 @@ fn series(report: &SceneReport, x: Axis, y: &dyn Fn(&Run) -> Option<f64>) -> Vec
         .map(|m| chart::Series {
             label: m.name(),
             colour: m.colour(),
-            dashed: m.direct == DirectMethod::Sampled,
+            dashed: m.dashed(),
             points: report
                 .runs
                 .iter()
@@ -727,7 +947,12 @@ fn error_panels(report: &SceneReport, x: Axis) -> Vec<chart::Panel> {
         series: series(report, x, &|r| Some(r.error.rmse)),
         floor: noise(None),
     }];
-    for region in [Region::Penumbra, Region::Umbra, Region::Contact] {
+    for region in [
+        Region::Penumbra,
+        Region::Umbra,
+        Region::Contact,
+        Region::Indirect,
+    ] {
         if report.region_texels.get(&region).copied().unwrap_or(0) == 0 {
             continue;
         }
@@ -875,14 +1100,20 @@ fn write_pictures(
             .collect(),
     }];
     let picture_budget = nearest_budget(&o.budgets, o.picture_budget);
-    for mesher in [Mesher::Uniform, Mesher::Adaptive, Mesher::Discontinuity] {
-        let Some(k) = views
-            .iter()
-            .position(|v| v.0.mesher == mesher && v.0.direct == DirectMethod::Exact)
-            .or_else(|| views.iter().position(|v| v.0.mesher == mesher))
-        else {
-            continue;
-        };
+    // One column per mesher (exact direct light, progressive, if baked), then one per other
+    // solver or form factors.
+    let mut shown: Vec<usize> = [Mesher::Uniform, Mesher::Adaptive, Mesher::Discontinuity]
+        .iter()
+        .filter_map(|&mesher| {
+            let default = |v: &(Method, _, _, _)| v.0.mesher == mesher && v.0.is_default_solve();
+            views
+                .iter()
+                .position(|v| default(v) && v.0.direct == DirectMethod::Exact)
+                .or_else(|| views.iter().position(default))
+        })
+        .collect();
+    shown.extend((0..views.len()).filter(|&k| !views[k].0.is_default_solve()));
+    for k in shown {
         let (method, _, view, error) = &views[k];
         let Some(run) = m
             .report
@@ -896,7 +1127,11 @@ fn write_pictures(
             .regions
             .get(&Region::Penumbra)
             .map_or(String::new(), |e| format!(", penumbra {}", pct(e.rmse)));
-        let mut title = format!("{mesher:?}").to_lowercase();
+        let mut title = if method.is_default_solve() {
+            format!("{:?}", method.mesher).to_lowercase()
+        } else {
+            method.name()
+        };
         if method.direct == DirectMethod::Sampled {
             title.push_str(" (sampled)");
         }
@@ -996,17 +1231,6 @@ fn findings(report: &SceneReport) -> Vec<String> {
         return vec!["No discontinuity-exact runs: nothing to compare against.".into()];
     };
     let mut out = Vec::new();
-    // Both errors, and the ratio when both are above 0.01% (below that, noise decides).
-    let ratio = |a: f64, b: f64| {
-        let both = format!("{} vs {}", pct(a), pct(b));
-        if a < 1e-4 || b < 1e-4 {
-            both
-        } else if a <= b {
-            format!("{both} ({:.2}x lower)", b / a)
-        } else {
-            format!("{both} ({:.2}x HIGHER)", a / b)
-        }
-    };
     for other in ["uniform-exact", "adaptive-exact"] {
         let Some(o) = report.finest(other) else {
             continue;
@@ -1082,6 +1306,129 @@ fn findings(report: &SceneReport) -> Vec<String> {
     out
 }
 
+/// Both errors, and the ratio when both are above 0.01% (below that, noise decides).
+fn ratio(a: f64, b: f64) -> String {
+    let both = format!("{} vs {}", pct(a), pct(b));
+    if a < 1e-4 || b < 1e-4 {
+        both
+    } else if a <= b {
+        format!("{both} ({:.2}x lower)", b / a)
+    } else {
+        format!("{both} ({:.2}x HIGHER)", a / b)
+    }
+}
+
+/// Slope of `y` against `x` on log-log axes, by least squares (the exponent of a power law).
+fn log_log_slope(points: &[(f64, f64)]) -> Option<f64> {
+    let pts: Vec<(f64, f64)> = points
+        .iter()
+        .filter(|(x, y)| *x > 0.0 && *y > 0.0)
+        .map(|(x, y)| (x.ln(), y.ln()))
+        .collect();
+    if pts.len() < 2 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let (mx, my) = (
+        pts.iter().map(|p| p.0).sum::<f64>() / n,
+        pts.iter().map(|p| p.1).sum::<f64>() / n,
+    );
+    let sxx: f64 = pts.iter().map(|p| (p.0 - mx).powi(2)).sum();
+    let sxy: f64 = pts.iter().map(|p| (p.0 - mx) * (p.1 - my)).sum();
+    (sxx > 0.0).then(|| sxy / sxx)
+}
+
+/// The other solvers and form factors against `discontinuity-exact` (progressive, closed
+/// form, the same mesh) at the largest budget, by region and time; and the matrix's growth.
+fn classic_findings(report: &SceneReport) -> Vec<String> {
+    let base = "discontinuity-exact";
+    let mut out = Vec::new();
+    if let Some(d) = report.finest(base) {
+        for m in Method::known().iter().filter(|m| !m.is_default_solve()) {
+            let name = m.name();
+            let Some(r) = report.finest(&name) else {
+                continue;
+            };
+            let mut parts = vec![format!("all texels {}", ratio(r.error.rmse, d.error.rmse))];
+            for region in Region::ALL {
+                if let (Some(a), Some(b)) = (r.regions.get(&region), d.regions.get(&region)) {
+                    parts.push(format!("{} {}", region.name(), ratio(a.rmse, b.rmse)));
+                }
+            }
+            let mut cost = format!("indirect solve {:.2} s", r.indirect_seconds);
+            if let Some(bytes) = r.matrix_bytes {
+                cost.push_str(&format!(", matrix {:.1} MiB", bytes as f64 / MIB));
+            }
+            if let Some(h) = r.hemicubes {
+                cost.push_str(&format!(", {h} hemicubes"));
+            }
+            out.push(format!(
+                "{name} at its largest budget ({} elements, {:.2} s; {cost}) against {base} ({:.2} s; indirect solve {:.2} s), RMSE: {}.",
+                r.elements,
+                r.seconds,
+                d.seconds,
+                d.indirect_seconds,
+                parts.join(", ")
+            ));
+        }
+    }
+    let s = &report.scaling;
+    if let (Some(first), Some(last)) = (s.first(), s.last())
+        && s.len() >= 2
+    {
+        let slope = |f: &dyn Fn(&ScalingRow) -> f64| {
+            log_log_slope(
+                &s.iter()
+                    .map(|r| (r.patches as f64, f(r)))
+                    .collect::<Vec<_>>(),
+            )
+            .map_or("-".into(), |k| format!("{k:.2}"))
+        };
+        out.push(format!(
+            "Growth with the patch count ({} to {} patches, patch solve alone): the matrix takes {:.2} to {:.1} MiB (exponent {}), filling it {:.2} to {:.2} s (exponent {}), Gauss-Seidel {:.3} to {:.3} s; progressive refinement to 0.1% unshot takes {:.2} to {:.2} s (exponent {}, {} to {} shots) in O(n) memory. At this rate 100 000 patches would need a {:.0} GiB matrix.",
+            first.patches,
+            last.patches,
+            first.matrix_bytes as f64 / MIB,
+            last.matrix_bytes as f64 / MIB,
+            slope(&|r| r.matrix_bytes as f64),
+            first.matrix_fill_seconds,
+            last.matrix_fill_seconds,
+            slope(&|r| r.matrix_fill_seconds),
+            first.matrix_solve_seconds,
+            last.matrix_solve_seconds,
+            first.progressive_seconds,
+            last.progressive_seconds,
+            slope(&|r| r.progressive_seconds),
+            first.progressive_shots,
+            last.progressive_shots,
+            crate::solve::matrix::bytes(100_000) as f64 / (MIB * 1024.0)
+        ));
+    }
+    out
+}
+
+fn scaling_table(s: &[ScalingRow], md: &mut String) {
+    use std::fmt::Write;
+    let _ = writeln!(
+        md,
+        "| patches | matrix MiB | matrix fill s | Gauss-Seidel s | sweeps | progressive s | shots |"
+    );
+    let _ = writeln!(md, "|---|---|---|---|---|---|---|");
+    for r in s {
+        let _ = writeln!(
+            md,
+            "| {} | {:.2} | {:.2} | {:.3} | {} | {:.2} | {} |",
+            r.patches,
+            r.matrix_bytes as f64 / MIB,
+            r.matrix_fill_seconds,
+            r.matrix_solve_seconds,
+            r.matrix_sweeps,
+            r.progressive_seconds,
+            r.progressive_shots
+        );
+    }
+}
+
 fn pct(v: f64) -> String {
     format!("{:.2}%", 100.0 * v)
 }
@@ -1092,20 +1439,24 @@ fn runs_table(report: &SceneReport, md: &mut String) {
         .into_iter()
         .filter(|r| report.region_texels.contains_key(r))
         .collect();
-    let _ = write!(md, "| method | budget | elements | seconds | RMSE all |");
+    let _ = write!(
+        md,
+        "| method | budget | elements | seconds | indirect s | RMSE all |"
+    );
     for r in &regions {
         let _ = write!(md, " {} |", r.name());
     }
     let _ = writeln!(md, " max |");
-    let _ = writeln!(md, "|{}", "---|".repeat(6 + regions.len()));
+    let _ = writeln!(md, "|{}", "---|".repeat(7 + regions.len()));
     for run in &report.runs {
         let _ = write!(
             md,
-            "| {} | {} | {} | {:.2} | {} |",
+            "| {} | {} | {} | {:.2} | {:.2} | {} |",
             run.method,
             run.budget,
             run.elements,
             run.seconds,
+            run.indirect_seconds,
             pct(run.error.rmse)
         );
         for r in &regions {
@@ -1162,6 +1513,28 @@ pub fn markdown(report: &Report) -> String {
     for f in findings(s) {
         let _ = writeln!(md, "- {f}");
     }
+    let classic = classic_findings(s);
+    if !classic.is_empty() {
+        let _ = writeln!(
+            md,
+            "\n## Classic methods\n\nThe other solvers and form factors on the discontinuity \
+             mesh, against progressive refinement with closed-form form factors \
+             (discontinuity-exact), and the classic 1985 pipeline (uniform mesh, hemicube, \
+             matrix). Hemicube methods carry the area emitters' light through the hemicube \
+             too.\n"
+        );
+        for f in classic {
+            let _ = writeln!(md, "- {f}");
+        }
+        if !s.scaling.is_empty() {
+            let _ = writeln!(
+                md,
+                "\nThe patch solve alone as the patches grow (uniform mesh, budget 250, \
+                 closed-form form factors, both to convergence):\n"
+            );
+            scaling_table(&s.scaling, &mut md);
+        }
+    }
     let _ = writeln!(md, "\n## All runs\n");
     runs_table(s, &mut md);
     if !report.failure_sweep.is_empty() {
@@ -1178,7 +1551,7 @@ pub fn markdown(report: &Report) -> String {
                 f.description,
                 scene_summary(f)
             );
-            for line in findings(f) {
+            for line in findings(f).into_iter().chain(classic_findings(f)) {
                 let _ = writeln!(md, "- {line}");
             }
             let _ = writeln!(md);

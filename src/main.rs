@@ -5,7 +5,7 @@ use clap::{Args, Parser, Subcommand};
 use penumbra::files::write_atomically;
 use penumbra::load::Gltf;
 use penumbra::mesh::Mesher;
-use penumbra::solve::{DirectMethod, SolveOptions, Solver};
+use penumbra::solve::{DirectMethod, FormFactors, SolveOptions, Solver};
 use penumbra::{BakeOptions, OutputFiles, bake_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
@@ -45,9 +45,11 @@ struct CompareArgs {
     /// Element budgets of the sweep, comma-separated.
     #[arg(long, value_delimiter = ',', default_value = "250,1000,4000,16000")]
     budgets: Vec<usize>,
-    /// Methods (mesher-direct), comma-separated, from: uniform-exact, uniform-sampled,
-    /// adaptive-exact, adaptive-sampled, discontinuity-exact, discontinuity-sampled [default:
-    /// all].
+    /// Methods (mesher-direct[-solver][-form factors]), comma-separated, from: uniform-exact,
+    /// uniform-sampled, adaptive-exact, adaptive-sampled, discontinuity-exact,
+    /// discontinuity-sampled, discontinuity-exact-matrix, discontinuity-exact-hierarchical,
+    /// discontinuity-hemicube, discontinuity-matrix-hemicube, uniform-matrix-hemicube,
+    /// discontinuity-exact-raycast [default: all but the last].
     #[arg(long, value_delimiter = ',', value_parser = parse_method)]
     methods: Vec<penumbra::compare::Method>,
     /// Lightmap width and height (every bake and the reference share one layout).
@@ -80,11 +82,11 @@ struct CompareArgs {
 }
 
 fn parse_method(s: &str) -> Result<penumbra::compare::Method, String> {
-    penumbra::compare::Method::all()
+    penumbra::compare::Method::known()
         .into_iter()
         .find(|m| m.name() == s)
         .ok_or_else(|| {
-            let names: Vec<String> = penumbra::compare::Method::all()
+            let names: Vec<String> = penumbra::compare::Method::known()
                 .iter()
                 .map(|m| m.name())
                 .collect();
@@ -201,10 +203,26 @@ struct BakeArgs {
     #[arg(long, default_value_t = 1024)]
     patches: usize,
     /// Indirect-light solver: `hierarchical` (hierarchical radiosity with clustering over the
-    /// mesh elements) or `progressive` (coarse patches, final gather at every vertex; the
-    /// comparator, slower on large scenes).
+    /// mesh elements), `progressive` (coarse patches, final gather at every vertex; the
+    /// comparator, slower on large scenes) or `matrix` (classic radiosity: every pair of the
+    /// progressive solver's patches in a form-factor matrix, Gauss-Seidel; n² memory, refused
+    /// past --matrix-memory).
     #[arg(long, value_enum, default_value_t = Solver::Hierarchical)]
     solver: Solver,
+    /// Form factors of the progressive and matrix solvers: `closed-form` (contour formula,
+    /// ray-cast visibility), `raycast` (Wallace et al. 1989: 16 disks per patch) or `hemicube`
+    /// (Cohen and Greenberg 1985; the area emitters' light then goes through the hemicube too,
+    /// instead of --direct).
+    #[arg(long, value_enum, default_value_t = FormFactors::ClosedForm)]
+    form_factors: FormFactors,
+    /// Hemicube form factors: cells across the hemicube's top face (even, 2 to 2048; 3 R² cells
+    /// in all).
+    #[arg(long, default_value_t = penumbra::solve::hemicube::DEFAULT_RESOLUTION)]
+    hemicube_resolution: u32,
+    /// Matrix solver: the most memory its n x n form-factor matrix (8 bytes an entry) may take,
+    /// MiB; more patches than fit are refused before the bake starts.
+    #[arg(long, value_name = "MIB", default_value_t = penumbra::solve::matrix::DEFAULT_MEMORY_MIB)]
+    matrix_memory: u64,
     /// Hierarchical solver: the most power one link may carry before it is refined, as a
     /// fraction of the total reflected direct power (dimensionless, in (0, 1]; smaller: more
     /// links, more accurate).
@@ -480,6 +498,9 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             patches: args.patches,
             solver: args.solver,
             hr_tolerance: args.hr_tolerance,
+            form_factors: args.form_factors,
+            hemicube_resolution: args.hemicube_resolution,
+            matrix_memory_mib: args.matrix_memory,
             ..SolveOptions::default()
         },
         texels_per_unit: args.texels_per_unit,

@@ -209,7 +209,7 @@ mod tests {
 
     #[test]
     fn spade_five_segment_repro_builds_a_planar_arrangement() {
-        // The DESIGN's 5-segment case on which spade's add_constraint_and_split panics.
+        // The 5-segment case on which spade's add_constraint_and_split panics.
         let arr = build(
             &[
                 seg((1.5, 0.5), (1.0, 4.0)),

@@ -159,6 +159,13 @@ impl<'a> Direct<'a> {
         }
     }
 
+    /// Leaves the area emitters out: the direct light is then the punctual lights' alone (the
+    /// hemicube form factors carry the area emitters, [`super::form_factors`]).
+    pub fn drop_area_emitters(&mut self) {
+        self.emitters.clear();
+        self.per_emitter.clear();
+    }
+
     /// Irradiance H (W/m²) at a receiving point.
     pub fn irradiance(&self, at: &SurfacePoint) -> DVec3 {
         match self.method {

@@ -9,9 +9,9 @@
 //!   term with one shadow ray.
 //! * **Indirect light** by progressive refinement (Cohen, Chen, Wallace, Greenberg, "A progressive
 //!   refinement approach to fast radiosity image generation", SIGGRAPH 1988) over coarse patches,
-//!   with ray-cast form factors (Wallace, Elmquist, Haines, "A ray tracing algorithm for
-//!   progressive radiosity", SIGGRAPH 1989): the point-to-patch form factor evaluated at the
-//!   receiver, exact for the unoccluded part and subdivided near the receiver. The converged
+//!   by default with the point-to-patch form factor evaluated at the receiver, exact for the
+//!   unoccluded part and subdivided near the receiver, with ray-cast visibility (after Wallace,
+//!   Elmquist, Haines, "A ray tracing algorithm for progressive radiosity", SIGGRAPH 1989). The converged
 //!   patch radiosities are then gathered at every mesh vertex (a final gather), so the mesh
 //!   vertices receive the indirect light without the patch resolution showing.
 //!
@@ -19,19 +19,30 @@
 //! channel. `B = M + rho H`. Everything is deterministic: fixed sample patterns, and every
 //! parallel loop writes its own output slot.
 //!
+//! * **Classic radiosity** (`--solver matrix`, [`matrix`]): the same patches and final gather,
+//!   but every pair's form factor in a matrix and the system solved by Gauss-Seidel
+//!   ([`gauss_seidel`]).
+//! * **Form factors** of the patch solvers (`--form-factors`, [`form_factors`]): closed form
+//!   (the default), ray cast (Wallace et al. 1989), or hemicube ([`hemicube`]; Cohen and
+//!   Greenberg 1985), which also carries the area emitters' light.
+//!
 //! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
-//! indirect light: patches, progressive refinement, final gather) and `gauss_seidel.rs` (a
-//! matrix solve of the same patch system, the test oracle). [`radiosity`] is the entry point:
-//! the direct light, then the indirect solver (another indirect solver goes in a file of its
-//! own beside `progressive.rs`, chosen there). The shared physics (form factors, emitters, the
-//! punctual light model) is in [`crate::geometry`] and [`crate::light`].
+//! indirect light: patches, progressive refinement, final gather), `matrix.rs` (classic
+//! radiosity), `gauss_seidel.rs` (its iteration, also the progressive solver's test oracle),
+//! `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`. [`radiosity`] is
+//! the entry point: the direct light, then the indirect solver. The shared physics (form
+//! factors, emitters, the punctual light model) is in [`crate::geometry`] and [`crate::light`].
 
 pub mod direct;
+pub mod form_factors;
 pub mod gauss_seidel;
+pub mod hemicube;
 pub mod hierarchical;
+pub mod matrix;
 pub mod progressive;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
+pub use form_factors::FormFactors;
 pub use gauss_seidel::gauss_seidel;
 pub use progressive::{Patch, patches, point_patch_form_factor, progressive};
 // The receiving point and the area emitter are shared physics; re-exported for the solver's
@@ -65,12 +76,26 @@ pub enum DirectMethod {
 #[serde(rename_all = "lowercase")]
 pub enum Solver {
     /// Progressive refinement over coarse patches, then a final gather at every vertex
-    /// ([`progressive`]): the comparator.
+    /// ([`progressive`](mod@progressive)): the comparator.
     Progressive,
     /// Hierarchical radiosity with clustering over the mesh elements ([`hierarchical`]): the
     /// default.
     #[default]
     Hierarchical,
+    /// Classic radiosity: the form factors of all pairs of the progressive solver's patches in
+    /// a matrix, solved by Gauss-Seidel, then the same final gather ([`matrix`]). `n²` memory.
+    Matrix,
+}
+
+impl Solver {
+    /// `progressive`, `hierarchical` or `matrix`, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            Solver::Progressive => "progressive",
+            Solver::Hierarchical => "hierarchical",
+            Solver::Matrix => "matrix",
+        }
+    }
 }
 
 /// Options of the solve.
@@ -97,6 +122,12 @@ pub struct SolveOptions {
     /// Hierarchical radiosity: the most power one link may carry before it is refined, as a
     /// fraction of the total reflected direct power (dimensionless; see [`hierarchical`]).
     pub hr_tolerance: f64,
+    /// How the patch solvers (progressive, matrix) compute form factors.
+    pub form_factors: FormFactors,
+    /// Cells across the hemicube's top face (even, 2 to 2048), for hemicube form factors.
+    pub hemicube_resolution: u32,
+    /// The most memory the matrix solver's form-factor matrix may take, MiB.
+    pub matrix_memory_mib: u64,
 }
 
 /// Default of [`SolveOptions::hr_tolerance`]: at 3e-5 the 20x20 box grid's indirect solve was
@@ -115,6 +146,9 @@ impl Default for SolveOptions {
             tolerance: 1e-3,
             solver: Solver::Hierarchical,
             hr_tolerance: DEFAULT_HR_TOLERANCE,
+            form_factors: FormFactors::ClosedForm,
+            hemicube_resolution: hemicube::DEFAULT_RESOLUTION,
+            matrix_memory_mib: matrix::DEFAULT_MEMORY_MIB,
         }
     }
 }
@@ -133,8 +167,17 @@ pub struct Solution {
 /// Counters of a solve, reported in `--stats`.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SolveStats {
+    /// The indirect solver (`progressive`, `hierarchical`, `matrix`).
+    pub solver: Option<Solver>,
+    /// The patch solvers' form factors (`closed-form`, `raycast`, `hemicube`).
+    pub form_factors: Option<FormFactors>,
     pub patches: usize,
     pub shots: usize,
+    /// Wall time of the indirect solve (patches, their solve and the final gather; or the
+    /// hierarchical solve), seconds.
+    pub indirect_seconds: f64,
+    /// Wall time of the patch solve alone (progressive refinement or the matrix), seconds.
+    pub patch_solve_seconds: f64,
     pub rays: u64,
     /// Unshot power left at the end, relative to the power first received.
     pub unshot_fraction: f64,
@@ -149,6 +192,12 @@ pub struct SolveStats {
     /// The hierarchical solver's counters (`--solver hierarchical`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hierarchical: Option<hierarchical::HierStats>,
+    /// The matrix solver's counters (`--solver matrix`): matrix size and memory, times, sweeps.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub matrix: Option<matrix::MatrixStats>,
+    /// The hemicube's counters (`--form-factors hemicube`): resolution, cells, hemicubes.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub hemicube: Option<form_factors::HemicubeStats>,
     /// Caps that changed the result.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
@@ -219,21 +268,45 @@ pub fn radiosity(
     options: &SolveOptions,
     progress: &crate::stats::Progress<'_>,
 ) -> Solution {
-    let direct = Direct::with_options(scene, vis, options);
-    let mut stats = SolveStats::default();
+    let mut direct = Direct::with_options(scene, vis, options);
+    let mut stats = SolveStats {
+        solver: Some(options.solver),
+        form_factors: (options.solver != Solver::Hierarchical).then_some(options.form_factors),
+        ..SolveStats::default()
+    };
+    let emitted_power = direct
+        .emitters
+        .iter()
+        .map(|e| PI * e.radiance.element_sum() / 3.0 * scene.polygons[e.polygon].area)
+        .sum();
+    // Hemicube form factors carry the area emitters' light themselves (classic radiosity):
+    // the direct stage keeps the punctual lights.
+    let emitters_in_solve =
+        options.form_factors == FormFactors::Hemicube && options.solver != Solver::Hierarchical;
+    if emitters_in_solve {
+        direct.drop_area_emitters();
+    }
 
     // Direct light at the vertices.
     let start = Instant::now();
-    let direct_h = direct_light(scene, vis, &direct, meshes, progress);
+    let mut direct_h = direct_light(scene, vis, &direct, meshes, progress);
     stats.direct = direct.stats();
     stats.direct.seconds = start.elapsed().as_secs_f64();
 
-    let irradiance = if options.bounces == Some(0) {
+    let start = Instant::now();
+    let irradiance = if options.bounces == Some(0) && !emitters_in_solve {
         direct_h.clone()
     } else {
         match options.solver {
-            Solver::Progressive => progressive::indirect(
-                scene, vis, &direct, meshes, &direct_h, options, &mut stats, progress,
+            Solver::Progressive | Solver::Matrix => progressive::indirect(
+                scene,
+                vis,
+                &direct,
+                meshes,
+                &mut direct_h,
+                options,
+                &mut stats,
+                progress,
             ),
             Solver::Hierarchical => {
                 hierarchical::indirect(scene, vis, meshes, &direct_h, options, &mut stats, progress)
@@ -241,11 +314,8 @@ pub fn radiosity(
         }
     };
     stats.rays += direct.rays.load(Ordering::Relaxed);
-    stats.emitted_power = direct
-        .emitters
-        .iter()
-        .map(|e| PI * e.radiance.element_sum() / 3.0 * scene.polygons[e.polygon].area)
-        .sum();
+    stats.indirect_seconds = start.elapsed().as_secs_f64();
+    stats.emitted_power = emitted_power;
     Solution {
         irradiance,
         direct: direct_h,

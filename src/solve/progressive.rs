@@ -1,12 +1,15 @@
 //! The indirect light by progressive refinement (Cohen, Chen, Wallace, Greenberg, "A progressive
 //! refinement approach to fast radiosity image generation", SIGGRAPH 1988) over coarse patches,
-//! with ray-cast form factors (Wallace, Elmquist, Haines, "A ray tracing algorithm for
-//! progressive radiosity", SIGGRAPH 1989), then a final gather of the converged patch
-//! radiosities at every mesh vertex.
+//! then a final gather of the converged patch radiosities at every mesh vertex. The form
+//! factors are [`super::form_factors`]'s (`--form-factors`): by default the exact unoccluded
+//! point-to-patch factor with ray-cast visibility (after Wallace, Elmquist, Haines, "A ray
+//! tracing algorithm for progressive radiosity", SIGGRAPH 1989). The patches, the patch system
+//! and the final gather are shared with classic radiosity ([`super::matrix`]).
 //!
 //! Irradiance `H` and radiosity `B` in W/m² per linear RGB channel; form factors dimensionless.
 
-use super::{SolveOptions, SolveStats, evaluation_points};
+use super::form_factors::{FormFactors, Kernel};
+use super::{SolveOptions, SolveStats, Solver, evaluation_points};
 use crate::geometry::{point_polygon_form_factor, triangle_area};
 use crate::light::SurfacePoint;
 use crate::mesh::ReceiverMesh;
@@ -73,14 +76,7 @@ pub fn point_patch_form_factor(
     rays: &mut u64,
 ) -> f64 {
     let (p, n) = (at.p, at.n);
-    // Cull: a planar polygon does not see itself; the receiver behind (or in the plane of) the
-    // patch; the patch entirely below the receiver's horizon.
-    if at.polygon == patch.polygon
-        || patch.normal.dot(p - patch.centroid) <= 1e-9 * (p - patch.centroid).length()
-    {
-        return 0.0;
-    }
-    if patch.p.iter().all(|q| n.dot(*q - p) <= 0.0) {
+    if super::form_factors::culled(at, patch) {
         return 0.0;
     }
     let skip = [at.polygon, patch.polygon];
@@ -139,8 +135,8 @@ fn piece_form_factor(
     }
 }
 
-/// Progressive refinement over patches: returns the irradiance of each patch, direct plus
-/// indirect. `direct[i]` is the direct irradiance of patch `i`.
+/// Progressive refinement over patches with closed-form form factors: returns the irradiance
+/// of each patch, direct plus indirect. `direct[i]` is the direct irradiance of patch `i`.
 pub fn progressive(
     vis: &Visibility,
     patches: &[Patch],
@@ -149,13 +145,74 @@ pub fn progressive(
     tolerance: f64,
     stats: &mut SolveStats,
 ) -> Vec<DVec3> {
-    let mut h = direct.to_vec();
-    // Unshot radiosity (W/m²) of each patch: its reflected direct light.
-    let mut unshot: Vec<DVec3> = patches
-        .iter()
-        .zip(direct)
-        .map(|(p, d)| p.rho * *d)
-        .collect();
+    let kernel = Kernel::new(vis, patches, FormFactors::ClosedForm, 0);
+    let system = PatchSystem::new(patches, direct.to_vec(), vec![DVec3::ZERO; patches.len()]);
+    refine(&kernel, &system, bounces, tolerance, stats)
+}
+
+/// The linear system of the patch solvers: `B_i = M_i + rho_i H_i`, `H_i = D_i + sum_j F_ij B_j`
+/// (Goral, Torrance, Greenberg, Battaile 1984), with `F_ij` the form factor from patch `i`'s
+/// centroid to patch `j`. W/m² per linear RGB channel.
+pub struct PatchSystem<'a> {
+    pub patches: &'a [Patch],
+    /// `D`: the irradiance the form factors do not carry (the direct light computed apart: all
+    /// of it, or with hemicube form factors only the punctual lights').
+    pub direct: Vec<DVec3>,
+    /// `M`: the emitted radiosity carried by the form factors (with hemicube form factors the
+    /// area emitters', `pi L`; otherwise 0).
+    pub emission: Vec<DVec3>,
+}
+
+impl<'a> PatchSystem<'a> {
+    pub fn new(patches: &'a [Patch], direct: Vec<DVec3>, emission: Vec<DVec3>) -> Self {
+        PatchSystem {
+            patches,
+            direct,
+            emission,
+        }
+    }
+
+    /// The source of the system, `S_i = M_i + rho_i D_i`: `B = S + rho F B`.
+    pub fn source(&self) -> Vec<DVec3> {
+        self.patches
+            .iter()
+            .zip(&self.direct)
+            .zip(&self.emission)
+            .map(|((p, d), m)| *m + p.rho * *d)
+            .collect()
+    }
+
+    /// True when the form factors carry emitted light, whose first transfer is then the direct
+    /// light rather than a bounce.
+    pub fn emits(&self) -> bool {
+        self.emission.iter().any(|m| m.max_element() > 0.0)
+    }
+
+    /// Power of a radiosity (or irradiance) per patch, W (mean over RGB).
+    pub fn power(&self, b: &[DVec3]) -> f64 {
+        self.patches
+            .iter()
+            .zip(b)
+            .map(|(p, b)| b.element_sum() / 3.0 * p.area)
+            .sum()
+    }
+}
+
+/// Progressive refinement of `system` (Cohen, Chen, Wallace, Greenberg 1988): the patch with
+/// the most unshot power shoots it to all others through `kernel`, until the unshot power is
+/// below `tolerance` of the initial source power, or `bounces` generations; returns each patch's
+/// irradiance `H`.
+pub fn refine(
+    kernel: &Kernel<'_>,
+    system: &PatchSystem<'_>,
+    bounces: Option<u32>,
+    tolerance: f64,
+    stats: &mut SolveStats,
+) -> Vec<DVec3> {
+    let patches = system.patches;
+    let mut h = system.direct.clone();
+    // Unshot radiosity (W/m²) of each patch: its emitted and reflected direct light.
+    let mut unshot = system.source();
     let power = |i: usize, u: &[DVec3]| u[i].element_sum() / 3.0 * patches[i].area;
     let initial: f64 = (0..patches.len()).map(|i| power(i, &unshot)).sum();
     let mut rays = 0u64;
@@ -163,21 +220,8 @@ pub fn progressive(
     // Shoots radiosity `b` from patch `i`: every other patch receives irradiance at its
     // centroid, and its reflected part becomes unshot radiosity in `next`.
     let mut shoot = |i: usize, b: DVec3, h: &mut Vec<DVec3>, next: &mut Vec<DVec3>| {
-        let src = &patches[i];
-        let received: Vec<(DVec3, u64)> = patches
-            .par_iter()
-            .enumerate()
-            .map(|(j, r)| {
-                if j == i {
-                    return (DVec3::ZERO, 0);
-                }
-                let mut n = 0;
-                let at = SurfacePoint::new(r.centroid, r.normal, r.polygon, vis);
-                let f = point_patch_form_factor(vis, &at, src, &mut n);
-                (b * f, n)
-            })
-            .collect();
-        for (j, (dh, n)) in received.into_iter().enumerate() {
+        for (j, (f, n)) in kernel.shoot(i).into_iter().enumerate() {
+            let dh = b * f;
             rays += n;
             h[j] += dh;
             next[j] += patches[j].rho * dh;
@@ -187,8 +231,10 @@ pub fn progressive(
         Some(0) => {}
         Some(n) => {
             // n bounces in all: the final gather at the vertices is the last one, so the patches
-            // exchange light n-1 times, one generation of unshot light at a time.
-            for _ in 1..n {
+            // exchange light n-1 times, one generation of unshot light at a time (n times when
+            // the first generation is the emitted light).
+            let first = if system.emits() { 0 } else { 1 };
+            for _ in first..n {
                 let mut next = vec![DVec3::ZERO; patches.len()];
                 for (i, &b) in unshot.iter().enumerate() {
                     if b.max_element() > 0.0 {
@@ -238,55 +284,80 @@ pub fn progressive(
     h
 }
 
-/// The indirect light at every vertex of `meshes`, added to their direct light `direct_h`:
-/// patches, their direct light from `direct`, progressive refinement, and the final gather.
-/// Fills the patch counters and powers of `stats` and adds the rays cast.
+/// The indirect light at every vertex of `meshes` by a patch solver (`--solver progressive` or
+/// `matrix`), added to their direct light `direct_h`: patches, their direct light from `direct`,
+/// the patch solve, and the final gather. With hemicube form factors the area emitters are
+/// patches of the solve (`direct` then holds the punctual lights only) and their light at the
+/// vertices is added to `direct_h` too. Fills the patch counters and powers of `stats` and adds
+/// the rays cast.
 #[allow(clippy::too_many_arguments)]
 pub fn indirect(
     scene: &Scene,
     vis: &Visibility,
     direct: &Direct<'_>,
     meshes: &[ReceiverMesh],
-    direct_h: &[Vec<DVec3>],
+    direct_h: &mut [Vec<DVec3>],
     options: &SolveOptions,
     stats: &mut SolveStats,
     progress: &crate::stats::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let patches = patches(scene, options.patches);
+    let kernel = Kernel::new(
+        vis,
+        &patches,
+        options.form_factors,
+        options.hemicube_resolution,
+    );
     let patch_direct: Vec<DVec3> = patches
         .par_iter()
         .map(|p| direct.irradiance(&SurfacePoint::new(p.centroid, p.normal, p.polygon, vis)))
         .collect();
-    let patch_h = progressive(
-        vis,
-        &patches,
-        &patch_direct,
-        options.bounces,
-        options.tolerance,
-        stats,
-    );
-    stats.direct_power = patches
+    // Emitted radiosity M = pi L of the patches, when the form factors carry it.
+    let emission: Vec<DVec3> = patches
         .iter()
-        .zip(&patch_direct)
-        .map(|(p, h)| p.area * h.element_sum() / 3.0)
-        .sum();
+        .map(|p| {
+            if options.form_factors == FormFactors::Hemicube {
+                std::f64::consts::PI * scene.materials[scene.polygons[p.polygon].material].radiance
+            } else {
+                DVec3::ZERO
+            }
+        })
+        .collect();
+    let system = PatchSystem::new(&patches, patch_direct, emission);
+    let start = std::time::Instant::now();
+    let patch_h = match options.solver {
+        Solver::Matrix => super::matrix::solve(&kernel, &system, options, stats),
+        _ => refine(&kernel, &system, options.bounces, options.tolerance, stats),
+    };
+    stats.patch_solve_seconds = start.elapsed().as_secs_f64();
+    stats.hemicube = kernel.hemicube_stats();
+    stats.direct_power = system.power(&system.direct);
     stats.absorbed_power = patches
         .iter()
         .zip(&patch_h)
         .map(|(p, h)| p.area * ((DVec3::ONE - p.rho) * *h).element_sum() / 3.0)
         .sum();
-    // Reflected radiosity of each patch, the source of the final gather.
+    // Radiosity of each patch, the source of the final gather: reflected, and emitted where the
+    // form factors carry it (direct light only: emitted alone).
     let reflected: Vec<DVec3> = patches
         .iter()
         .zip(&patch_h)
-        .map(|(p, h)| p.rho * *h)
+        .zip(&system.emission)
+        .map(|((p, h), m)| {
+            if options.bounces == Some(0) {
+                *m
+            } else {
+                *m + p.rho * *h
+            }
+        })
         .collect();
+    let emits = system.emits();
     let gather_rays = AtomicU64::new(0);
     let done = AtomicU64::new(0);
-    let out = meshes
+    let (out, emitted): (Vec<Vec<DVec3>>, Vec<Vec<DVec3>>) = meshes
         .par_iter()
-        .zip(direct_h)
+        .zip(direct_h.par_iter())
         .map(|(m, dh)| {
             let pts = evaluation_points(scene, vis, m);
             let mut rays = 0u64;
@@ -294,16 +365,21 @@ pub fn indirect(
                 .iter()
                 .zip(dh)
                 .map(|(p, &d)| {
+                    let f = kernel.gather(p, &|j| reflected[j].max_element() > 0.0, &mut rays);
                     let mut h = d;
-                    for (patch, b) in patches.iter().zip(&reflected) {
+                    let mut e = DVec3::ZERO;
+                    for ((b, m), f) in reflected.iter().zip(&system.emission).zip(f) {
                         if b.max_element() <= 0.0 {
                             continue;
                         }
-                        h += *b * point_patch_form_factor(vis, p, patch, &mut rays);
+                        h += *b * f;
+                        if emits {
+                            e += *m * f;
+                        }
                     }
-                    h
+                    (h, e)
                 })
-                .collect();
+                .unzip();
             gather_rays.fetch_add(rays, Ordering::Relaxed);
             let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
             progress(
@@ -313,7 +389,15 @@ pub fn indirect(
             );
             values
         })
-        .collect();
+        .unzip();
+    if emits {
+        for (dh, e) in direct_h.iter_mut().zip(emitted) {
+            for (d, e) in dh.iter_mut().zip(e) {
+                *d += e;
+            }
+        }
+    }
+    stats.hemicube = kernel.hemicube_stats();
     stats.rays += gather_rays.load(Ordering::Relaxed);
     out
 }

@@ -71,7 +71,7 @@ fn discontinuity_beats_uniform_on_the_square_occluder() {
 #[test]
 fn compare_writes_report_charts_and_pictures() {
     use penumbra::compare::{CompareOptions, Method, Region, compare};
-    use penumbra::solve::DirectMethod;
+    use penumbra::solve::{DirectMethod, FormFactors, Solver};
     let dir = crate::scratch("compare");
     let input = dir.join("square.glb");
     std::fs::write(&input, fixtures::square_occluder()).unwrap();
@@ -79,11 +79,15 @@ fn compare_writes_report_charts_and_pictures() {
     let options = CompareOptions {
         budgets: vec![300, 3000],
         methods: [Mesher::Uniform, Mesher::Discontinuity]
-            .map(|mesher| Method {
-                mesher,
-                direct: DirectMethod::Exact,
-            })
-            .to_vec(),
+            .map(|mesher| Method::new(mesher, DirectMethod::Exact))
+            .into_iter()
+            .chain([Method {
+                solver: Solver::Matrix,
+                form_factors: FormFactors::Hemicube,
+                ..Method::new(Mesher::Uniform, DirectMethod::Exact)
+            }])
+            .collect(),
+        scaling_patches: vec![64, 128],
         resolution: 96,
         spp: 256,
         picture_budget: 3000,
@@ -109,6 +113,7 @@ fn compare_writes_report_charts_and_pictures() {
         "regions.png",
         "error-uniform-exact.png",
         "error-discontinuity-exact.png",
+        "error-uniform-matrix-hemicube.png",
         "reference.exr",
         "bakes/discontinuity-exact.glb",
     ] {
@@ -116,7 +121,22 @@ fn compare_writes_report_charts_and_pictures() {
     }
     let json: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("report.json")).unwrap()).unwrap();
-    assert_eq!(json["scene"]["runs"].as_array().unwrap().len(), 4);
+    assert_eq!(json["scene"]["runs"].as_array().unwrap().len(), 6);
+    // The classic method's run and the matrix's growth: 8 n² bytes.
+    let classic = report
+        .scene
+        .runs
+        .iter()
+        .find(|r| r.method == "uniform-matrix-hemicube" && r.budget == 3000)
+        .unwrap();
+    let n = classic.patches as u64;
+    assert_eq!(classic.matrix_bytes, Some(8 * n * n));
+    assert!(classic.hemicubes.is_some_and(|h| h > n));
+    assert_eq!(report.scene.scaling.len(), 2);
+    for row in &report.scene.scaling {
+        assert_eq!(row.matrix_bytes, 8 * (row.patches as u64).pow(2));
+        assert!(row.progressive_shots > 0 && row.matrix_sweeps > 0);
+    }
     let s = &report.scene;
     for r in [Region::Lit, Region::Penumbra, Region::Umbra] {
         assert!(
@@ -158,4 +178,5 @@ fn compare_writes_report_charts_and_pictures() {
     }
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("## Findings") && md.contains("| discontinuity-exact | 3000 |"));
+    assert!(md.contains("## Classic methods") && md.contains("uniform-matrix-hemicube at its"));
 }

@@ -91,7 +91,7 @@ fn square_occluder_segments_lie_on_the_analytic_lines() {
     );
 }
 
-/// The DESIGN's 5-segment case that makes spade's constraint splitting panic goes through the
+/// The 5-segment case that makes spade's constraint splitting panic goes through the
 /// arrangement and into spade without a refused piece.
 #[test]
 fn spade_five_segment_repro_meshes() {
