@@ -230,12 +230,14 @@ fn hemicube_fails_on_its_failure_scenes() {
         }
         (sq / norm).sqrt()
     };
-    // The uniform mesh at the quick options, with `form_factors` at `resolution` cells.
+    // The uniform mesh at the quick options, progressive, with `form_factors` at `resolution`
+    // cells.
     let uniform = |s: &FailureScene, form_factors: FormFactors, resolution: u32| {
         let mut o = BakeOptions {
             mesher: Mesher::Uniform,
             ..quick()
         };
+        o.solve.solver = penumbra::solve::Solver::Progressive;
         o.solve.form_factors = form_factors;
         o.solve.hemicube_resolution = resolution;
         crate::bake(&s.glb, &o)
