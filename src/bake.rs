@@ -91,6 +91,9 @@ impl BakeOptions {
         if !(1..=1_000_000).contains(&self.solve.patches) {
             return bad("--patches", "must be between 1 and 1000000");
         }
+        if !(0.0..=1.0).contains(&self.solve.light_error) {
+            return bad("--light-error", "must be in [0, 1]");
+        }
         if !(self.solve.hr_tolerance > 0.0 && self.solve.hr_tolerance <= 1.0) {
             return bad("--hr-tolerance", "must be in (0, 1]");
         }

@@ -228,6 +228,12 @@ struct BakeArgs {
     /// links, more accurate).
     #[arg(long, default_value_t = penumbra::solve::DEFAULT_HR_TOLERANCE)]
     hr_tolerance: f64,
+    /// Exact direct light with many emitters: a group of emitters (a node of the light tree) is
+    /// bounded, with one shadow ray, instead of evaluated exactly while the most it can give a
+    /// vertex is below this fraction of the vertex's estimated irradiance (Lightcuts; in
+    /// [0, 1]; 0: every emitter exactly).
+    #[arg(long, default_value_t = penumbra::solve::lightcuts::EPSILON)]
+    light_error: f64,
     /// Lightmap density in texels per scene unit (metre), kept as given: charts that do not fit
     /// one --page-size page go onto more pages. Default: derived from --resolution.
     #[arg(long, conflicts_with = "resolution")]
@@ -498,6 +504,7 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             patches: args.patches,
             solver: args.solver,
             hr_tolerance: args.hr_tolerance,
+            light_error: args.light_error,
             form_factors: args.form_factors,
             hemicube_resolution: args.hemicube_resolution,
             matrix_memory_mib: args.matrix_memory,

@@ -9,6 +9,7 @@
 //! exact unoccluded form factor times a visibility fraction from stratified shadow rays.
 //! Irradiance in W/m² per linear RGB channel.
 
+use super::lightcuts::LightTree;
 use super::{DirectMethod, SolveOptions, evaluation_points};
 use crate::backproject::{EmitterShape, Limits, Occluders, Scratch, Shaft};
 use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint, punctual_unoccluded};
@@ -42,6 +43,12 @@ pub struct DirectStats {
     pub occluders_max: u64,
     /// Exact method: the most convex pieces the visible part of an emitter was cut into.
     pub pieces_max: u64,
+    /// Exact method: nodes of the light tree over the area emitters ([`super::lightcuts`]).
+    pub light_tree_nodes: usize,
+    /// Exact method: (vertex, light-tree node) pairs bounded instead of evaluated exactly: each
+    /// cost one shadow ray and carried under [`super::lightcuts::EPSILON`] of the vertex's
+    /// estimated irradiance.
+    pub bounded: u64,
     /// Cost per area emitter.
     pub emitters: Vec<EmitterCost>,
 }
@@ -99,6 +106,11 @@ pub struct Direct<'a> {
     pub limits: Limits,
     /// The scene's polygons in convex pieces (exact method only; empty otherwise).
     pub occluders: Occluders,
+    /// The light tree over `emitters` (exact method only; empty otherwise).
+    tree: LightTree,
+    /// [`SolveOptions::light_error`].
+    light_error: f64,
+    bounded: AtomicU64,
     evaluations: AtomicU64,
     candidates: AtomicU64,
     fallbacks: AtomicU64,
@@ -131,9 +143,9 @@ impl<'a> Direct<'a> {
         options: &SolveOptions,
     ) -> Direct<'a> {
         let emitters = AreaEmitter::all(scene, options.shadow_samples);
-        let occluders = match options.direct {
-            DirectMethod::Exact => Occluders::new(scene),
-            DirectMethod::Sampled => Occluders::default(),
+        let (occluders, tree) = match options.direct {
+            DirectMethod::Exact => (Occluders::new(scene), LightTree::new(&emitters)),
+            DirectMethod::Sampled => (Occluders::default(), LightTree::default()),
         };
         Direct {
             scene,
@@ -150,6 +162,9 @@ impl<'a> Direct<'a> {
                 ..Limits::default()
             },
             occluders,
+            tree,
+            light_error: options.light_error,
+            bounded: AtomicU64::new(0),
             evaluations: AtomicU64::new(0),
             candidates: AtomicU64::new(0),
             fallbacks: AtomicU64::new(0),
@@ -164,6 +179,7 @@ impl<'a> Direct<'a> {
     pub fn drop_area_emitters(&mut self) {
         self.emitters.clear();
         self.per_emitter.clear();
+        self.tree = LightTree::default();
     }
 
     /// Irradiance H (W/m²) at a receiving point.
@@ -187,10 +203,31 @@ impl<'a> Direct<'a> {
         let mut scale = vec![0.0; points.len()];
         let tree = ClusterTree::new(points);
         let mut scratch = Scratch::default();
+        // Per point, the light tree's cut: the emitters to evaluate exactly (gathered per
+        // emitter) and the bounded rest, added now.
+        let mut wanted: Vec<Vec<u32>> = vec![Vec::new(); self.emitters.len()];
+        let mut bounded = 0;
+        for (i, q) in points.iter().enumerate() {
+            let cut = self.tree.cut(&self.emitters, self.vis, q, self.light_error);
+            h[i] += cut.bounded;
+            tally.rays += cut.rays;
+            bounded += cut.bounded_nodes;
+            for e in cut.exact {
+                wanted[e as usize].push(i as u32);
+            }
+        }
+        self.bounded.fetch_add(bounded, Ordering::Relaxed);
         for (ei, e) in self.emitters.iter().enumerate() {
+            if wanted[ei].is_empty() {
+                continue;
+            }
             let start = Instant::now();
             let before = (tally.evaluations, tally.occluders, tally.fallbacks);
-            let f_un: Vec<f64> = points.iter().map(|q| e.form_factor(q.p, q.n)).collect();
+            let mut f_un = vec![0.0; points.len()];
+            for &i in &wanted[ei] {
+                let q = &points[i as usize];
+                f_un[i as usize] = e.form_factor(q.p, q.n);
+            }
             let active = f_un.iter().filter(|f| **f > 0.0).count();
             if active == 0 {
                 continue;
@@ -465,6 +502,8 @@ impl<'a> Direct<'a> {
             occluders: load(&self.occluder_total),
             occluders_max: load(&self.occluders_max),
             pieces_max: load(&self.pieces_max),
+            light_tree_nodes: self.tree.len(),
+            bounded: load(&self.bounded),
             emitters: self
                 .emitters
                 .iter()

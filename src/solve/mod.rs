@@ -38,6 +38,7 @@ pub mod form_factors;
 pub mod gauss_seidel;
 pub mod hemicube;
 pub mod hierarchical;
+pub mod lightcuts;
 pub mod matrix;
 pub mod progressive;
 
@@ -110,6 +111,10 @@ pub struct SolveOptions {
     /// point, that emitter's light at that point is sampled instead (counted in
     /// [`DirectStats::fallbacks`]).
     pub occluder_cap: usize,
+    /// Exact direct light: a light-tree node is bounded instead of evaluated while its bound is
+    /// below this fraction of the point's estimated irradiance ([`lightcuts`]; 0: every
+    /// emitter exactly). Dimensionless.
+    pub light_error: f64,
     /// Number of light bounces after the direct light (`Some(0)`: direct only); `None` iterates
     /// until the unshot power is below `tolerance` of the power first received.
     pub bounces: Option<u32>,
@@ -146,6 +151,7 @@ impl Default for SolveOptions {
             tolerance: 1e-3,
             solver: Solver::Hierarchical,
             hr_tolerance: DEFAULT_HR_TOLERANCE,
+            light_error: lightcuts::EPSILON,
             form_factors: FormFactors::ClosedForm,
             hemicube_resolution: hemicube::DEFAULT_RESOLUTION,
             matrix_memory_mib: matrix::DEFAULT_MEMORY_MIB,
