@@ -168,13 +168,16 @@ fn compare_writes_report_charts_and_pictures() {
     assert!(region(d, Region::Penumbra) < region(u, Region::Penumbra));
     for m in ["uniform-exact", "discontinuity-exact"] {
         let (coarse, fine) = (run(m, 300), run(m, 3000));
+        println!(
+            "{m}: RMSE {:.4} at 300, {:.4} at 3000 (ratio {:.2})",
+            coarse.error.rmse,
+            fine.error.rmse,
+            fine.error.rmse / coarse.error.rmse
+        );
         assert!(
             fine.error.rmse < 0.5 * coarse.error.rmse,
             "{m}: {coarse:?} {fine:?}"
         );
-        // raw² = error² + noise² (when the error is not clamped at 0).
-        let e = fine.error;
-        assert!((e.rmse_raw.powi(2) - e.rmse.powi(2) - e.noise.powi(2)).abs() < 1e-9);
     }
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("## Findings") && md.contains("| discontinuity-exact | 3000 |"));
