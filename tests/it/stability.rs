@@ -92,7 +92,14 @@ fn direct_only() -> BakeOptions {
 }
 
 fn bake_direct(bytes: &[u8]) -> Bake {
-    let o = direct_only();
+    bake_direct_at(bytes, direct_only().budget)
+}
+
+fn bake_direct_at(bytes: &[u8], budget: usize) -> Bake {
+    let o = BakeOptions {
+        budget,
+        ..direct_only()
+    };
     let mut b = match std::env::var("PENUMBRA_MUTATE").as_deref() {
         Ok("uniform") => crate::bake(
             bytes,
@@ -193,7 +200,8 @@ fn light_coplanar_with_the_ceiling() {
             }
         }
     });
-    matches_exact_in_shadows("coplanar light", &bytes, 1.0, 1.0);
+    // Measured 0.0042 RMS and 0.058 max; uniform meshing at the same budget: 0.014 and 0.12.
+    matches_exact_in_shadows("coplanar light", &bytes, 0.006, 0.09);
 }
 
 #[test]
@@ -207,7 +215,9 @@ fn rotated_occluder_d2() {
         &plate(1.0, [[0.0, -r], [-r, 0.0], [0.0, r], [r, 0.0]]),
         m,
     );
-    matches_exact_in_shadows("rotated occluder", &g.to_glb(), 1.0, 1.0);
+    // Measured 0.0008 RMS and 0.0044 max (uniform meshing is as good on this wide penumbra;
+    // the shadow moved by 1% of the floor fails it: 0.0036 RMS).
+    matches_exact_in_shadows("rotated occluder", &g.to_glb(), 0.0012, 0.007);
 }
 
 #[test]
@@ -226,7 +236,8 @@ fn occluder_touching_the_emitter() {
         ]),
         m,
     );
-    matches_exact_in_shadows("occluder touching emitter", &g.to_glb(), 1.0, 1.0);
+    // Measured 0.0011 RMS and 0.0070 max; uniform meshing at the same budget: 0.0022 and 0.034.
+    matches_exact_in_shadows("occluder touching emitter", &g.to_glb(), 0.0017, 0.011);
 }
 
 #[test]
@@ -238,7 +249,8 @@ fn occluder_crossing_the_receiver() {
         &fixtures::cuboid([-0.3, -0.5, -0.3], [0.3, 0.5, 0.3]),
         grey,
     );
-    let b = matches_exact_in_shadows("crossing box", &g.to_glb(), 1.0, 1.0);
+    // Measured 0.0074 RMS and 0.078 max; uniform meshing at the same budget: 0.022 and 0.19.
+    let b = matches_exact_in_shadows("crossing box", &g.to_glb(), 0.011, 0.12);
     let floor = b.scene.polygons.iter().position(|p| p.area > 15.0).unwrap();
     assert!(
         b.segments[floor]
@@ -262,7 +274,8 @@ fn nearly_coincident_occluders() {
         &plate(1.0 + 1e-7, sq.map(|[x, z]| [x + 1e-7, z])),
         m,
     );
-    matches_exact_in_shadows("coincident occluders", &g.to_glb(), 1.0, 1.0);
+    // Measured 0.0006 RMS and 0.0028 max; uniform meshing at the same budget: 0.0013 and 0.014.
+    matches_exact_in_shadows("coincident occluders", &g.to_glb(), 0.0009, 0.0045);
 }
 
 /// The generator lives in the library (benchmarks use it too); `crate::stability::box_grid`
@@ -333,19 +346,18 @@ fn finely_tessellated_sphere_stays_within_budget() {
     let grey = floor_and_light(&mut g);
     g.add_mesh_node("sphere", &sphere([0.0, 1.0, 0.0], 0.4, 40), grey);
     let bytes = g.to_glb();
-    matches_exact_in_shadows("tessellated sphere", &bytes, 1.0, 1.0);
     // The sphere alone has 3120 triangles, each its own polygon, and refinement splits its
-    // slivers at the poles: compare with the uniform mesher at the same budget.
-    let o = BakeOptions {
-        budget: 8000,
-        ..dm()
-    };
-    let b = crate::bake(&bytes, &o);
+    // slivers at the poles: at the quick budget its wedges are all dropped, so bake at 8000
+    // and compare the elements with the uniform mesher at the same budget.
+    let b = bake_direct_at(&bytes, 8000);
+    // Measured 0.0012 RMS and 0.0082 max; the shadow moved by 1% of the floor: 0.0023, 0.0135.
+    check("tessellated sphere", &b, 0.0018, 0.013);
     let u = crate::bake(
         &bytes,
         &BakeOptions {
             mesher: Mesher::Uniform,
-            ..o.clone()
+            budget: 8000,
+            ..direct_only()
         },
     );
     let d = b.stats.discontinuity.as_ref().unwrap();
@@ -358,15 +370,20 @@ fn finely_tessellated_sphere_stays_within_budget() {
     );
 }
 
+/// The box on the floor's tolerances (measured 0.0023 RMS and 0.0105 max at every scale and
+/// position; the uniform mesher at the same budget gives 0.0070 and 0.052).
+const BOX_RMS: f64 = 0.0035;
+const BOX_MAX: f64 = 0.016;
+
 /// The box on the floor at scale 1, 1e-3 and 1e4: each bake matches the exact light in its
 /// shadows, with the same error at every scale (the error is relative, so it must not change).
 #[test]
 fn same_result_at_tiny_and_huge_scales() {
     let base = fixtures::box_on_floor();
-    let e1 = check("box on floor", &bake_direct(&base), 1.0, 1.0);
+    let e1 = check("box on floor", &bake_direct(&base), BOX_RMS, BOX_MAX);
     for s in [1e-3, 1e4] {
         let b = bake_direct(&transformed(&base, json!({"scale": [s, s, s]})));
-        let e = check(&format!("box on floor at scale {s}"), &b, 1.0, 1.0);
+        let e = check(&format!("box on floor at scale {s}"), &b, BOX_RMS, BOX_MAX);
         assert!(
             (e.rms - e1.rms).abs() <= 0.1 * e1.rms
                 && e.points.abs_diff(e1.points) * 100 <= e1.points,
@@ -380,12 +397,17 @@ fn same_result_at_tiny_and_huge_scales() {
 #[test]
 fn rotating_and_translating_the_scene_keeps_the_light() {
     let base = fixtures::box_on_floor();
-    let e1 = check("box on floor", &bake_direct(&base), 1.0, 1.0);
+    let e1 = check("box on floor", &bake_direct(&base), BOX_RMS, BOX_MAX);
     let moved = transformed(
         &base,
         json!({"translation": [12.5, -3.0, 40.0], "rotation": [0.2126311, 0.3189466, 0.1063155, 0.9177546]}),
     );
-    let e = check("box on floor, moved", &bake_direct(&moved), 1.0, 1.0);
+    let e = check(
+        "box on floor, moved",
+        &bake_direct(&moved),
+        BOX_RMS,
+        BOX_MAX,
+    );
     assert!(
         (e.rms - e1.rms).abs() <= 0.1 * e1.rms,
         "{e:?}, unmoved {e1:?}"
