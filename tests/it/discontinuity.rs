@@ -181,8 +181,9 @@ fn contact_corners_keep_lit_and_shadowed_limits() {
             "{light} light: worst vertex limit error {:.4} at {:.3?}",
             worst.0, worst.1
         );
+        // Measured 0.0012 (point light) and 0.0083 (area light).
         assert!(
-            worst.0 < 0.1,
+            worst.0 < 0.01,
             "{light} light: a corner value is not its triangle's limit: {worst:?}"
         );
     }
@@ -261,9 +262,10 @@ fn contact_lines_do_not_leak_light() {
         outside_min.is_finite(),
         "no mesh vertex on the contact line"
     );
+    // Measured 1.7e-6 of the peak.
     println!("lit side of the contact line: worst error {outside_worst:.2e} of the peak");
     assert!(
-        outside_worst < 0.01,
+        outside_worst < 1e-4,
         "the lit side of the contact is not its exact light: {outside_worst} of the peak (min {outside_min})"
     );
 }

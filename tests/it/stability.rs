@@ -100,25 +100,7 @@ fn bake_direct_at(bytes: &[u8], budget: usize) -> Bake {
         budget,
         ..direct_only()
     };
-    let mut b = match std::env::var("PENUMBRA_MUTATE").as_deref() {
-        Ok("uniform") => crate::bake(
-            bytes,
-            &BakeOptions {
-                mesher: Mesher::Uniform,
-                ..o
-            },
-        ),
-        _ => crate::bake(bytes, &o),
-    };
-    if let Ok("shift") = std::env::var("PENUMBRA_MUTATE").as_deref() {
-        for m in &mut b.meshes {
-            let d = 0.01 * b.scene.polygons[m.polygon].area.sqrt();
-            for v in &mut m.vertices {
-                *v += DVec2::new(d, 0.0);
-            }
-        }
-    }
-    b
+    crate::bake(bytes, &o)
 }
 
 /// Bakes the direct light with discontinuity meshing; in the shadows its RMS error is within
