@@ -46,27 +46,31 @@ fn compare(name: &str, bytes: &[u8], budget: usize) -> (f64, f64) {
 
 #[test]
 fn discontinuity_beats_uniform_in_shadows_on_the_cornell_box() {
+    // Measured 3.5 (RMS) and 1.7 (max).
     let (rms, max) = compare("cornell-box", &fixtures::cornell_box(), 4000);
-    assert!(rms > 1.2, "RMS ratio uniform/discontinuity {rms}");
-    assert!(max > 1.2, "max ratio uniform/discontinuity {max}");
+    assert!(rms > 2.0, "RMS ratio uniform/discontinuity {rms}");
+    assert!(max > 1.4, "max ratio uniform/discontinuity {max}");
 }
 
 #[test]
 fn discontinuity_beats_uniform_in_shadows_on_the_box_grid() {
-    let (rms, _) = compare("box grid 5x5", &crate::stability::box_grid(5), 6000);
-    assert!(rms > 1.2, "RMS ratio uniform/discontinuity {rms}");
+    // Measured 3.7 (RMS) and 2.2 (max).
+    let (rms, max) = compare("box grid 5x5", &crate::stability::box_grid(5), 6000);
+    assert!(rms > 2.0, "RMS ratio uniform/discontinuity {rms}");
+    assert!(max > 1.5, "max ratio uniform/discontinuity {max}");
 }
 
 #[test]
 fn discontinuity_beats_uniform_on_the_square_occluder() {
+    // Measured 1.67 (RMS) and 2.6 (max).
     let (rms, max) = compare("square occluder", &fixtures::square_occluder(), 2000);
-    assert!(rms > 1.5 && max > 1.5, "ratios {rms} {max}");
+    assert!(rms > 1.5 && max > 2.0, "ratios {rms} {max}");
 }
 
 /// `penumbra compare` end to end on the square occluder at small settings: every file is
 /// written and readable, the regions are all present, errors fall with the budget, and at
 /// equal budget discontinuity meshing is better than uniform in the umbra and penumbra, where
-/// its umbra error is down at the reference's noise (the umbra is exact in its mesh). A
+/// its umbra error is well below the reference's noise (the umbra is exact in its mesh). A
 /// misaligned texel layout, a wrong normalisation or a biased reference would fail it.
 #[test]
 fn compare_writes_report_charts_and_pictures() {
@@ -163,18 +167,24 @@ fn compare_writes_report_charts_and_pictures() {
         region(u, Region::Lit),
         d.error.noise
     );
-    assert!(region(d, Region::Umbra) < 0.03);
+    // Measured: discontinuity umbra 0.0105 against uniform 0.047 (the reference's noise is
+    // 0.08, already subtracted), penumbra 0.040 against 0.055.
+    assert!(region(d, Region::Umbra) < 0.02);
     assert!(region(d, Region::Umbra) < 0.5 * region(u, Region::Umbra));
-    assert!(region(d, Region::Penumbra) < region(u, Region::Penumbra));
+    assert!(region(d, Region::Penumbra) < 0.9 * region(u, Region::Penumbra));
     for m in ["uniform-exact", "discontinuity-exact"] {
         let (coarse, fine) = (run(m, 300), run(m, 3000));
+        println!(
+            "{m}: RMSE {:.4} at 300, {:.4} at 3000 (ratio {:.2})",
+            coarse.error.rmse,
+            fine.error.rmse,
+            fine.error.rmse / coarse.error.rmse
+        );
+        // Measured 0.13 to 0.14: ten times the elements, about a tenth of the error.
         assert!(
-            fine.error.rmse < 0.5 * coarse.error.rmse,
+            fine.error.rmse < 0.25 * coarse.error.rmse,
             "{m}: {coarse:?} {fine:?}"
         );
-        // raw² = error² + noise² (when the error is not clamped at 0).
-        let e = fine.error;
-        assert!((e.rmse_raw.powi(2) - e.rmse.powi(2) - e.noise.powi(2)).abs() < 1e-9);
     }
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
     assert!(md.contains("## Findings") && md.contains("| discontinuity-exact | 3000 |"));
