@@ -37,7 +37,7 @@ use std::collections::BinaryHeap;
 
 /// The default of [`super::SolveOptions::light_error`]: a node of the cut is refined while its
 /// bound exceeds this fraction of the cut's estimated total irradiance (dimensionless).
-pub const EPSILON: f64 = 0.01;
+pub const EPSILON: f64 = 0.05;
 
 /// A node of the light tree.
 #[derive(Clone, Debug)]
@@ -131,10 +131,11 @@ impl LightTree {
         if let [only] = ids {
             let e = &emitters[*only as usize];
             let hull = e.shape.hull_world();
-            let (min, max) = hull.iter().fold(
-                (DVec3::INFINITY, DVec3::NEG_INFINITY),
-                |(lo, hi), q| (lo.min(*q), hi.max(*q)),
-            );
+            let (min, max) = hull
+                .iter()
+                .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), q| {
+                    (lo.min(*q), hi.max(*q))
+                });
             let area: f64 = e.triangles.iter().map(crate::geometry::triangle_area).sum();
             let power = e.radiance * area;
             let scalar = power.element_sum() / 3.0;
@@ -151,13 +152,12 @@ impl LightTree {
             });
             return (self.nodes.len() - 1) as u32;
         }
-        let (lo, hi) = ids.iter().fold(
-            (DVec3::INFINITY, DVec3::NEG_INFINITY),
-            |(lo, hi), &i| {
+        let (lo, hi) = ids
+            .iter()
+            .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), &i| {
                 let c = emitters[i as usize].center;
                 (lo.min(c), hi.max(c))
-            },
-        );
+            });
         let ext = hi - lo;
         let axis = if ext.x >= ext.y && ext.x >= ext.z {
             0
@@ -177,7 +177,11 @@ impl LightTree {
         let b = self.build(emitters, r);
         let (na, nb) = (&self.nodes[a as usize], &self.nodes[b as usize]);
         let scalar = na.scalar + nb.scalar;
-        let w = if scalar > 0.0 { na.scalar / scalar } else { 0.5 };
+        let w = if scalar > 0.0 {
+            na.scalar / scalar
+        } else {
+            0.5
+        };
         let node = Node {
             kids: Some([a, b]),
             emitter: if na.scalar >= nb.scalar {
