@@ -1593,23 +1593,18 @@ pub fn shadow_error(b: &Bake, points_per_side: usize) -> Option<ShadowError> {
     let mut peak: f64 = 0.0;
     let n = points_per_side.max(1);
     for t in &poly.triangles_plane {
-        for i in 0..n {
-            for j in 0..n - i {
-                let u = (i as f64 + 1.0 / 3.0) / n as f64;
-                let v = (j as f64 + 1.0 / 3.0) / n as f64;
-                let q: DVec2 = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
-                let p = poly.frame.world_from_plane(q);
-                let at = SurfacePoint::new(p, poly.frame.n, floor, &vis);
-                let exact = direct.irradiance(&at).x;
-                let unoccluded: f64 = direct
-                    .emitters
-                    .iter()
-                    .map(|e| PI * e.radiance.x * e.form_factor(p, poly.frame.n))
-                    .sum();
-                peak = peak.max(exact);
-                if exact < 0.995 * unoccluded {
-                    errors.push((loc.value(q).x - exact).abs());
-                }
+        for q in crate::geometry::triangle_grid(t, n) {
+            let p = poly.frame.world_from_plane(q);
+            let at = SurfacePoint::new(p, poly.frame.n, floor, &vis);
+            let exact = direct.irradiance(&at).x;
+            let unoccluded: f64 = direct
+                .emitters
+                .iter()
+                .map(|e| PI * e.radiance.x * e.form_factor(p, poly.frame.n))
+                .sum();
+            peak = peak.max(exact);
+            if exact < 0.995 * unoccluded {
+                errors.push((loc.value(q).x - exact).abs());
             }
         }
     }

@@ -324,6 +324,19 @@ pub fn triangle_area(p: &[DVec3; 3]) -> f64 {
 // ---------------------------------------------------------------------------------------------
 // Barycentric coordinates
 
+/// A stratified grid of `n (n + 1) / 2` points inside the plane triangle `t`: for `i + j < n`,
+/// the point at `((i + 1/3) / n, (j + 1/3) / n)` along its two edges from `t[0]` (each point is
+/// the centroid of one small triangle of the `n`-fold subdivision pointing the same way).
+pub fn triangle_grid(t: &[DVec2; 3], n: usize) -> impl Iterator<Item = DVec2> + '_ {
+    (0..n).flat_map(move |i| {
+        (0..n - i).map(move |j| {
+            let u = (i as f64 + 1.0 / 3.0) / n as f64;
+            let v = (j as f64 + 1.0 / 3.0) / n as f64;
+            t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v
+        })
+    })
+}
+
 /// Barycentric coordinates `[l0, l1, l2]` of plane point `q` in triangle `t` (by signed areas:
 /// `l1 = area(a, q, c) / area(a, b, c)`, ...). Outside the triangle some are negative; a
 /// degenerate triangle gives non-finite values.
@@ -353,6 +366,22 @@ pub fn barycentric_3d(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn triangle_grid_covers_the_triangle_evenly() {
+        let t = [DVec2::new(0.0, 0.0), DVec2::new(3.0, 0.0), DVec2::new(1.0, 2.0)];
+        for n in [1, 2, 7] {
+            let points: Vec<DVec2> = triangle_grid(&t, n).collect();
+            assert_eq!(points.len(), n * (n + 1) / 2);
+            for q in &points {
+                let l = barycentric_2d(&t, *q);
+                assert!(l.iter().all(|x| *x > 0.0), "{q} outside: {l:?}");
+            }
+        }
+        // One point: the centroid.
+        let c = triangle_grid(&t, 1).next().unwrap();
+        assert!((c - (t[0] + t[1] + t[2]) / 3.0).length() < 1e-12, "{c}");
+    }
 
     fn square(z: f64, size: f64) -> Vec<DVec3> {
         let h = size / 2.0;

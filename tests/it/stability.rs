@@ -4,8 +4,8 @@
 
 use crate::discontinuity::dm;
 use crate::output::split_glb;
-use glam::DVec2;
 use penumbra::fixtures::{self, GlbBuilder, Material, TriangleMesh};
+use penumbra::geometry::triangle_grid;
 use penumbra::lightmap::Locator;
 use penumbra::mesh::Mesher;
 use penumbra::solve::{Direct, SurfacePoint};
@@ -50,25 +50,20 @@ fn shadow_errors(b: &Bake, points: usize) -> ShadowErrors {
         for t in &poly.triangles_plane {
             let a = 0.5 * (t[1] - t[0]).perp_dot(t[2] - t[0]).abs();
             let n = ((2.0 * a).sqrt() / h).ceil().max(1.0) as usize;
-            for i in 0..n {
-                for j in 0..n - i {
-                    let u = (i as f64 + 1.0 / 3.0) / n as f64;
-                    let v = (j as f64 + 1.0 / 3.0) / n as f64;
-                    let q: DVec2 = t[0] + (t[1] - t[0]) * u + (t[2] - t[0]) * v;
-                    let p = poly.frame.world_from_plane(q);
-                    let unoccluded: f64 = direct
-                        .emitters
-                        .iter()
-                        .map(|e| PI * e.radiance.x * e.form_factor(p, poly.frame.n))
-                        .sum();
-                    if unoccluded <= 0.0 {
-                        continue;
-                    }
-                    let at = SurfacePoint::new(p, poly.frame.n, f, &vis);
-                    let exact = direct.irradiance(&at).x;
-                    peak = peak.max(exact);
-                    errors.push(((loc.value(q).x - exact).abs(), exact < 0.995 * unoccluded));
+            for q in triangle_grid(t, n) {
+                let p = poly.frame.world_from_plane(q);
+                let unoccluded: f64 = direct
+                    .emitters
+                    .iter()
+                    .map(|e| PI * e.radiance.x * e.form_factor(p, poly.frame.n))
+                    .sum();
+                if unoccluded <= 0.0 {
+                    continue;
                 }
+                let at = SurfacePoint::new(p, poly.frame.n, f, &vis);
+                let exact = direct.irradiance(&at).x;
+                peak = peak.max(exact);
+                errors.push(((loc.value(q).x - exact).abs(), exact < 0.995 * unoccluded));
             }
         }
     }
