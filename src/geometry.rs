@@ -369,7 +369,11 @@ mod tests {
 
     #[test]
     fn triangle_grid_covers_the_triangle_evenly() {
-        let t = [DVec2::new(0.0, 0.0), DVec2::new(3.0, 0.0), DVec2::new(1.0, 2.0)];
+        let t = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(3.0, 0.0),
+            DVec2::new(1.0, 2.0),
+        ];
         for n in [1, 2, 7] {
             let points: Vec<DVec2> = triangle_grid(&t, n).collect();
             assert_eq!(points.len(), n * (n + 1) / 2);
