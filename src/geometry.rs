@@ -324,6 +324,17 @@ pub fn triangle_area(p: &[DVec3; 3]) -> f64 {
 // ---------------------------------------------------------------------------------------------
 // Barycentric coordinates
 
+/// The eight corners of the axis-aligned box `[min, max]`.
+pub fn box_corners(min: DVec3, max: DVec3) -> [DVec3; 8] {
+    std::array::from_fn(|c| {
+        DVec3::new(
+            if c & 1 == 0 { min.x } else { max.x },
+            if c & 2 == 0 { min.y } else { max.y },
+            if c & 4 == 0 { min.z } else { max.z },
+        )
+    })
+}
+
 /// A stratified grid of `n (n + 1) / 2` points inside the plane triangle `t`: for `i + j < n`,
 /// the point at `((i + 1/3) / n, (j + 1/3) / n)` along its two edges from `t[0]` (each point is
 /// the centroid of one small triangle of the `n`-fold subdivision pointing the same way).

@@ -167,7 +167,7 @@
 //! channel; powers in W (mean over RGB); form factors and `K` dimensionless.
 
 use super::{SolveOptions, SolveStats};
-use crate::geometry::{point_polygon_form_factor, triangle_area};
+use crate::geometry::{box_corners, point_polygon_form_factor, triangle_area};
 use crate::light::{NO_POLYGON, SurfacePoint};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
@@ -780,14 +780,9 @@ impl Hierarchy {
                 return false;
             }
             let tol = 1e-9 * (other.radius + plane.radius).max(1e-300);
-            (0..8).all(|c| {
-                let q = DVec3::new(
-                    if c & 1 == 0 { other.min.x } else { other.max.x },
-                    if c & 2 == 0 { other.min.y } else { other.max.y },
-                    if c & 4 == 0 { other.min.z } else { other.max.z },
-                );
-                plane.normal.dot(q - plane.center) <= tol
-            })
+            box_corners(other.min, other.max)
+                .iter()
+                .all(|q| plane.normal.dot(*q - plane.center) <= tol)
         };
         behind(nr, ns) || behind(ns, nr)
     }
@@ -1183,14 +1178,9 @@ fn enclosed(scene: &Scene, vis: &Visibility, p: &[DVec3; 3], n: DVec3, polygon: 
 /// True when the bounding box of `n` lies above (or touches) the horizon of `(p, normal)`.
 fn box_above(p: DVec3, normal: DVec3, n: &Node) -> bool {
     let tol = 1e-9 * (n.radius + n.center.distance(p));
-    (0..8).all(|c| {
-        let q = DVec3::new(
-            if c & 1 == 0 { n.min.x } else { n.max.x },
-            if c & 2 == 0 { n.min.y } else { n.max.y },
-            if c & 4 == 0 { n.min.z } else { n.max.z },
-        );
-        normal.dot(q - p) >= -tol
-    })
+    box_corners(n.min, n.max)
+        .iter()
+        .all(|q| normal.dot(*q - p) >= -tol)
 }
 
 /// Up to four sample points of a node (see the module doc).

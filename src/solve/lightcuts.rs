@@ -29,6 +29,7 @@
 //!
 //! With one emitter, or where every emitter matters, everything is exact as before.
 
+use crate::geometry::box_corners;
 use crate::light::{AreaEmitter, SurfacePoint};
 use crate::visibility::Visibility;
 use glam::DVec3;
@@ -207,18 +208,12 @@ impl LightTree {
     /// The bound and the unoccluded estimate of node `i` at `(p, n)` (W/m², channel mean).
     fn bound_and_estimate(&self, i: u32, p: DVec3, n: DVec3) -> (f64, f64) {
         let node = &self.nodes[i as usize];
-        let corner = |c: i32| {
-            DVec3::new(
-                if c & 1 == 0 { node.min.x } else { node.max.x },
-                if c & 2 == 0 { node.min.y } else { node.max.y },
-                if c & 4 == 0 { node.min.z } else { node.max.z },
-            )
-        };
+        let corners = box_corners(node.min, node.max);
         // Some of the box above the point's horizon, and the point in front of some emitter.
-        let above = (0..8).any(|c| n.dot(corner(c) - p) > 0.0);
+        let above = corners.iter().any(|q| n.dot(*q - p) > 0.0);
         let in_front = node
             .facing
-            .is_none_or(|f| (0..8).any(|c| f.dot(p - corner(c)) > 0.0));
+            .is_none_or(|f| corners.iter().any(|q| f.dot(p - *q) > 0.0));
         if !above || !in_front || node.scalar <= 0.0 {
             return (0.0, 0.0);
         }
