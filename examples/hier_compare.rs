@@ -20,7 +20,7 @@ fn main() -> anyhow::Result<()> {
     let gltf = load::read(Path::new(&path))?;
     let mut options = BakeOptions::default();
     if let Some(b) = budget {
-        options.budget = b;
+        options.budget = Some(b);
     }
     // The progressive solver's patch count (a reference run with finer patches).
     if let Ok(p) = std::env::var("PATCHES") {

@@ -20,7 +20,7 @@ fn main() -> anyhow::Result<()> {
     let tol: f64 = args.next().map(|s| s.parse()).transpose()?.unwrap_or(3e-5);
     let budget: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(4000);
     let mut o = BakeOptions {
-        budget,
+        budget: Some(budget),
         resolution: Some(128),
         ..Default::default()
     };

@@ -31,7 +31,7 @@ fn main() -> anyhow::Result<()> {
         ..BakeOptions::default()
     };
     if let Some(b) = budget {
-        options.budget = b;
+        options.budget = Some(b);
     }
     if let Some(t) = tol {
         options.solve.hr_tolerance = t;

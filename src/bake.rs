@@ -18,8 +18,9 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug)]
 pub struct BakeOptions {
     pub mesher: Mesher,
-    /// Target number of mesh elements (triangles) over the whole scene.
-    pub budget: usize,
+    /// Target number of mesh elements (triangles) over the whole scene; `None`: chosen from the
+    /// scene ([`element_budget`]).
+    pub budget: Option<usize>,
     /// Discontinuity pieces where their light's unoccluded irradiance is below this fraction
     /// (0..1) of the brightest piece's are dropped.
     pub dm_threshold: f64,
@@ -43,7 +44,7 @@ impl Default for BakeOptions {
     fn default() -> Self {
         BakeOptions {
             mesher: Mesher::Discontinuity,
-            budget: 20_000,
+            budget: None,
             dm_threshold: 0.01,
             solve: SolveOptions::default(),
             texels_per_unit: None,
@@ -76,7 +77,7 @@ impl BakeOptions {
                 reason: reason.into(),
             })
         };
-        if !(1..=100_000_000).contains(&self.budget) {
+        if self.budget.is_some_and(|b| !(1..=100_000_000).contains(&b)) {
             return bad("--budget", "must be between 1 and 100000000");
         }
         if !(1..=8).contains(&self.supersample) {
@@ -165,25 +166,16 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     // The atlas depends on the scene only: it runs before the expensive stages, so a request
     // that cannot be packed fails in seconds.
     let atlas = stage(&mut t.atlas, "atlas", progress, || {
-        pack_atlas(&scene, options)
-    })
-    .map_err(|error| match error {
-        // The atlas numbers its inputs as the scene's instances: name the glTF item instead.
-        atlas::AtlasError::InvalidInput { mesh, reason }
-        | atlas::AtlasError::AddMesh { mesh, reason } => Error::BadItem {
-            path: gltf.path.clone(),
-            item: gltf.instance_item(&scene.instances[mesh]),
-            reason: format!("atlas: {reason}"),
-        },
-        atlas::AtlasError::Empty => Error::EmptyScene {
-            path: gltf.path.clone(),
-        },
-        error => Error::Atlas {
-            path: gltf.path.clone(),
-            error,
-        },
+        scene_atlas(gltf, &scene, options)
     })?;
-    let (segments, meshes) = mesh_scene(&scene, &vis, options, &mut stats, progress);
+    let (segments, meshes) = mesh_scene(
+        &scene,
+        &vis,
+        options,
+        atlas.texels_per_unit as f64,
+        &mut stats,
+        progress,
+    );
     if meshes.iter().all(|m| m.triangles.is_empty()) {
         return Err(Error::EmptyScene {
             path: gltf.path.clone(),
@@ -222,6 +214,16 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats.lightmap_encoding = options.encoding.name().into();
     stats.texels_per_unit = atlas.texels_per_unit;
     stats.warnings = scene.warnings.clone();
+    let most = (stats.budget as f64 * (1.0 + mesh::BUDGET_SLACK)) as usize;
+    if stats.elements > most {
+        stats.warnings.push(format!(
+            "the mesh has {} elements, over the budget of {} (+{}%): the outlines and contact \
+             lines alone need that many; raise --budget",
+            stats.elements,
+            stats.budget,
+            mesh::BUDGET_SLACK * 100.0
+        ));
+    }
     stats
         .warnings
         .extend(solution.stats.warnings.iter().cloned());
@@ -357,34 +359,96 @@ const ADAPTIVE_TOLERANCE: f64 = 0.01;
 /// Total surface area, in xatlas's units, that the scene is scaled to for charting.
 const ATLAS_AREA: f64 = 1000.0;
 
+/// The default element budget is one element per this many lightmap texels the surfaces cover
+/// (about an 8 x 8 texel square per two elements): a finer mesh than the lightmap can show
+/// costs time for nothing.
+pub const TEXELS_PER_ELEMENT: f64 = 32.0;
+
+/// The default element budget is at least this many elements per input triangle, so that the
+/// light has elements of its own beyond the geometry's.
+pub const ELEMENTS_PER_TRIANGLE: f64 = 1.5;
+
+/// Bounds of the default element budget (elements).
+pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 20_000..=250_000;
+
+/// The element budget of a bake, and what chose it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Budget {
+    pub elements: usize,
+    /// `--budget`, `lightmap texels`, `input triangles`, `minimum` or `maximum`.
+    pub from: &'static str,
+}
+
+/// The element budget: `requested` (`--budget`) if given, else the larger of one element per
+/// [`TEXELS_PER_ELEMENT`] lightmap texels the surfaces cover at `texels_per_unit` and
+/// [`ELEMENTS_PER_TRIANGLE`] per input triangle, within [`DEFAULT_BUDGET`]. Either way at least
+/// the input's own triangle count: the mesh can hardly have fewer elements than the geometry.
+pub fn element_budget(scene: &Scene, requested: Option<usize>, texels_per_unit: f64) -> Budget {
+    let triangles = scene.triangles.len();
+    let (elements, from) = match requested {
+        Some(b) => (b, "--budget"),
+        None => {
+            let area: f64 = scene.polygons.iter().map(|p| p.area).sum();
+            let texels = area * texels_per_unit * texels_per_unit / TEXELS_PER_ELEMENT;
+            let per_triangle = triangles as f64 * ELEMENTS_PER_TRIANGLE;
+            let (b, from) = if texels >= per_triangle {
+                (texels, "lightmap texels")
+            } else {
+                (per_triangle, "input triangles")
+            };
+            let b = b.min(1e9) as usize;
+            if b < *DEFAULT_BUDGET.start() {
+                (*DEFAULT_BUDGET.start(), "minimum")
+            } else if b > *DEFAULT_BUDGET.end() {
+                (*DEFAULT_BUDGET.end(), "maximum")
+            } else {
+                (b, from)
+            }
+        }
+    };
+    if elements < triangles {
+        Budget {
+            elements: triangles,
+            from: "input triangles",
+        }
+    } else {
+        Budget { elements, from }
+    }
+}
+
 /// The discontinuity and mesh stages: segments per polygon (empty unless discontinuity
 /// meshing) and the receiver meshes. Fills their timings and counters into `stats`.
 fn mesh_scene(
     scene: &Scene,
     vis: &Visibility,
     options: &BakeOptions,
+    texels_per_unit: f64,
     stats: &mut Stats,
     progress: &Progress<'_>,
 ) -> (Vec<Vec<Segment>>, Vec<ReceiverMesh>) {
+    let budget = element_budget(scene, options.budget, texels_per_unit);
+    stats.budget = budget.elements;
+    stats.budget_from = budget.from.into();
+    let budget = budget.elements;
     let t = &mut stats.timings_s;
     match options.mesher {
         Mesher::Uniform => {
             let meshes = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::uniform(scene, options.budget)
+                mesh::uniform(scene, budget)
             });
             (Vec::new(), meshes)
         }
         Mesher::Discontinuity => {
             let dm = DmOptions {
                 threshold: options.dm_threshold,
-                max_pieces: options.budget,
+                max_pieces: budget,
             };
             let (segments, mut dm_stats) =
                 stage(&mut t.discontinuity, "discontinuity", progress, || {
                     discontinuity::segments(scene, vis, &dm)
                 });
             let (meshes, refused, dropped) = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::discontinuity(scene, &segments, options.budget)
+                mesh::discontinuity(scene, &segments, budget)
             });
             dm_stats.refused = refused;
             dm_stats.dropped_budget += dropped;
@@ -396,7 +460,7 @@ fn mesh_scene(
             // Refine on the direct light, which carries the sharp features.
             let direct = crate::solve::Direct::with_options(scene, vis, &options.solve);
             let meshes = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::adaptive(scene, options.budget, ADAPTIVE_TOLERANCE, |meshes| {
+                mesh::adaptive(scene, budget, ADAPTIVE_TOLERANCE, |meshes| {
                     crate::solve::direct_light(scene, vis, &direct, meshes, &|_, _, _| {})
                 })
             });
@@ -405,7 +469,28 @@ fn mesh_scene(
     }
 }
 
-/// Loads the scene and runs the discontinuity and mesh stages only (for debug views).
+/// The scene's lightmap atlas, its errors naming the glTF file and item.
+fn scene_atlas(gltf: &Gltf, scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
+    pack_atlas(scene, options).map_err(|error| match error {
+        // The atlas numbers its inputs as the scene's instances: name the glTF item instead.
+        atlas::AtlasError::InvalidInput { mesh, reason }
+        | atlas::AtlasError::AddMesh { mesh, reason } => Error::BadItem {
+            path: gltf.path.clone(),
+            item: gltf.instance_item(&scene.instances[mesh]),
+            reason: format!("atlas: {reason}"),
+        },
+        atlas::AtlasError::Empty => Error::EmptyScene {
+            path: gltf.path.clone(),
+        },
+        error => Error::Atlas {
+            path: gltf.path.clone(),
+            error,
+        },
+    })
+}
+
+/// Loads the scene and runs the discontinuity and mesh stages only (for debug views), with the
+/// bake's element budget (the default one needs the atlas's texel density).
 pub fn meshes(
     gltf: &Gltf,
     options: &BakeOptions,
@@ -413,8 +498,18 @@ pub fn meshes(
     options.check()?;
     let scene = load::scene(gltf)?;
     let vis = Visibility::new(&scene);
-    let (segments, meshes) =
-        mesh_scene(&scene, &vis, options, &mut Stats::default(), &|_, _, _| {});
+    let texels_per_unit = match options.budget {
+        Some(_) => 0.0,
+        None => scene_atlas(gltf, &scene, options)?.texels_per_unit as f64,
+    };
+    let (segments, meshes) = mesh_scene(
+        &scene,
+        &vis,
+        options,
+        texels_per_unit,
+        &mut Stats::default(),
+        &|_, _, _| {},
+    );
     Ok((scene, segments, meshes))
 }
 

@@ -490,7 +490,7 @@ fn measure(
         for &budget in &o.budgets {
             let mut options = BakeOptions {
                 mesher: method.mesher,
-                budget,
+                budget: Some(budget),
                 resolution: Some(o.resolution),
                 supersample: o.supersample,
                 ..BakeOptions::default()
@@ -825,7 +825,7 @@ fn scaling(
         }
         let mut o = BakeOptions {
             mesher: Mesher::Uniform,
-            budget: 250,
+            budget: Some(250),
             resolution: Some(64),
             supersample: 1,
             ..BakeOptions::default()

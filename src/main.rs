@@ -142,8 +142,8 @@ struct MeshArgs {
     #[arg(long, value_enum, default_value_t = Mesher::Discontinuity)]
     mesher: Mesher,
     /// Element budget (as for bake).
-    #[arg(long, default_value_t = 20_000)]
-    budget: usize,
+    #[arg(long)]
+    budget: Option<usize>,
     /// As for bake.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
@@ -180,9 +180,11 @@ struct BakeArgs {
     /// Which mesher builds the receiver meshes.
     #[arg(long, value_enum, default_value_t = Mesher::Discontinuity)]
     mesher: Mesher,
-    /// Target number of mesh elements (triangles) over the whole scene.
-    #[arg(long, default_value_t = 20_000)]
-    budget: usize,
+    /// Target number of mesh elements (triangles) over the whole scene, at least the input's
+    /// triangle count [default: one element per 32 lightmap texels or 1.5 per input triangle,
+    /// whichever is more, within 20000..250000; --stats reports it].
+    #[arg(long)]
+    budget: Option<usize>,
     /// Discontinuity meshing: drop wedge pieces where their light's unoccluded irradiance is
     /// below this fraction (0..1) of the brightest piece's.
     #[arg(long, default_value_t = 0.01)]

@@ -135,7 +135,11 @@ pub fn triangulate_with(
             refused += 1;
         }
     }
-    if cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
+    // A polygon no larger than one element, with nothing inside, stays its outline's
+    // triangulation: refining its slivers for their angles (a tessellated sphere's poles) would
+    // spend the budget where the light is smooth at the element's scale anyway.
+    let refine = polygon.area > max_area || !arr.edges.iter().all(|e| e.2.is_none());
+    if refine && cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
         let params = RefinementParameters::<f64>::new()
             .with_angle_limit(AngleLimit::from_deg(ANGLE_LIMIT_DEG))
             .with_max_allowed_area(max_area.max(polygon.area * 1e-9))
@@ -395,33 +399,148 @@ fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
     }
 }
 
-/// Meshes every polygon with `mesh_one(polygon, max_area, vertex_cap)` at one area cap, chosen
-/// so that the whole scene has about `budget` triangles: one pass at area/budget, then a rescale
-/// (refinement leaves triangles between a quarter and all of the cap).
+/// The element count may exceed the budget by this fraction.
+pub const BUDGET_SLACK: f64 = 0.05;
+
+/// When not every discontinuity fits, the wedge pieces kept may take at most this share of what
+/// the coarsest meshing without them leaves of the budget; the rest refines between the lines.
+pub const DM_SHARE: f64 = 0.75;
+
+/// The coarsest area cap the budget search uses, as a multiple of the average element area
+/// (elements 8x the side of a uniform mesh's): coarser meshes cost no fewer elements on
+/// real scenes, only quality.
+const COARSEST: f64 = 64.0;
+
+/// Most meshings of the whole scene [`to_budget`] tries while looking for its area cap.
+const BUDGET_PASSES: usize = 10;
+
+/// The elements of a set of meshes.
+pub fn element_count(meshes: &[ReceiverMesh]) -> usize {
+    meshes.iter().map(|m| m.triangles.len()).sum()
+}
+
+/// Meshes every polygon with `mesh_one(polygon, max_area, vertex_cap)` at one area cap (scene
+/// units²), chosen so that the whole scene has at most `budget` (1 + [`BUDGET_SLACK`])
+/// triangles and not many fewer.
+///
+/// The count falls with the cap, but not as `1/cap`: constraints and the angle bound grade the
+/// mesh, so part of it does not scale. The search starts at area/budget and brackets the
+/// budget between a cap that gives too many and one that gives too few, then interpolates in
+/// log(cap), log(count) within the bracket (bisecting when that stalls). The cap stays within
+/// [`COARSEST`] times area/budget; when even that gives too many, that meshing is returned and
+/// the caller decides what to drop.
 fn to_budget<F>(scene: &Scene, budget: usize, mesh_one: F) -> Vec<ReceiverMesh>
 where
     F: Fn(usize, f64, usize) -> ReceiverMesh + Sync,
 {
-    let total_area: f64 = scene.polygons.iter().map(|p| p.area).sum();
     let budget = budget.max(1) as f64;
-    let mesh_all = |max_area: f64| -> Vec<ReceiverMesh> {
-        (0..scene.polygons.len())
-            .into_par_iter()
-            .map(|i| {
-                let p = &scene.polygons[i];
-                let expected = (p.area / max_area).ceil().min(1e9) as usize;
-                mesh_one(i, max_area, 4 * expected + 4 * p.boundary.len() + 64)
-            })
-            .collect()
+    let most = budget * (1.0 + BUDGET_SLACK);
+    let mesh_all = |max_area: f64| -> (Vec<ReceiverMesh>, f64) {
+        let meshes = mesh_at(scene, max_area, &mesh_one);
+        let count = element_count(&meshes) as f64;
+        (meshes, count)
     };
-    let first_area = total_area / budget;
-    let first = mesh_all(first_area);
-    let count: usize = first.iter().map(|m| m.triangles.len()).sum();
-    if count == 0 || (count as f64 - budget).abs() / budget < 0.1 {
-        first
-    } else {
-        mesh_all(first_area * count as f64 / budget)
+    let first = coarsest_cap(scene, budget as usize) / COARSEST;
+    // Past COARSEST only when even that is over the budget: then as coarse as it gets.
+    let total_area: f64 = scene.polygons.iter().map(|p| p.area).sum();
+    let (lowest, highest) = (first * 1e-3, total_area.max(first * COARSEST));
+    let mut cap = first;
+    let (mut best, mut best_count) = mesh_all(cap);
+    // Bracket: (cap, count) with too many elements, and with too few.
+    let mut over: Option<(f64, f64)> = None;
+    let mut under: Option<(f64, f64)> = None;
+    let mut last = (cap, best_count);
+    let mut previous: Option<(f64, f64)> = None;
+    for _ in 1..BUDGET_PASSES {
+        let (c, n) = last;
+        if n == 0.0 || (n <= most && n >= budget * 0.9) {
+            break;
+        }
+        if n > most {
+            over = Some(last);
+        } else {
+            under = Some(last);
+        }
+        // Aim a little under the budget: the interpolation is not exact.
+        let target = budget * (1.0 - BUDGET_SLACK / 2.0);
+        let next = match (over, under) {
+            (Some((c0, n0)), Some((c1, n1))) => {
+                let slope = (n1.max(1.0) / n0).ln() / (c1 / c0).ln();
+                let t = (target / n0).ln() / slope;
+                let guess = c0 * t.exp();
+                // Stay well inside the bracket, else bisect.
+                let (a, b) = (c0.ln(), c1.ln());
+                let g = guess.ln();
+                if slope < 0.0
+                    && g.is_finite()
+                    && (g - a) / (b - a) > 0.1
+                    && (g - a) / (b - a) < 0.9
+                {
+                    guess
+                } else {
+                    ((a + b) / 2.0).exp()
+                }
+            }
+            // Not bracketed yet: extrapolate the last step in log-log (at first assume count
+            // ∝ 1/cap), stepping 2x to 64x.
+            _ => {
+                let slope = match previous {
+                    Some((c0, n0)) if c0 != c && n0 > 0.0 && n > 0.0 => {
+                        ((n / n0).ln() / (c / c0).ln()).min(-1.0 / 64.0)
+                    }
+                    _ => -1.0,
+                };
+                let step = ((target / n).ln() / slope).exp();
+                if n > most {
+                    c * step.clamp(2.0, 64.0)
+                } else {
+                    c * step.clamp(1.0 / 64.0, 0.5)
+                }
+            }
+        }
+        .clamp(lowest, highest);
+        if next == c {
+            break;
+        }
+        cap = next;
+        let (meshes, count) = mesh_all(cap);
+        previous = Some(last);
+        last = (cap, count);
+        // Keep the fullest meshing within the budget, else the smallest.
+        let better = if count <= most {
+            best_count > most || count > best_count
+        } else {
+            best_count > most && count < best_count
+        };
+        if better {
+            best = meshes;
+            best_count = count;
+        }
     }
+    best
+}
+
+/// The largest area cap [`to_budget`] uses for `budget` elements: [`COARSEST`] times the
+/// average element area (scene units²).
+fn coarsest_cap(scene: &Scene, budget: usize) -> f64 {
+    let total_area: f64 = scene.polygons.iter().map(|p| p.area).sum();
+    total_area / budget.max(1) as f64 * COARSEST
+}
+
+/// Meshes every polygon at one area cap, with a refinement vertex cap from the polygon's
+/// expected element count and its outline.
+fn mesh_at<F>(scene: &Scene, max_area: f64, mesh_one: &F) -> Vec<ReceiverMesh>
+where
+    F: Fn(usize, f64, usize) -> ReceiverMesh + Sync,
+{
+    (0..scene.polygons.len())
+        .into_par_iter()
+        .map(|i| {
+            let p = &scene.polygons[i];
+            let expected = (p.area / max_area).ceil().min(1e9) as usize;
+            mesh_one(i, max_area, 4 * expected + 4 * p.boundary.len() + 64)
+        })
+        .collect()
 }
 
 /// The uniform mesher: every polygon refined to one area cap, about `budget` triangles in all.
@@ -432,13 +551,13 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 }
 
 /// The discontinuity mesher: each polygon's discontinuity `segments` as constraints, then the
-/// same refinement as [`uniform`], about `budget` triangles in all.
+/// same refinement as [`uniform`], at most `budget` (1 + [`BUDGET_SLACK`]) triangles in all.
 ///
-/// Constraints cost elements of their own (refinement grades the mesh around them), so when the
-/// result exceeds the budget by more than a quarter, the weakest wedge pieces (lowest
-/// significance; D0 lines are always kept) are dropped in proportion and the scene is meshed
-/// again. Returns the meshes, the constraint pieces spade refused (should be 0) and the wedge
-/// pieces dropped for the budget.
+/// Discontinuities take the budget first: when every wedge piece does not fit even with the
+/// coarsest refinement, the weakest pieces (lowest significance; D0 lines are always kept)
+/// are dropped until the coarsest meshing costs at most [`DM_SHARE`] of the budget, so that
+/// the rest still refines the surfaces between the lines. Returns the meshes, the constraint
+/// pieces spade refused (should be 0) and the wedge pieces dropped for the budget.
 pub fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],
@@ -461,8 +580,9 @@ pub fn discontinuity(
             .total_cmp(&segments[p][i].significance)
             .then((p, i).cmp(&(q, j)))
     });
-    let mut keep = ranked.len();
-    loop {
+    let snap = 10.0 * crate::discontinuity::TOLERANCE * scene.extent();
+    // The strongest `keep` wedge pieces and every D0 line, per polygon.
+    let select = |keep: usize| -> Vec<Vec<Segment>> {
         let mut kept: Vec<Vec<bool>> = segments
             .iter()
             .map(|segs| segs.iter().map(|s| s.kind == Kind::D0).collect())
@@ -470,7 +590,7 @@ pub fn discontinuity(
         for &(p, i) in &ranked[..keep] {
             kept[p][i] = true;
         }
-        let selected: Vec<Vec<Segment>> = segments
+        segments
             .iter()
             .zip(&kept)
             .map(|(segs, k)| {
@@ -480,20 +600,69 @@ pub fn discontinuity(
                     .map(|(s, _)| s.clone())
                     .collect()
             })
-            .collect();
-        let refused = std::sync::atomic::AtomicUsize::new(0);
-        let meshes = to_budget(scene, budget, |i, area, cap| {
-            let snap = 10.0 * crate::discontinuity::TOLERANCE * scene.extent();
-            let (m, r) = triangulate_with(i, &scene.polygons[i], &selected[i], snap, area, cap);
-            refused.fetch_add(r, std::sync::atomic::Ordering::Relaxed);
-            m
-        });
-        let count: usize = meshes.iter().map(|m| m.triangles.len()).sum();
-        if count * 4 <= budget * 5 || keep == 0 {
-            return (meshes, refused.into_inner(), ranked.len() - keep);
+            .collect()
+    };
+    // Spade refuses a constraint (or not) before refinement: the same count at every cap.
+    let refused: Vec<std::sync::atomic::AtomicUsize> = (0..scene.polygons.len())
+        .map(|_| Default::default())
+        .collect();
+    let mesh_one = |selected: &[Vec<Segment>], i: usize, area: f64, cap: usize| {
+        let (m, r) = triangulate_with(
+            i,
+            &scene.polygons[i],
+            &selected[i],
+            snap,
+            area,
+            cap + 4 * selected[i].len(),
+        );
+        refused[i].store(r, std::sync::atomic::Ordering::Relaxed);
+        m
+    };
+    // The count at the coarsest cap with the strongest `keep` pieces.
+    let coarsest = coarsest_cap(scene, budget);
+    let floor = |keep: usize| -> usize {
+        let selected = select(keep);
+        element_count(&mesh_at(scene, coarsest, &|i, area, cap| {
+            mesh_one(&selected, i, area, cap)
+        }))
+    };
+    let mut keep = ranked.len();
+    let most = (budget as f64 * (1.0 + BUDGET_SLACK)) as usize;
+    let all = floor(keep);
+    if all > most {
+        // The wedges may take DM_SHARE of what the meshing without them leaves of the budget:
+        // search for the most pieces that fit, interpolating (the count grows about linearly
+        // in the pieces kept) or bisecting between the most known to fit and the fewest known
+        // not to.
+        let none = floor(0);
+        let share = none + ((budget.saturating_sub(none)) as f64 * DM_SHARE) as usize;
+        let (mut fits, mut fails) = ((0, none), (ranked.len(), all));
+        keep = 0;
+        for _ in 0..BUDGET_PASSES {
+            if none > share || fails.0 - fits.0 <= (ranked.len() / 100).max(1) {
+                break;
+            }
+            let span = (fails.0 - fits.0) as f64;
+            let t = (share - fits.1) as f64 / (fails.1 - fits.1).max(1) as f64;
+            let t = if (0.1..=0.9).contains(&t) { t } else { 0.5 };
+            let guess = fits.0 + ((span * t) as usize).clamp(1, fails.0 - fits.0 - 1);
+            let n = floor(guess);
+            if n <= share {
+                fits = (guess, n);
+            } else {
+                fails = (guess, n);
+            }
         }
-        keep = (keep as f64 * budget as f64 / count as f64 * 0.8) as usize;
+        if none <= share {
+            keep = fits.0;
+        }
     }
+    let selected = select(keep);
+    let meshes = to_budget(scene, budget, |i, area, cap| {
+        mesh_one(&selected, i, area, cap)
+    });
+    let refused = refused.into_iter().map(|r| r.into_inner()).sum();
+    (meshes, refused, ranked.len() - keep)
 }
 
 /// Triangulates a polygon's outline plus the given interior points, with no refinement (the
@@ -664,7 +833,7 @@ mod tests {
         assert!((m.area() - 2.0).abs() < 1e-9, "area {}", m.area());
         let n = m.triangles.len();
         assert!(
-            (300..=700).contains(&n),
+            (450..=525).contains(&n),
             "{n} triangles for a budget of 500"
         );
         assert!(m.triangles.iter().all(|t| tri_area(m, t) > 0.0));

@@ -32,6 +32,10 @@ pub struct Stats {
     pub instances: usize,
     pub area_emitters: usize,
     pub punctual_lights: usize,
+    /// The element budget the meshers aimed at, and what chose it (`--budget`, `lightmap texels`,
+    /// `input triangles`, `minimum` or `maximum`; see `bake::element_budget`).
+    pub budget: usize,
+    pub budget_from: String,
     pub elements: usize,
     pub vertices: usize,
     /// Discontinuity meshing counters (only with `--mesher discontinuity`).

@@ -13,7 +13,7 @@ fn shadow_error(b: &Bake, points_per_side: usize) -> (f64, f64, usize) {
 
 fn compare(name: &str, bytes: &[u8], budget: usize) -> (f64, f64) {
     let mut o = BakeOptions {
-        budget,
+        budget: Some(budget),
         resolution: Some(512),
         ..dm()
     };

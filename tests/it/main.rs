@@ -47,7 +47,7 @@ pub fn bake(bytes: &[u8], options: &BakeOptions) -> Bake {
 /// Small, quick options for tests.
 pub fn quick() -> BakeOptions {
     let mut o = BakeOptions {
-        budget: 2000,
+        budget: Some(2000),
         resolution: Some(128),
         ..Default::default()
     };

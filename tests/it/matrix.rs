@@ -145,7 +145,7 @@ fn matrix_and_hemicube_bakes_are_deterministic() {
     ] {
         let dir = scratch(&format!("matrix-determinism-{}", solver.name()));
         let mut o = with(solver, ff);
-        o.budget = 500;
+        o.budget = Some(500);
         o.solve.patches = 128;
         let a = bake_to_file_with(&fixtures::box_on_floor(), &dir, 1, &o);
         let b = bake_to_file_with(&fixtures::box_on_floor(), &dir, 2, &o);

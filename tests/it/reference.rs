@@ -17,7 +17,7 @@ fn baked(bytes: &[u8], name: &str) -> Gltf {
     let (input, output) = (dir.join("in.glb"), dir.join("out.glb"));
     std::fs::write(&input, bytes).unwrap();
     let options = BakeOptions {
-        budget: 2000,
+        budget: Some(2000),
         resolution: Some(64),
         ..Default::default()
     };

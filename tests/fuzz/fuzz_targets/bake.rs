@@ -11,7 +11,7 @@ fuzz_target!(|data: &[u8]| {
         return;
     };
     let mut options = penumbra::BakeOptions {
-        budget: 200,
+        budget: Some(200),
         resolution: Some(16),
         supersample: 1,
         ..Default::default()
