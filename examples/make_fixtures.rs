@@ -3,6 +3,7 @@
 //! ```text
 //! cargo run --example make_fixtures [OUTPUT_DIR]
 //! cargo run --release --example make_fixtures -- --ladder DIR
+//! cargo run --release --example make_fixtures -- --town TRIANGLES FILE
 //! ```
 //!
 //! `OUTPUT_DIR` defaults to `fixtures` (relative to the current directory, so run it from the
@@ -11,14 +12,18 @@
 //!
 //! `--ladder DIR` writes the scale-ladder scenes (`penumbra::fixtures::ladder`, up to several
 //! megabytes each) to `DIR/<rung>.glb` instead; they are generated on demand and not kept in
-//! `fixtures/`.
+//! `fixtures/`. `--town TRIANGLES FILE` writes the ladder's sunlit town at about that many
+//! triangles (`penumbra::fixtures::ladder::town`), e.g. a small one for `penumbra compare`.
 
 use std::path::PathBuf;
 
 fn main() -> std::io::Result<()> {
     let args: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
     let usage = || -> ! {
-        eprintln!("usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR");
+        eprintln!(
+            "usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR \
+             | make_fixtures --town TRIANGLES FILE"
+        );
         std::process::exit(2);
     };
     if args.first().is_some_and(|a| a == "--ladder") {
@@ -36,6 +41,18 @@ fn main() -> std::io::Result<()> {
                 rung.triangles
             );
         }
+        return Ok(());
+    }
+    if args.first().is_some_and(|a| a == "--town") {
+        let [_, triangles, file] = args.as_slice() else {
+            usage()
+        };
+        let Some(triangles) = triangles.to_str().and_then(|t| t.parse().ok()) else {
+            usage()
+        };
+        let glb = penumbra::fixtures::ladder::town(triangles);
+        std::fs::write(file, &glb)?;
+        println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
         return Ok(());
     }
     if args.len() > 1 {
