@@ -74,7 +74,7 @@ pub const ANGLE_LIMIT_DEG: f64 = 25.0;
 
 /// Triangulates one polygon without extra constraints; see [`triangulate_with`].
 pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usize) -> ReceiverMesh {
-    triangulate_with(id, polygon, &[], 0.0, max_area, vertex_cap).0
+    triangulate_with(id, polygon, &[], 0.0, 0.0, max_area, vertex_cap).0
 }
 
 /// Triangulates one polygon: its boundary and the discontinuity `segments` (plane coordinates)
@@ -85,6 +85,13 @@ pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usiz
 /// Points closer than `snap` (scene units; at least 1e-9 of the polygon's size) are merged, and
 /// segments within `snap` of each other (or of the outline) become one: use the tolerance the
 /// segments were computed to, so near-coincident events do not force slivers.
+///
+/// A wedge segment (any kind but D0) that runs along the outline, a D0 line or a stronger wedge
+/// segment (higher [`Segment::significance`]), both its ends within `clearance` (scene units)
+/// of it, is left out: two constraints closer than an element cannot both be resolved, and
+/// Delaunay refinement splits such a pair against each other until its triangles have good
+/// angles (a thin slab's penumbra line 1 cm from its contact line took three times the budget).
+/// Use about half an element's side; segments that only meet or cross stay.
 ///
 /// The constraints go through [`arrangement::build`] first, so they never cross when inserted
 /// with spade's `try_add_constraint`. Faces outside the polygon (holes, concavities) are dropped
@@ -97,6 +104,7 @@ pub fn triangulate_with(
     polygon: &Polygon,
     segments: &[Segment],
     snap: f64,
+    clearance: f64,
     max_area: f64,
     vertex_cap: usize,
 ) -> (ReceiverMesh, usize) {
@@ -115,9 +123,27 @@ pub fn triangulate_with(
     // Tags: `None` for the outline, the segment's kind and event otherwise.
     type Tagged = (DVec2, DVec2, Option<(Kind, u32)>);
     let mut input: Vec<Tagged> = outline.iter().map(|[a, b]| (*a, *b, None)).collect();
-    input.extend(segments.iter().filter_map(|s| {
-        keep_clear(s.a, s.b, &outline, gap).map(|(a, b)| (a, b, Some((s.kind, s.event))))
-    }));
+    // D0 lines first, then the wedges strongest first, each kept clear of what went before.
+    let mut order: Vec<&Segment> = segments.iter().collect();
+    order.sort_by(|s, t| {
+        (t.kind == Kind::D0)
+            .cmp(&(s.kind == Kind::D0))
+            .then(t.significance.total_cmp(&s.significance))
+    });
+    let mut obstacles: Vec<[DVec2; 2]> = outline.clone();
+    for s in order {
+        let along = s.kind != Kind::D0
+            && obstacles.iter().any(|[p, q]| {
+                dist_to_segment(s.a, *p, *q) < clearance && dist_to_segment(s.b, *p, *q) < clearance
+            });
+        if along {
+            continue;
+        }
+        if let Some((a, b)) = keep_clear(s.a, s.b, &outline, gap) {
+            input.push((a, b, Some((s.kind, s.event))));
+            obstacles.push([a, b]);
+        }
+    }
     let arr = arrangement::build(&input, tol);
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     let handles: Vec<Option<FixedVertexHandle>> = arr
@@ -140,13 +166,23 @@ pub fn triangulate_with(
     // spend the budget where the light is smooth at the element's scale anyway.
     let refine = polygon.area > max_area || !arr.edges.iter().all(|e| e.2.is_none());
     if refine && cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
-        let params = RefinementParameters::<f64>::new()
-            .with_angle_limit(AngleLimit::from_deg(ANGLE_LIMIT_DEG))
-            .with_max_allowed_area(max_area.max(polygon.area * 1e-9))
-            .with_min_required_area(max_area * 1e-3)
-            .with_max_additional_vertices(vertex_cap)
-            .exclude_outer_faces(segments.is_empty());
-        cdt.refine(params);
+        // Two passes: the area cap first, then the angles with at most half as many vertices
+        // again. In one pass, constraints that meet at small angles or run close together (a
+        // thin slab's contact and penumbra lines) can take every vertex the cap allows in
+        // fans around them and leave the rest of the polygon coarse.
+        let params = |angle: AngleLimit, vertices: usize| {
+            RefinementParameters::<f64>::new()
+                .with_angle_limit(angle)
+                .with_max_allowed_area(max_area.max(polygon.area * 1e-9))
+                .with_min_required_area(max_area * 1e-3)
+                .with_max_additional_vertices(vertices)
+                .exclude_outer_faces(segments.is_empty())
+        };
+        let before = cdt.num_vertices();
+        cdt.refine(params(AngleLimit::from_deg(0.0), vertex_cap));
+        let added = cdt.num_vertices() - before;
+        let angle_cap = (added / 2).max(vertex_cap / 4);
+        cdt.refine(params(AngleLimit::from_deg(ANGLE_LIMIT_DEG), angle_cap));
     }
     let (mut mesh, remap) = inside_faces(id, polygon, &cdt);
     let mut constraint_edges: Vec<(u32, u32)> = cdt
@@ -581,6 +617,8 @@ pub fn discontinuity(
             .then((p, i).cmp(&(q, j)))
     });
     let snap = 10.0 * crate::discontinuity::TOLERANCE * scene.extent();
+    // Half the side of an average element at the budget.
+    let clearance = 0.5 * (coarsest_cap(scene, budget) / COARSEST).sqrt();
     // The strongest `keep` wedge pieces and every D0 line, per polygon.
     let select = |keep: usize| -> Vec<Vec<Segment>> {
         let mut kept: Vec<Vec<bool>> = segments
@@ -612,8 +650,9 @@ pub fn discontinuity(
             &scene.polygons[i],
             &selected[i],
             snap,
+            clearance,
             area,
-            cap + 4 * selected[i].len(),
+            cap,
         );
         refused[i].store(r, std::sync::atomic::Ordering::Relaxed);
         m
