@@ -447,12 +447,13 @@ fn mesh_scene(
                 stage(&mut t.discontinuity, "discontinuity", progress, || {
                     discontinuity::segments(scene, vis, &dm)
                 });
-            let (meshes, refused, dropped) = stage(&mut t.mesh, "mesh", progress, || {
+            let (meshes, inserted, dropped) = stage(&mut t.mesh, "mesh", progress, || {
                 mesh::discontinuity(scene, &segments, budget)
             });
-            dm_stats.refused = refused;
+            dm_stats.refused = inserted.refused;
+            dm_stats.crowded = inserted.crowded;
             dm_stats.dropped_budget += dropped;
-            dm_stats.kept -= dropped;
+            dm_stats.kept = dm_stats.kept.saturating_sub(dropped + inserted.crowded);
             stats.discontinuity = Some(dm_stats);
             (segments, meshes)
         }

@@ -90,6 +90,9 @@ pub struct DmStats {
     pub dropped_budget: usize,
     /// Constraint pieces spade refused (they would have crossed another; should be 0).
     pub refused: usize,
+    /// Wedge pieces left out by the mesher because they run along a stronger line (the
+    /// outline, a D0 line, a stronger wedge piece) within half an element.
+    pub crowded: usize,
 }
 
 /// A convex region in a plane, given by half-spaces `m·(x - c) >= 0` (m in the plane).

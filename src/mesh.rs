@@ -32,6 +32,15 @@ pub enum Mesher {
     Adaptive,
 }
 
+/// What [`triangulate_with`] did with its segments besides inserting them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Inserted {
+    /// Constraint pieces spade refused (they would have crossed another; should be 0).
+    pub refused: usize,
+    /// Wedge segments left out because they run along a stronger line within the clearance.
+    pub crowded: usize,
+}
+
 /// A triangulated receiver polygon. Coordinates are in the polygon's plane frame
 /// ([`crate::scene::Polygon::frame`]); values are solved at its vertices.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -98,7 +107,7 @@ pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usiz
 /// by testing each face's centroid against the polygon's own triangles (spade's
 /// `exclude_outer_faces` is wrong once interior constraints exist). Vertices on D0 (contact)
 /// segments are split, one copy per side, so values never interpolate across a contact.
-/// Returns the mesh and the number of constraint pieces spade refused.
+/// Returns the mesh and what became of the segments ([`Inserted`]).
 pub fn triangulate_with(
     id: usize,
     polygon: &Polygon,
@@ -107,7 +116,7 @@ pub fn triangulate_with(
     clearance: f64,
     max_area: f64,
     vertex_cap: usize,
-) -> (ReceiverMesh, usize) {
+) -> (ReceiverMesh, Inserted) {
     let (lo, hi) = polygon.triangles_plane.iter().flatten().fold(
         (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
@@ -131,12 +140,14 @@ pub fn triangulate_with(
             .then(t.significance.total_cmp(&s.significance))
     });
     let mut obstacles: Vec<[DVec2; 2]> = outline.clone();
+    let mut crowded = 0;
     for s in order {
         let along = s.kind != Kind::D0
             && obstacles.iter().any(|[p, q]| {
                 dist_to_segment(s.a, *p, *q) < clearance && dist_to_segment(s.b, *p, *q) < clearance
             });
         if along {
+            crowded += 1;
             continue;
         }
         if let Some((a, b)) = keep_clear(s.a, s.b, &outline, gap) {
@@ -257,7 +268,7 @@ pub fn triangulate_with(
         cuts.dedup();
         split_along(&mut mesh, &cuts);
     }
-    (mesh, refused)
+    (mesh, Inserted { refused, crowded })
 }
 
 /// Merges chains of collinear boundary edges (T-junction vertices of the input mesh) into
@@ -592,13 +603,13 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 /// Discontinuities take the budget first: when every wedge piece does not fit even with the
 /// coarsest refinement, the weakest pieces (lowest significance; D0 lines are always kept)
 /// are dropped until the coarsest meshing costs at most [`DM_SHARE`] of the budget, so that
-/// the rest still refines the surfaces between the lines. Returns the meshes, the constraint
-/// pieces spade refused (should be 0) and the wedge pieces dropped for the budget.
+/// the rest still refines the surfaces between the lines. Returns the meshes, what became of
+/// the segments passed to the triangulation and the wedge pieces dropped for the budget.
 pub fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],
     budget: usize,
-) -> (Vec<ReceiverMesh>, usize, usize) {
+) -> (Vec<ReceiverMesh>, Inserted, usize) {
     // Wedge pieces, strongest first (ties by polygon and position: a total, fixed order).
     let mut ranked: Vec<(usize, usize)> = segments
         .iter()
@@ -640,12 +651,11 @@ pub fn discontinuity(
             })
             .collect()
     };
-    // Spade refuses a constraint (or not) before refinement: the same count at every cap.
-    let refused: Vec<std::sync::atomic::AtomicUsize> = (0..scene.polygons.len())
-        .map(|_| Default::default())
-        .collect();
+    // What became of each polygon's segments: decided before refinement, so the same at every
+    // cap; the last meshing (the final selection) writes last.
+    let inserted = std::sync::Mutex::new(vec![Inserted::default(); scene.polygons.len()]);
     let mesh_one = |selected: &[Vec<Segment>], i: usize, area: f64, cap: usize| {
-        let (m, r) = triangulate_with(
+        let (m, ins) = triangulate_with(
             i,
             &scene.polygons[i],
             &selected[i],
@@ -654,7 +664,7 @@ pub fn discontinuity(
             area,
             cap,
         );
-        refused[i].store(r, std::sync::atomic::Ordering::Relaxed);
+        inserted.lock().unwrap_or_else(|e| e.into_inner())[i] = ins;
         m
     };
     // The count at the coarsest cap with the strongest `keep` pieces.
@@ -700,8 +710,15 @@ pub fn discontinuity(
     let meshes = to_budget(scene, budget, |i, area, cap| {
         mesh_one(&selected, i, area, cap)
     });
-    let refused = refused.into_iter().map(|r| r.into_inner()).sum();
-    (meshes, refused, ranked.len() - keep)
+    let total = inserted
+        .into_inner()
+        .unwrap_or_else(|e| e.into_inner())
+        .iter()
+        .fold(Inserted::default(), |t, i| Inserted {
+            refused: t.refused + i.refused,
+            crowded: t.crowded + i.crowded,
+        });
+    (meshes, total, ranked.len() - keep)
 }
 
 /// Triangulates a polygon's outline plus the given interior points, with no refinement (the
