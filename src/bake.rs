@@ -352,10 +352,6 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::Atla
     Ok(atlas)
 }
 
-/// The adaptive mesher splits elements whose direct light varies by more than this fraction of
-/// the brightest vertex.
-const ADAPTIVE_TOLERANCE: f64 = 0.01;
-
 /// Total surface area, in xatlas's units, that the scene is scaled to for charting.
 const ATLAS_AREA: f64 = 1000.0;
 
@@ -447,8 +443,13 @@ fn mesh_scene(
                 stage(&mut t.discontinuity, "discontinuity", progress, || {
                     discontinuity::segments(scene, vis, &dm)
                 });
+            // The budget left after the lines refines where the direct light varies most.
+            let direct = crate::solve::Direct::with_options(scene, vis, &options.solve);
+            let evaluate = |meshes: &[ReceiverMesh]| {
+                crate::solve::direct_light(scene, vis, &direct, meshes, &|_, _, _| {})
+            };
             let (meshes, inserted, dropped) = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::discontinuity(scene, &segments, budget)
+                mesh::discontinuity(scene, &segments, budget, Some(&evaluate))
             });
             dm_stats.refused = inserted.refused;
             dm_stats.crowded = inserted.crowded;
@@ -461,7 +462,7 @@ fn mesh_scene(
             // Refine on the direct light, which carries the sharp features.
             let direct = crate::solve::Direct::with_options(scene, vis, &options.solve);
             let meshes = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::adaptive(scene, budget, ADAPTIVE_TOLERANCE, |meshes| {
+                mesh::adaptive(scene, budget, &|meshes: &[ReceiverMesh]| {
                     crate::solve::direct_light(scene, vis, &direct, meshes, &|_, _, _| {})
                 })
             });

@@ -32,6 +32,19 @@ pub enum Mesher {
     Adaptive,
 }
 
+/// What goes into a polygon's triangulation besides its outline (see [`triangulate_with`]).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Lines<'a> {
+    /// Discontinuity segments in plane coordinates, inserted as constraints.
+    pub segments: &'a [Segment],
+    /// Merge tolerance, scene units.
+    pub snap: f64,
+    /// Wedge segments along a stronger line closer than this (scene units) are left out.
+    pub clearance: f64,
+    /// Extra vertices (plane coordinates) inserted before refinement: the light-driven splits.
+    pub points: &'a [DVec2],
+}
+
 /// What [`triangulate_with`] did with its segments besides inserting them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Inserted {
@@ -83,20 +96,20 @@ pub const ANGLE_LIMIT_DEG: f64 = 25.0;
 
 /// Triangulates one polygon without extra constraints; see [`triangulate_with`].
 pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usize) -> ReceiverMesh {
-    triangulate_with(id, polygon, &[], 0.0, 0.0, max_area, vertex_cap).0
+    triangulate_with(id, polygon, Lines::default(), max_area, vertex_cap).0
 }
 
-/// Triangulates one polygon: its boundary and the discontinuity `segments` (plane coordinates)
-/// as constraints, refined so that no triangle is larger than `max_area` (scene units²) and,
+/// Triangulates one polygon: its boundary and the discontinuity `lines.segments` (plane
+/// coordinates) as constraints, the `lines.points` as vertices, refined so that no triangle is larger than `max_area` (scene units²) and,
 /// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. At most
 /// `vertex_cap` vertices are added by refinement.
 ///
-/// Points closer than `snap` (scene units; at least 1e-9 of the polygon's size) are merged, and
-/// segments within `snap` of each other (or of the outline) become one: use the tolerance the
+/// Points closer than `lines.snap` (scene units; at least 1e-9 of the polygon's size) are merged,
+/// and segments within `snap` of each other (or of the outline) become one: use the tolerance the
 /// segments were computed to, so near-coincident events do not force slivers.
 ///
 /// A wedge segment (any kind but D0) that runs along the outline, a D0 line or a stronger wedge
-/// segment (higher [`Segment::significance`]), both its ends within `clearance` (scene units)
+/// segment (higher [`Segment::significance`]), both its ends within `lines.clearance`
 /// of it, is left out: two constraints closer than an element cannot both be resolved, and
 /// Delaunay refinement splits such a pair against each other until its triangles have good
 /// angles (a thin slab's penumbra line 1 cm from its contact line took three times the budget).
@@ -111,12 +124,16 @@ pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usiz
 pub fn triangulate_with(
     id: usize,
     polygon: &Polygon,
-    segments: &[Segment],
-    snap: f64,
-    clearance: f64,
+    lines: Lines<'_>,
     max_area: f64,
     vertex_cap: usize,
 ) -> (ReceiverMesh, Inserted) {
+    let Lines {
+        segments,
+        snap,
+        clearance,
+        points,
+    } = lines;
     let (lo, hi) = polygon.triangles_plane.iter().flatten().fold(
         (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
         |(lo, hi), p| (lo.min(*p), hi.max(*p)),
@@ -172,10 +189,16 @@ pub fn triangulate_with(
             refused += 1;
         }
     }
+    for p in points {
+        if polygon.contains(*p) {
+            let _ = cdt.insert(Point2::new(p.x, p.y));
+        }
+    }
     // A polygon no larger than one element, with nothing inside, stays its outline's
     // triangulation: refining its slivers for their angles (a tessellated sphere's poles) would
     // spend the budget where the light is smooth at the element's scale anyway.
-    let refine = polygon.area > max_area || !arr.edges.iter().all(|e| e.2.is_none());
+    let refine =
+        polygon.area > max_area || !arr.edges.iter().all(|e| e.2.is_none()) || !points.is_empty();
     if refine && cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
         // Two passes: the area cap first, then the angles with at most half as many vertices
         // again. In one pass, constraints that meet at small angles or run close together (a
@@ -458,6 +481,21 @@ pub const DM_SHARE: f64 = 0.75;
 /// real scenes, only quality.
 const COARSEST: f64 = 64.0;
 
+/// The share of the budget above the coarsest meshing that the discontinuity mesher leaves to
+/// refinement where the light varies most.
+pub const LIGHT_SHARE: f64 = 0.2;
+
+/// Rounds of light-driven refinement after discontinuity meshing (each evaluates the direct
+/// light on the whole mesh).
+pub const LIGHT_ROUNDS: usize = 3;
+
+/// Elements split by [`adaptive`] and by the discontinuity mesher's refinement when the light
+/// across them varies by more than this fraction of the brightest vertex.
+pub const LIGHT_TOLERANCE: f64 = 0.01;
+
+/// The direct light (W/m², linear RGB) at every vertex of a set of meshes.
+pub type Evaluate<'a> = dyn Fn(&[ReceiverMesh]) -> Vec<Vec<glam::DVec3>> + 'a;
+
 /// Most meshings of the whole scene [`to_budget`] tries while looking for its area cap.
 const BUDGET_PASSES: usize = 10;
 
@@ -476,7 +514,7 @@ pub fn element_count(meshes: &[ReceiverMesh]) -> usize {
 /// log(cap), log(count) within the bracket (bisecting when that stalls). The cap stays within
 /// [`COARSEST`] times area/budget; when even that gives too many, that meshing is returned and
 /// the caller decides what to drop.
-fn to_budget<F>(scene: &Scene, budget: usize, mesh_one: F) -> Vec<ReceiverMesh>
+fn to_budget<F>(scene: &Scene, budget: usize, mesh_one: F) -> (Vec<ReceiverMesh>, f64)
 where
     F: Fn(usize, f64, usize) -> ReceiverMesh + Sync,
 {
@@ -493,6 +531,7 @@ where
     let (lowest, highest) = (first * 1e-3, total_area.max(first * COARSEST));
     let mut cap = first;
     let (mut best, mut best_count) = mesh_all(cap);
+    let mut best_cap = cap;
     // Bracket: (cap, count) with too many elements, and with too few.
     let mut over: Option<(f64, f64)> = None;
     let mut under: Option<(f64, f64)> = None;
@@ -562,9 +601,10 @@ where
         if better {
             best = meshes;
             best_count = count;
+            best_cap = cap;
         }
     }
-    best
+    (best, best_cap)
 }
 
 /// The largest area cap [`to_budget`] uses for `budget` elements: [`COARSEST`] times the
@@ -582,12 +622,15 @@ where
 {
     (0..scene.polygons.len())
         .into_par_iter()
-        .map(|i| {
-            let p = &scene.polygons[i];
-            let expected = (p.area / max_area).ceil().min(1e9) as usize;
-            mesh_one(i, max_area, 4 * expected + 4 * p.boundary.len() + 64)
-        })
+        .map(|i| mesh_one(i, max_area, vertex_cap(&scene.polygons[i], max_area)))
         .collect()
+}
+
+/// Most vertices refinement may add to polygon `p` at area cap `max_area`: four times the
+/// elements the cap asks for, plus room for the outline's grading.
+fn vertex_cap(p: &Polygon, max_area: f64) -> usize {
+    let expected = (p.area / max_area).ceil().min(1e9) as usize;
+    4 * expected + 4 * p.boundary.len() + 64
 }
 
 /// The uniform mesher: every polygon refined to one area cap, about `budget` triangles in all.
@@ -595,6 +638,7 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
     to_budget(scene, budget, |i, area, cap| {
         triangulate(i, &scene.polygons[i], area, cap)
     })
+    .0
 }
 
 /// The discontinuity mesher: each polygon's discontinuity `segments` as constraints, then the
@@ -603,12 +647,18 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 /// Discontinuities take the budget first: when every wedge piece does not fit even with the
 /// coarsest refinement, the weakest pieces (lowest significance; D0 lines are always kept)
 /// are dropped until the coarsest meshing costs at most [`DM_SHARE`] of the budget, so that
-/// the rest still refines the surfaces between the lines. Returns the meshes, what became of
-/// the segments passed to the triangulation and the wedge pieces dropped for the budget.
+/// the rest still refines the surfaces between the lines.
+///
+/// With `refine` (the direct light at the vertices of a set of meshes), [`LIGHT_SHARE`] of what
+/// the coarsest meshing with the lines leaves of the budget is kept back, and goes where the light
+/// varies most across an element ([`LIGHT_ROUNDS`] rounds of the adaptive mesher's rule,
+/// splitting at the centroid so that no split lands on a line). Returns the meshes, what became
+/// of the segments passed to the triangulation and the wedge pieces dropped for the budget.
 pub fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],
     budget: usize,
+    refine: Option<&Evaluate<'_>>,
 ) -> (Vec<ReceiverMesh>, Inserted, usize) {
     // Wedge pieces, strongest first (ties by polygon and position: a total, fixed order).
     let mut ranked: Vec<(usize, usize)> = segments
@@ -654,25 +704,24 @@ pub fn discontinuity(
     // What became of each polygon's segments: decided before refinement, so the same at every
     // cap; the last meshing (the final selection) writes last.
     let inserted = std::sync::Mutex::new(vec![Inserted::default(); scene.polygons.len()]);
-    let mesh_one = |selected: &[Vec<Segment>], i: usize, area: f64, cap: usize| {
-        let (m, ins) = triangulate_with(
-            i,
-            &scene.polygons[i],
-            &selected[i],
-            snap,
-            clearance,
-            area,
-            cap,
-        );
-        inserted.lock().unwrap_or_else(|e| e.into_inner())[i] = ins;
-        m
-    };
+    let mesh_one =
+        |selected: &[Vec<Segment>], i: usize, points: &[DVec2], area: f64, cap: usize| {
+            let lines = Lines {
+                segments: &selected[i],
+                snap,
+                clearance,
+                points,
+            };
+            let (m, ins) = triangulate_with(i, &scene.polygons[i], lines, area, cap);
+            inserted.lock().unwrap_or_else(|e| e.into_inner())[i] = ins;
+            m
+        };
     // The count at the coarsest cap with the strongest `keep` pieces.
     let coarsest = coarsest_cap(scene, budget);
     let floor = |keep: usize| -> usize {
         let selected = select(keep);
         element_count(&mesh_at(scene, coarsest, &|i, area, cap| {
-            mesh_one(&selected, i, area, cap)
+            mesh_one(&selected, i, &[], area, cap)
         }))
     };
     let mut keep = ranked.len();
@@ -707,9 +756,45 @@ pub fn discontinuity(
         }
     }
     let selected = select(keep);
-    let meshes = to_budget(scene, budget, |i, area, cap| {
-        mesh_one(&selected, i, area, cap)
+    // With light-driven refinement, the lines and the uniform refinement leave it LIGHT_SHARE
+    // of what the coarsest meshing with the lines leaves of the budget.
+    let first = match refine {
+        Some(_) => {
+            let least = if keep == ranked.len() {
+                all
+            } else {
+                floor(keep)
+            };
+            least + (budget.saturating_sub(least) as f64 * (1.0 - LIGHT_SHARE)) as usize
+        }
+        None => budget,
+    };
+    let (mut meshes, cap) = to_budget(scene, first, |i, area, vertices| {
+        mesh_one(&selected, i, &[], area, vertices)
     });
+    if let Some(evaluate) = refine {
+        let start = meshes;
+        let added;
+        (meshes, added) = refine_by_light(
+            &start,
+            budget,
+            LIGHT_ROUNDS,
+            evaluate,
+            |t| (t[0] + t[1] + t[2]) / 3.0,
+            |mi, points| {
+                let i = start[mi].polygon;
+                let vertices = vertex_cap(&scene.polygons[i], cap) + 4 * points.len();
+                mesh_one(&selected, i, points, cap, vertices)
+            },
+        );
+        // Where the light varies little, the rounds stop short of the budget: the rest refines
+        // uniformly, keeping the points added.
+        if element_count(&meshes) * 10 < budget * 9 {
+            (meshes, _) = to_budget(scene, budget, |i, area, vertices| {
+                mesh_one(&selected, i, &added[i], area, vertices + 4 * added[i].len())
+            });
+        }
+    }
     let total = inserted
         .into_inner()
         .unwrap_or_else(|e| e.into_inner())
@@ -780,14 +865,60 @@ fn inside_faces(
 /// elements across which the solution varies most (the longest edge at its midpoint), then solve
 /// and split again, until the budget is reached or no element varies by more than `tolerance`
 /// of the brightest vertex. `evaluate` gives the values (irradiance) at every mesh's vertices.
-pub fn adaptive<F>(scene: &Scene, budget: usize, tolerance: f64, evaluate: F) -> Vec<ReceiverMesh>
+pub fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) -> Vec<ReceiverMesh> {
+    let start = uniform(scene, (budget / 4).max(1));
+    refine_by_light(
+        &start,
+        budget,
+        8,
+        evaluate,
+        |t| {
+            // The midpoint of the longest edge.
+            let e = (0..3)
+                .max_by(|&i, &j| {
+                    let li = t[i].distance_squared(t[(i + 1) % 3]);
+                    let lj = t[j].distance_squared(t[(j + 1) % 3]);
+                    li.total_cmp(&lj).then(j.cmp(&i))
+                })
+                .unwrap_or(0);
+            (t[e] + t[(e + 1) % 3]) * 0.5
+        },
+        |mi, points| {
+            let m = &start[mi];
+            let mut all = m.vertices.clone();
+            all.extend(points);
+            triangulate_points(m.polygon, &scene.polygons[m.polygon], &all)
+        },
+    )
+    .0
+}
+
+/// The adaptive rule on top of `start`: up to `rounds` times, evaluate the light, rank the
+/// elements across which it varies by more than [`LIGHT_TOLERANCE`] of the brightest vertex,
+/// and add a vertex (`split` of the triangle's corners) to the worst ones, as many as the
+/// budget allows; `rebuild(mesh, points)` remeshes `start[mesh]` with all the points added to
+/// it so far. Stops at 95% of the budget; a round that would overshoot it by more than
+/// [`BUDGET_SLACK`] is undone. Returns the meshes and the points added to each.
+fn refine_by_light<S, R>(
+    start: &[ReceiverMesh],
+    budget: usize,
+    rounds: usize,
+    evaluate: &Evaluate<'_>,
+    split: S,
+    rebuild: R,
+) -> (Vec<ReceiverMesh>, Vec<Vec<DVec2>>)
 where
-    F: Fn(&[ReceiverMesh]) -> Vec<Vec<glam::DVec3>>,
+    S: Fn([DVec2; 3]) -> DVec2,
+    R: Fn(usize, &[DVec2]) -> ReceiverMesh + Sync,
 {
     let lum = |c: &glam::DVec3| crate::light::luminance(*c);
-    let mut meshes = uniform(scene, (budget / 4).max(1));
-    for _ in 0..8 {
-        let total: usize = meshes.iter().map(|m| m.triangles.len()).sum();
+    let most = (budget as f64 * (1.0 + BUDGET_SLACK)) as usize;
+    let mut meshes = start.to_vec();
+    let mut added: Vec<Vec<DVec2>> = vec![Vec::new(); start.len()];
+    // Elements one split adds, measured after each round.
+    let mut per_split = 2.0;
+    for _ in 0..rounds {
+        let total = element_count(&meshes);
         if total * 20 >= budget * 19 {
             break;
         }
@@ -803,7 +934,7 @@ where
                 let l = t.map(|i| lum(&v[i as usize]));
                 let variation = l.iter().fold(f64::MIN, |a, &b| a.max(b))
                     - l.iter().fold(f64::MAX, |a, &b| a.min(b));
-                if variation > tolerance * peak {
+                if variation > LIGHT_TOLERANCE * peak {
                     ranked.push((variation, mi, ti));
                 }
             }
@@ -812,35 +943,47 @@ where
             break;
         }
         ranked.sort_by(|a, b| b.0.total_cmp(&a.0).then((a.1, a.2).cmp(&(b.1, b.2))));
-        // A split adds about two triangles.
-        ranked.truncate(((budget - total) / 2).clamp(1, total.div_ceil(2)));
-        let mut extra: Vec<Vec<DVec2>> = vec![Vec::new(); meshes.len()];
-        for &(_, mi, ti) in &ranked {
-            let m = &meshes[mi];
-            let p = m.triangles[ti].map(|i| m.vertices[i as usize]);
-            let e = (0..3)
-                .max_by(|&i, &j| {
-                    let li = p[i].distance_squared(p[(i + 1) % 3]);
-                    let lj = p[j].distance_squared(p[(j + 1) % 3]);
-                    li.total_cmp(&lj).then(j.cmp(&i))
+        let room = (budget - total) as f64 / per_split;
+        ranked.truncate((room as usize).clamp(1, total.div_ceil(2)));
+        // A round that overshoots is retried once with fewer splits, scaled by the overshoot.
+        let mut accepted = None;
+        for _ in 0..2 {
+            let mut touched = vec![false; meshes.len()];
+            let mut next_added = added.clone();
+            for &(_, mi, ti) in &ranked {
+                let m = &meshes[mi];
+                next_added[mi].push(split(m.triangles[ti].map(|i| m.vertices[i as usize])));
+                touched[mi] = true;
+            }
+            let next: Vec<ReceiverMesh> = (0..meshes.len())
+                .into_par_iter()
+                .map(|mi| {
+                    if touched[mi] {
+                        rebuild(mi, &next_added[mi])
+                    } else {
+                        meshes[mi].clone()
+                    }
                 })
-                .unwrap_or(0);
-            extra[mi].push((p[e] + p[(e + 1) % 3]) * 0.5);
+                .collect();
+            let count = element_count(&next);
+            per_split = ((count as f64 - total as f64) / ranked.len() as f64).max(1.0);
+            if count <= most {
+                accepted = Some((next, next_added));
+                break;
+            }
+            let fewer = ((budget - total) as f64 / per_split * 0.95) as usize;
+            if fewer == 0 {
+                break;
+            }
+            ranked.truncate(fewer);
         }
-        meshes = meshes
-            .par_iter()
-            .zip(&extra)
-            .map(|(m, add)| {
-                if add.is_empty() {
-                    return m.clone();
-                }
-                let mut points = m.vertices.clone();
-                points.extend(add);
-                triangulate_points(m.polygon, &scene.polygons[m.polygon], &points)
-            })
-            .collect();
+        let Some((next, next_added)) = accepted else {
+            break;
+        };
+        meshes = next;
+        added = next_added;
     }
-    meshes
+    (meshes, added)
 }
 
 #[cfg(test)]

@@ -121,8 +121,16 @@ fn spade_five_segment_repro_meshes() {
         seg((0.0, 0.0), (2.5, 1.5)),
         seg((0.5, 0.0), (1.5, 3.0)),
     ];
-    let (mesh, inserted) =
-        penumbra::mesh::triangulate_with(0, poly, &segments, 0.0, 0.0, 0.05, 10_000);
+    let (mesh, inserted) = penumbra::mesh::triangulate_with(
+        0,
+        poly,
+        penumbra::mesh::Lines {
+            segments: &segments,
+            ..Default::default()
+        },
+        0.05,
+        10_000,
+    );
     assert_eq!(inserted.refused, 0);
     assert!((mesh.area() - 36.0).abs() < 1e-9);
 }
