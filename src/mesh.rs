@@ -917,12 +917,22 @@ where
     let mut added: Vec<Vec<DVec2>> = vec![Vec::new(); start.len()];
     // Elements one split adds, measured after each round.
     let mut per_split = 2.0;
+    // The light at each mesh's vertices; after a round only the rebuilt meshes are evaluated.
+    let mut values: Vec<Vec<glam::DVec3>> = Vec::new();
+    let mut stale: Vec<usize> = (0..meshes.len()).collect();
     for _ in 0..rounds {
         let total = element_count(&meshes);
         if total * 20 >= budget * 19 {
             break;
         }
-        let values = evaluate(&meshes);
+        if values.is_empty() {
+            values = evaluate(&meshes);
+        } else if !stale.is_empty() {
+            let subset: Vec<ReceiverMesh> = stale.iter().map(|&mi| meshes[mi].clone()).collect();
+            for (&mi, v) in stale.iter().zip(evaluate(&subset)) {
+                values[mi] = v;
+            }
+        }
         let peak = values.iter().flatten().map(lum).fold(0.0, f64::max);
         if peak <= 0.0 {
             break;
@@ -980,6 +990,9 @@ where
         let Some((next, next_added)) = accepted else {
             break;
         };
+        stale = (0..meshes.len())
+            .filter(|&mi| next_added[mi].len() != added[mi].len())
+            .collect();
         meshes = next;
         added = next_added;
     }
