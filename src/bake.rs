@@ -205,7 +205,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats.instances = scene.instances.len();
     stats.area_emitters = scene.emitters().count();
     stats.punctual_lights = scene.lights.len();
-    stats.elements = meshes.iter().map(|m| m.triangles.len()).sum();
+    stats.elements = mesh::element_count(&meshes);
     stats.vertices = meshes.iter().map(|m| m.vertices.len()).sum();
     stats.solve = solution.stats.clone();
     stats.lightmap_width = atlas.width;

@@ -526,7 +526,7 @@ where
         let count = element_count(&meshes) as f64;
         (meshes, count)
     };
-    let first = coarsest_cap(scene, budget as usize) / COARSEST;
+    let first = element_area(scene, budget as usize);
     // Past COARSEST only when even that is over the budget: then as coarse as it gets.
     let total_area: f64 = scene.polygons.iter().map(|p| p.area).sum();
     let (lowest, highest) = (first * 1e-3, total_area.max(first * COARSEST));
@@ -608,11 +608,11 @@ where
     (best, best_cap)
 }
 
-/// The largest area cap [`to_budget`] uses for `budget` elements: [`COARSEST`] times the
-/// average element area (scene units²).
-fn coarsest_cap(scene: &Scene, budget: usize) -> f64 {
+/// The average element area (scene units²) at `budget` elements over the whole scene; the budget
+/// search's cap stays within [`COARSEST`] times it.
+fn element_area(scene: &Scene, budget: usize) -> f64 {
     let total_area: f64 = scene.polygons.iter().map(|p| p.area).sum();
-    total_area / budget.max(1) as f64 * COARSEST
+    total_area / budget.max(1) as f64
 }
 
 /// Meshes every polygon at one area cap, with a refinement vertex cap from the polygon's
@@ -680,7 +680,7 @@ pub fn discontinuity(
     });
     let snap = 10.0 * crate::discontinuity::TOLERANCE * scene.extent();
     // Half the side of an average element at the budget.
-    let clearance = 0.5 * (coarsest_cap(scene, budget) / COARSEST).sqrt();
+    let clearance = 0.5 * element_area(scene, budget).sqrt();
     // The strongest `keep` wedge pieces and every D0 line, per polygon.
     let select = |keep: usize| -> Vec<Vec<Segment>> {
         let mut kept: Vec<Vec<bool>> = segments
@@ -718,7 +718,7 @@ pub fn discontinuity(
             m
         };
     // The count at the coarsest cap with the strongest `keep` pieces.
-    let coarsest = coarsest_cap(scene, budget);
+    let coarsest = element_area(scene, budget) * COARSEST;
     let floor = |keep: usize| -> usize {
         let selected = select(keep);
         element_count(&mesh_at(scene, coarsest, &|i, area, cap| {
