@@ -550,10 +550,13 @@ fn exact_bake_reports_its_direct_light() {
 }
 
 /// Many emitters (Lightcuts): a small night town with 64 lamp panels, direct light only. With
-/// the default `--light-error` each vertex evaluates exactly only the lamps that matter and
-/// bounds the rest; against every lamp exact (`light_error` 0), the vertex irradiance differs by
-/// under 0.5% RMS of its mean and by at most 5% of the mean at any vertex, with well under half
-/// the exact evaluations.
+/// the default `--light-error` (`EPSILON`) each vertex evaluates exactly only the lamps that
+/// matter and bounds the rest, with a tenth of the exact evaluations; against every lamp exact
+/// (`light_error` 0), the vertex irradiance differs by under `EPSILON` RMS of its mean and by
+/// at most `5 EPSILON` of the mean at any vertex (the bounds, with their cosines, are close to
+/// the contributions, so the error is of the order of `EPSILON`: measured 2.4% RMS and 16% at
+/// worst). A tenth of it (0.005) is under 0.5% RMS and 5% at any vertex, with still under a
+/// fifth of the exact evaluations (measured 0.37%, 3.1% and 18%).
 #[test]
 fn light_cuts_bound_the_far_emitters_and_keep_the_result() {
     let glb = fixtures::ladder::night_town(1500, 64);
@@ -568,43 +571,58 @@ fn light_cuts_bound_the_far_emitters_and_keep_the_result() {
         o.solve.light_error = light_error;
         bake(&glb, &o)
     };
-    let (exact, cut) = (run(0.0), run(solve::lightcuts::EPSILON));
+    let exact = run(0.0);
     assert!(
         exact.stats.area_emitters >= 64,
         "{}",
         exact.stats.area_emitters
     );
-    let (de, dc) = (&exact.stats.solve.direct, &cut.stats.solve.direct);
+    let de = &exact.stats.solve.direct;
     assert_eq!(de.bounded, 0);
-    assert!(dc.bounded > 0, "{dc:?}");
-    assert!(dc.light_tree_nodes == 2 * exact.stats.area_emitters - 1);
-    assert!(
-        (dc.evaluations as f64) < 0.5 * de.evaluations as f64,
-        "{} of {} evaluations",
-        dc.evaluations,
-        de.evaluations
-    );
-    let (mut sq, mut sum, mut worst, mut n) = (0.0, 0.0, 0.0f64, 0usize);
-    for (a, b) in exact
-        .solution
-        .irradiance
-        .iter()
-        .flatten()
-        .zip(cut.solution.irradiance.iter().flatten())
-    {
-        sq += (a.x - b.x).powi(2);
-        sum += a.x;
-        worst = worst.max((a.x - b.x).abs());
-        n += 1;
+    let epsilon = solve::lightcuts::EPSILON;
+    for (light_error, evaluations, rms_limit, worst_limit) in [
+        (epsilon, 0.1, epsilon, 5.0 * epsilon),
+        (epsilon / 10.0, 0.2, 5e-3, 0.05),
+    ] {
+        let cut = run(light_error);
+        let dc = &cut.stats.solve.direct;
+        assert!(dc.bounded > 0, "{dc:?}");
+        assert!(dc.light_tree_nodes == 2 * exact.stats.area_emitters - 1);
+        assert!(
+            (dc.evaluations as f64) < evaluations * de.evaluations as f64,
+            "{light_error}: {} of {} evaluations",
+            dc.evaluations,
+            de.evaluations
+        );
+        let (mut sq, mut sum, mut worst, mut n) = (0.0, 0.0, 0.0f64, 0usize);
+        for (a, b) in exact
+            .solution
+            .irradiance
+            .iter()
+            .flatten()
+            .zip(cut.solution.irradiance.iter().flatten())
+        {
+            sq += (a.x - b.x).powi(2);
+            sum += a.x;
+            worst = worst.max((a.x - b.x).abs());
+            n += 1;
+        }
+        let mean = sum / n as f64;
+        let rms = (sq / n as f64).sqrt() / mean;
+        eprintln!(
+            "light cuts at {light_error}: RMS {rms:.2e}, worst {:.2e} of the mean, {} of {} \
+             evaluations",
+            worst / mean,
+            dc.evaluations,
+            de.evaluations
+        );
+        assert!(rms < rms_limit, "{light_error}: RMS {rms}");
+        assert!(
+            worst < worst_limit * mean,
+            "{light_error}: worst {} of the mean",
+            worst / mean
+        );
     }
-    let mean = sum / n as f64;
-    let rms = (sq / n as f64).sqrt() / mean;
-    eprintln!(
-        "light cuts: RMS {rms:.2e}, worst {:.2e} of the mean",
-        worst / mean
-    );
-    assert!(rms < 5e-3, "RMS {rms}");
-    assert!(worst < 0.05 * mean, "worst {} of the mean", worst / mean);
 }
 
 /// One emitter: the cut is the emitter itself, evaluated exactly (nothing bounded).
