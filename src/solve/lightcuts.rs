@@ -57,7 +57,7 @@ use std::collections::BinaryHeap;
 
 /// The default of [`super::SolveOptions::light_error`]: a node of the cut is refined while its
 /// bound exceeds this fraction of the cut's estimated total irradiance (dimensionless).
-pub const EPSILON: f64 = 0.05;
+pub const EPSILON: f64 = 0.02;
 
 /// A node of the light tree.
 #[derive(Clone, Debug)]
