@@ -1247,6 +1247,18 @@ fn add_area_light(b: &mut GlbBuilder) {
     );
 }
 
+/// The box of [`box_on_floor`]: [-0.5, 0.5] × [0, 1] × [-0.5, 0.5], 5 outward faces, node
+/// `box`.
+fn add_unit_box(b: &mut GlbBuilder, material: usize) {
+    let top = [
+        [-0.5, 1.0, -0.5],
+        [-0.5, 1.0, 0.5],
+        [0.5, 1.0, 0.5],
+        [0.5, 1.0, -0.5],
+    ];
+    b.add_mesh_node("box", &block(top, 0.0, false), material);
+}
+
 /// A 1 m cube standing on a floor, lit by an area light.
 ///
 /// * `floor`: [-2, 2]² at y = 0 facing up, reflectance 0.5 grey; one quad, sharing no vertex
@@ -1263,13 +1275,7 @@ pub fn box_on_floor() -> Vec<u8> {
         &horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
         grey,
     );
-    let top = [
-        [-0.5, 1.0, -0.5],
-        [-0.5, 1.0, 0.5],
-        [0.5, 1.0, 0.5],
-        [0.5, 1.0, -0.5],
-    ];
-    b.add_mesh_node("box", &block(top, 0.0, false), grey);
+    add_unit_box(&mut b, grey);
     add_area_light(&mut b);
     b.to_glb()
 }
@@ -1298,13 +1304,7 @@ pub fn tiled_box_on_floor(n: usize) -> Vec<u8> {
     );
     floor.normals = None;
     b.add_mesh_node("floor", &floor, grey);
-    let top = [
-        [-0.5, 1.0, -0.5],
-        [-0.5, 1.0, 0.5],
-        [0.5, 1.0, 0.5],
-        [0.5, 1.0, -0.5],
-    ];
-    b.add_mesh_node("box", &block(top, 0.0, false), grey);
+    add_unit_box(&mut b, grey);
     add_area_light(&mut b);
     let camera = b.add_camera(PerspectiveCamera {
         name: "camera".into(),

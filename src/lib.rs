@@ -37,7 +37,8 @@ pub mod solve;
 /// Exact visible emitter parts (used by `solve`).
 pub mod backproject;
 
-/// Texels from the receiver meshes.
+/// Texels from the receiver meshes (buried sub-samples left out, dilation), and the
+/// stitching of the seams between charts.
 pub mod lightmap;
 
 /// The lightmapped glb.

@@ -1,5 +1,6 @@
 //! Lightmap rasterization: for every texel, the irradiance of the receiver mesh at the surface
-//! points its footprint covers, supersampled, then dilated into the padding.
+//! points its footprint covers, supersampled (sub-samples buried under other geometry left
+//! out), then dilated into the padding. [`seams`] then stitches the seams between charts.
 //!
 //! Texel `(x, y)` covers UV `[x, x+1] x [y, y+1]` in atlas texel units; row 0 is the top row of the
 //! image, as glTF's UV origin is the image's top-left corner. An atlas of several pages gives a
