@@ -157,7 +157,7 @@ impl Visibility {
     /// box that crosses it, the ceiling behind a light fitted against it. Such points are never
     /// seen, and their light (dark, or leaking) must not reach the lightmap.
     ///
-    /// The test is the back-face test of lightmappers (Bakery, Unity's "backface tolerance"):
+    /// The test is the back-face test of lightmappers (Unity's "backface tolerance"):
     /// from `p`, lifted off its surface by [`Visibility::epsilon`], a ray along `n` and
     /// [`BURIED_RAYS`] rays at 60 degrees from it, evenly around `n`; the point is buried when
     /// the ray along `n` and most of all the rays (more than half) meet a back face first. One

@@ -29,12 +29,13 @@
 //!   sample), each group serially and the groups in parallel, so the result does not depend
 //!   on the thread count. Texels in no footprint do not move.
 //!
-//! [`LAMBDA`] = 0.1 (as Sylvan's and Iwanicki's seam optimizers): a sample whose two sides
-//! read one texel each keeps `LAMBDA^2 / (2 + LAMBDA^2)` = 0.5% of its mismatch, and the weak
-//! term only has to make the system definite (the seam terms alone leave any value both sides
-//! share free) and keep texels read by no lookup of any strength where they were. A larger
-//! lambda leaves more of the seam; a much smaller one makes the system ill-conditioned (more
-//! iterations) and lets texels drift along the seam where the samples do not pin them.
+//! [`LAMBDA`] = 0.1 (as in the seamoptimizer library's example, after Iwanicki): a sample
+//! whose two sides read one texel each keeps `LAMBDA^2 / (2 + LAMBDA^2)` = 0.5% of its
+//! mismatch. The weak term makes the system definite (the seam terms alone leave free any
+//! change both sides share) and holds each texel near its baked value where the samples pull
+//! on it only weakly. A larger lambda leaves more of the seam; a much smaller one makes the
+//! system ill-conditioned (more iterations) and lets texels drift where the samples do not pin
+//! them.
 //!
 //! The mismatch ([`mismatch`]) is, per sample, `|side A - side B|` (mean over the channels) of
 //! the two bilinear lookups, relative to the lightmap's mean covered texel value (mean over the
@@ -50,8 +51,8 @@ use serde::Serialize;
 
 /// Seam edges are stitched where the two triangles' unit normals have at least this dot
 /// product (8.1 degrees): the planar pieces of one surface, and the facets of a finely
-/// tessellated curved one. (Sylvan's seam optimizer stitches "triangles that are on the same
-/// plane" at the same threshold.)
+/// tessellated curved one. (The seamoptimizer library's example stitches "triangles that are
+/// on the same plane" at the same threshold.)
 pub const SMOOTH_COS: f64 = 0.99;
 
 /// Weight of the term holding each stitched texel to its baked value, relative to a seam
@@ -519,7 +520,7 @@ pub struct SeamStats {
     /// Mean and largest seam mismatch before stitching, relative to the mean covered texel.
     pub mismatch_mean_before: f64,
     pub mismatch_max_before: f64,
-    /// Where the largest mismatch before stitching is: the world point of its sample (empty
+    /// Where the largest mismatch before stitching is: the world point of its sample (`null`
     /// without samples).
     pub worst_before_at: Option<[f64; 3]>,
     /// The same after stitching (equal to the before values with `--seams off`).
@@ -539,6 +540,12 @@ pub fn stitch_seams(
     atlas: &Atlas,
     on: bool,
 ) -> SeamStats {
+    if map.width == 0 || map.height == 0 {
+        return SeamStats {
+            stitched: on,
+            ..SeamStats::default()
+        };
+    }
     let seams = find(scene, atlas);
     let samples = samples(&seams.edges, map.width, map.height, |p, n| {
         !vis.buried(p, n)
@@ -557,7 +564,7 @@ pub fn stitch_seams(
         mismatch_max: before.max,
         ..SeamStats::default()
     };
-    if !on || samples.is_empty() || map.width == 0 || map.height == 0 {
+    if !on || samples.is_empty() {
         return stats;
     }
     let stitched = stitch(&mut map.texels, &samples);
