@@ -1,6 +1,7 @@
 //! Lightmap rasterization: for every texel, the irradiance of the receiver mesh at the surface
 //! points its footprint covers, supersampled (sub-samples buried under other geometry left
-//! out), then dilated into the padding. [`seams`] then stitches the seams between charts.
+//! out), then dilated into the padding. [`crate::lightmap::seams`] then stitches the seams
+//! between charts.
 //!
 //! Texel `(x, y)` covers UV `[x, x+1] x [y, y+1]` in atlas texel units; row 0 is the top row of the
 //! image, as glTF's UV origin is the image's top-left corner. An atlas of several pages gives a
@@ -411,8 +412,9 @@ pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
     dilate_from(map, filled, rings);
 }
 
-/// [`dilate_page`] on every page of `map`, each on its own, from the texels marked in `filled`
-/// (same layout as the texels): the others are filled.
+/// Dilation on every page of `map`, each on its own, from the texels marked in `filled` (same
+/// layout as the texels): the others are filled, ring by ring outward, with the mean of their
+/// already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole page).
 pub fn dilate_from(map: &mut Lightmap, mut filled: Vec<bool>, rings: u32) {
     let n = map.width as usize * map.height as usize;
     if n == 0 {
