@@ -4,6 +4,7 @@
 //! cargo run --example make_fixtures [OUTPUT_DIR]
 //! cargo run --release --example make_fixtures -- --ladder DIR
 //! cargo run --release --example make_fixtures -- --town TRIANGLES FILE
+//! cargo run --release --example make_fixtures -- --tiled-box TILES FILE
 //! ```
 //!
 //! `OUTPUT_DIR` defaults to `fixtures` (relative to the current directory, so run it from the
@@ -14,6 +15,8 @@
 //! megabytes each) to `DIR/<rung>.glb` instead; they are generated on demand and not kept in
 //! `fixtures/`. `--town TRIANGLES FILE` writes the ladder's sunlit town at about that many
 //! triangles (`penumbra::fixtures::ladder::town`), e.g. a small one for `penumbra compare`.
+//! `--tiled-box TILES FILE` writes the box on a floor of TILES x TILES tiles of the seam
+//! pictures (`penumbra::fixtures::tiled_box_on_floor`).
 
 use std::path::PathBuf;
 
@@ -22,7 +25,7 @@ fn main() -> std::io::Result<()> {
     let usage = || -> ! {
         eprintln!(
             "usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR \
-             | make_fixtures --town TRIANGLES FILE"
+             | make_fixtures --town TRIANGLES FILE | make_fixtures --tiled-box TILES FILE"
         );
         std::process::exit(2);
     };
@@ -43,14 +46,19 @@ fn main() -> std::io::Result<()> {
         }
         return Ok(());
     }
-    if args.first().is_some_and(|a| a == "--town") {
-        let [_, triangles, file] = args.as_slice() else {
+    let generated: Option<fn(usize) -> Vec<u8>> = match args.first().and_then(|a| a.to_str()) {
+        Some("--town") => Some(penumbra::fixtures::ladder::town),
+        Some("--tiled-box") => Some(penumbra::fixtures::tiled_box_on_floor),
+        _ => None,
+    };
+    if let Some(generate) = generated {
+        let [_, size, file] = args.as_slice() else {
             usage()
         };
-        let Some(triangles) = triangles.to_str().and_then(|t| t.parse().ok()) else {
+        let Some(size) = size.to_str().and_then(|t| t.parse().ok()) else {
             usage()
         };
-        let glb = penumbra::fixtures::ladder::town(triangles);
+        let glb = generate(size);
         std::fs::write(file, &glb)?;
         println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
         return Ok(());

@@ -38,6 +38,18 @@ pub struct BakeOptions {
     pub encoding: Encoding,
     /// Sub-samples per texel side (`n x n` per texel), 1..=8.
     pub supersample: u32,
+    /// Stitch the lightmap's seams ([`lightmap::seams`]); off: measure them only.
+    pub seams: Seams,
+}
+
+/// What the lightmap stage does at the seams between charts (`--seams`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum Seams {
+    /// Least-squares stitching, so bilinear lookups on the two sides of a seam agree.
+    #[default]
+    Stitch,
+    /// Leave the charts as rasterized and dilated (the mismatch is still measured).
+    Off,
 }
 
 impl Default for BakeOptions {
@@ -53,6 +65,7 @@ impl Default for BakeOptions {
             page_size: atlas::DEFAULT_PAGE_SIZE,
             encoding: Encoding::Srgb,
             supersample: 4,
+            seams: Seams::Stitch,
         }
     }
 }
@@ -189,17 +202,21 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     for (i, m) in meshes.iter().enumerate() {
         mesh_of_polygon[m.polygon] = i;
     }
-    let lightmap = stage(&mut t.lightmap, "lightmap", progress, || {
-        lightmap::rasterize(
+    let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
+        let mut map = lightmap::rasterize(
             &scene,
+            &vis,
             &meshes,
             &solution.irradiance,
             &mesh_of_polygon,
             &atlas,
             options.supersample,
-            u32::MAX,
-        )
+        );
+        let on = options.seams == Seams::Stitch;
+        let seams = lightmap::seams::stitch_seams(&mut map, &scene, &vis, &atlas, on);
+        (map, seams)
     });
+    stats.seams = seams;
     stats.triangles = scene.triangles.len();
     stats.polygons = scene.polygons.len();
     stats.instances = scene.instances.len();

@@ -1247,6 +1247,18 @@ fn add_area_light(b: &mut GlbBuilder) {
     );
 }
 
+/// The box of [`box_on_floor`]: [-0.5, 0.5] × [0, 1] × [-0.5, 0.5], 5 outward faces, node
+/// `box`.
+fn add_unit_box(b: &mut GlbBuilder, material: usize) {
+    let top = [
+        [-0.5, 1.0, -0.5],
+        [-0.5, 1.0, 0.5],
+        [0.5, 1.0, 0.5],
+        [0.5, 1.0, -0.5],
+    ];
+    b.add_mesh_node("box", &block(top, 0.0, false), material);
+}
+
 /// A 1 m cube standing on a floor, lit by an area light.
 ///
 /// * `floor`: [-2, 2]² at y = 0 facing up, reflectance 0.5 grey; one quad, sharing no vertex
@@ -1263,14 +1275,53 @@ pub fn box_on_floor() -> Vec<u8> {
         &horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
         grey,
     );
-    let top = [
-        [-0.5, 1.0, -0.5],
-        [-0.5, 1.0, 0.5],
-        [0.5, 1.0, 0.5],
-        [0.5, 1.0, -0.5],
-    ];
-    b.add_mesh_node("box", &block(top, 0.0, false), grey);
+    add_unit_box(&mut b, grey);
     add_area_light(&mut b);
+    b.to_glb()
+}
+
+/// [`box_on_floor`] with its floor cut into `n` x `n` square tiles (`2 n²` triangles, vertices
+/// shared): with enough tiles xatlas cuts the floor into several charts (a chart holds about
+/// [`crate::atlas::TRIANGLES_PER_CHART`] average triangles), so lightmap seams cross the floor,
+/// its light and the box's shadow: the scene of the seam pictures and tests.
+///
+/// * `floor`: [-2, 2]² at y = 0 facing up, reflectance 0.5 grey, `n` x `n` tiles.
+/// * `box`, `light`: as in [`box_on_floor`].
+/// * `camera`: at (2.5, 2.2, 3.2) m looking at (0, 0.3, 0), `yfov` 0.8 rad.
+pub fn tiled_box_on_floor(n: usize) -> Vec<u8> {
+    let mut b = GlbBuilder::new();
+    let grey = b.add_material(Material::diffuse("grey", [0.5; 3]));
+    let steps: Vec<f64> = (0..=n.max(1))
+        .map(|k| 4.0 * k as f64 / n.max(1) as f64)
+        .collect();
+    let mut floor = ladder::grid(
+        DVec3::new(-2.0, 0.0, -2.0),
+        DVec3::Z,
+        DVec3::X,
+        &steps,
+        &steps,
+        |_, _| false,
+    );
+    floor.normals = None;
+    b.add_mesh_node("floor", &floor, grey);
+    add_unit_box(&mut b, grey);
+    add_area_light(&mut b);
+    let camera = b.add_camera(PerspectiveCamera {
+        name: "camera".into(),
+        yfov: 0.8,
+        aspect_ratio: Some(1.0),
+        znear: 0.01,
+        zfar: Some(20.0),
+    });
+    b.add_node(
+        Node::new("camera")
+            .with_transform(Transform::look_to(
+                [2.5, 2.2, 3.2],
+                [-2.5, -1.9, -3.2],
+                [0.0, 1.0, 0.0],
+            ))
+            .with_camera(camera),
+    );
     b.to_glb()
 }
 

@@ -37,7 +37,8 @@ pub mod solve;
 /// Exact visible emitter parts (used by `solve`).
 pub mod backproject;
 
-/// Texels from the receiver meshes.
+/// Texels from the receiver meshes (buried sub-samples left out, dilation), and the
+/// stitching of the seams between charts.
 pub mod lightmap;
 
 /// The lightmapped glb.
@@ -84,5 +85,5 @@ pub mod reference;
 /// Pictures of a baked glb.
 pub mod render;
 
-pub use bake::{Bake, BakeOptions, OutputFiles, bake, bake_file};
+pub use bake::{Bake, BakeOptions, OutputFiles, Seams, bake, bake_file};
 pub use error::{Error, Result};

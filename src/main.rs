@@ -81,6 +81,19 @@ struct CompareArgs {
     quiet: bool,
 }
 
+/// A point `X,Y,Z` (three finite numbers).
+fn parse_point(s: &str) -> Result<glam::DVec3, String> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|c| c.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{s:?}: {e}"))?;
+    match v[..] {
+        [x, y, z] if v.iter().all(|c| c.is_finite()) => Ok(glam::DVec3::new(x, y, z)),
+        _ => Err(format!("{s:?} is not three finite numbers X,Y,Z")),
+    }
+}
+
 fn parse_method(s: &str) -> Result<penumbra::compare::Method, String> {
     penumbra::compare::Method::known()
         .into_iter()
@@ -160,6 +173,16 @@ struct RenderArgs {
     /// any other value: the perspective camera (or its node) of that name.
     #[arg(long, default_value = "gltf")]
     camera: String,
+    /// Instead of --camera: a camera at this point (world space, scene units), looking at
+    /// --look-at (+y up).
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true, requires = "look_at", conflicts_with = "camera")]
+    eye: Option<glam::DVec3>,
+    /// The point the --eye camera looks at.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_point, allow_hyphen_values = true, requires = "eye")]
+    look_at: Option<glam::DVec3>,
+    /// Vertical field of view of the --eye camera, degrees (0 to 179).
+    #[arg(long, default_value_t = 40.0, requires = "eye")]
+    fov: f64,
     /// Image width in pixels (the height follows the camera's aspect, 1:1 by default).
     #[arg(long, default_value_t = 512)]
     width: u32,
@@ -258,6 +281,10 @@ struct BakeArgs {
     /// Sub-samples per texel side (n x n per texel, 1 to 8): antialiases sharp shadows.
     #[arg(long, default_value_t = 4)]
     supersample: u32,
+    /// Lightmap seams between charts: `stitch` (least squares, so that bilinear lookups on
+    /// the two sides agree) or `off` (measured in --stats only).
+    #[arg(long, value_enum, default_value_t = penumbra::Seams::Stitch)]
+    seams: penumbra::Seams,
     /// Also write the float lightmap (irradiance, W/m², linear) as OpenEXR: page 0 to FILE,
     /// page p >= 1 to FILE's stem plus `-p` (`light.exr`, `light-1.exr`, ...).
     #[arg(long, value_name = "FILE")]
@@ -468,10 +495,21 @@ fn pool(threads: Option<usize>) -> anyhow::Result<rayon::ThreadPool> {
 fn render(args: RenderArgs) -> anyhow::Result<()> {
     let gltf = penumbra::load::read(&args.input)?;
     use penumbra::render::Camera;
-    let camera = match args.camera.as_str() {
-        "gltf" => Camera::from_gltf(&gltf),
-        "auto" => None,
-        name => Some(Camera::named(&gltf, name).with_context(|| {
+    let camera = match (&args.eye, &args.look_at, args.camera.as_str()) {
+        (Some(eye), Some(target), _) => {
+            anyhow::ensure!(
+                args.fov > 0.0 && args.fov < 179.0,
+                "--fov must be between 0 and 179 degrees"
+            );
+            Some(
+                Camera::look_at(*eye, *target, args.fov.to_radians()).context(
+                    "--eye and --look-at must be two different points with finite coordinates",
+                )?,
+            )
+        }
+        (_, _, "gltf") => Camera::from_gltf(&gltf),
+        (_, _, "auto") => None,
+        (_, _, name) => Some(Camera::named(&gltf, name).with_context(|| {
             format!(
                 "{}: no perspective camera called {name:?} (cameras: {:?}); \
                  --camera gltf takes the first, auto frames the scene",
@@ -518,6 +556,7 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         page_size: args.page_size,
         encoding: args.encoding,
         supersample: args.supersample,
+        seams: args.seams,
     };
     let bars = Bars::new(args.quiet);
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);

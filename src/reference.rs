@@ -32,7 +32,9 @@
 //!
 //! Sampling follows the bake's supersampling footprint: texel `(x, y)` covers UV `[x, x+1] x
 //! [y, y+1]` in texel units (row 0 on top) and its `n x n` sub-samples sit at `x + (i + 0.5)/n`,
-//! `y + (j + 0.5)/n`; each lies on the first lightmapped triangle that contains it in UV space.
+//! `y + (j + 0.5)/n`; each lies on the first lightmapped triangle that contains it in UV space,
+//! and counts as covered unless it is buried under other geometry
+//! ([`crate::visibility::Visibility::buried`], as in the bake).
 //! The texel value is the mean over its covered sub-samples, each given the same number of
 //! paths (stratified sampling); its standard error is that of the stratified mean.
 //!
@@ -85,7 +87,7 @@ pub struct ReferenceMap {
     pub mean: Vec<DVec3>,
     /// Standard error of `mean` per texel and channel, W/m².
     pub std_error: Vec<DVec3>,
-    /// Fraction of each texel's sub-samples covered by a lightmapped triangle.
+    /// Fraction of each texel's sub-samples covered by a lightmapped triangle (and not buried).
     pub coverage: Vec<f32>,
     /// Per texel, the fraction of its direct light (area emitters and punctual lights, by
     /// luminance) that is not blocked: 1 fully lit, 0 in umbra. `None` where no emitter would
@@ -317,6 +319,9 @@ pub fn texel_layout(
                     let p = tri.p[0] * l0 + tri.p[1] * l1 + tri.p[2] * l2;
                     // Onto the polygon's plane exactly.
                     let p = p - frame.n * frame.n.dot(p - frame.origin);
+                    if vis.buried(p, frame.n) {
+                        continue; // not covered, as in the bake
+                    }
                     samples[idx].push(SurfacePoint::new(p, frame.n, poly, vis));
                 }
             }

@@ -86,6 +86,29 @@ impl Camera {
         None
     }
 
+    /// A camera at `eye` looking at `target` (world space), with vertical field of view `yfov`
+    /// (radians); `up` is +y, or +z when looking straight up or down. `None` when the two
+    /// points coincide or a value is not finite.
+    pub fn look_at(eye: DVec3, target: DVec3, yfov: f64) -> Option<Camera> {
+        let forward = (target - eye).try_normalize()?;
+        if !(eye.is_finite() && target.is_finite() && yfov.is_finite()) {
+            return None;
+        }
+        let up0 = if forward.cross(DVec3::Y).length() > 1e-6 {
+            DVec3::Y
+        } else {
+            DVec3::Z
+        };
+        let right = forward.cross(up0).normalize();
+        Some(Camera {
+            eye,
+            forward,
+            up: right.cross(forward),
+            right,
+            yfov,
+        })
+    }
+
     /// A camera that frames the scene's bounding box from the front-above diagonal.
     pub fn auto(scene: &Scene) -> Camera {
         let center = (scene.bounds_min + scene.bounds_max) * 0.5;
@@ -316,15 +339,8 @@ pub fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
     if w == 0 || h == 0 || map.texels.len() < (page + 1) * w * h {
         return DVec3::ZERO;
     }
-    let texels = &map.texels[page * w * h..(page + 1) * w * h];
-    let x = (uv.x * w as f64 - 0.5).clamp(0.0, w as f64 - 1.0);
-    let y = (uv.y * h as f64 - 0.5).clamp(0.0, h as f64 - 1.0);
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = (x - x0 as f64, y - y0 as f64);
-    let t = |x: usize, y: usize| texels[y * w + x];
-    (t(x0, y0) * (1.0 - fx) + t(x1, y0) * fx) * (1.0 - fy)
-        + (t(x0, y1) * (1.0 - fx) + t(x1, y1) * fx) * fy
+    let texel_uv = uv * DVec2::new(w as f64, h as f64);
+    crate::lightmap::seams::Footprint::at(map.width, map.height, page, texel_uv).sample(&map.texels)
 }
 
 /// The sRGB opto-electronic transfer function (IEC 61966-2-1), value in [0,1].

@@ -54,6 +54,9 @@ pub struct Stats {
     pub texels_per_unit: f32,
     /// `MOZ_lightmap` intensity: H (W/m²) of a full-scale texel.
     pub lightmap_intensity: f64,
+    /// Seam edges, samples, stitched texels, and the seam mismatch before and after
+    /// stitching (`lightmap::seams`).
+    pub seams: crate::lightmap::seams::SeamStats,
     pub timings_s: Timings,
     pub warnings: Vec<String>,
 }

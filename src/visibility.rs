@@ -28,6 +28,9 @@ pub struct Visibility {
     eps: f64,
 }
 
+/// Slanted rays of [`Visibility::buried`], besides the one along the normal.
+pub const BURIED_RAYS: usize = 8;
+
 /// A ray's closest intersection.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Hit {
@@ -113,6 +116,14 @@ impl Visibility {
 
     /// The closest hit along `origin + t dir` for `t` in `(epsilon, tmax)`; `dir` must be unit.
     pub fn first_hit(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit> {
+        self.closest(origin, dir, tmax).map(|(t, k)| Hit {
+            t,
+            triangle: self.ids[k],
+        })
+    }
+
+    /// [`Visibility::first_hit`] as (distance, BVH primitive).
+    fn closest(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<(f64, usize)> {
         if self.tris.is_empty() {
             return None;
         }
@@ -125,14 +136,54 @@ impl Visibility {
         if RECORDING.load(Ordering::Relaxed) {
             record(&ray, Query::FirstHit, [u32::MAX; 2], found);
         }
-        if found {
-            Some(Hit {
-                t: hit.t as f64,
-                triangle: self.ids[hit.primitive_id as usize],
+        found.then_some((hit.t as f64, hit.primitive_id as usize))
+    }
+
+    /// True when the first surface the ray from `origin` along unit `dir` meets shows it its
+    /// back (the triangle's front normal points along `dir`).
+    fn meets_back_face(&self, origin: DVec3, dir: DVec3) -> bool {
+        self.closest(origin, dir, f64::from(f32::MAX))
+            .is_some_and(|(_, k)| {
+                let t = &self.tris[k];
+                (t.v1 - t.v0)
+                    .cross(t.v2 - t.v0)
+                    .dot(Vec3A::from(dir.as_vec3()))
+                    > 0.0
             })
-        } else {
-            None
+    }
+
+    /// True when the surface point `p`, on a surface with front normal `n` (unit), is buried
+    /// under other geometry: the floor under a box standing on it, a wall's foot inside the
+    /// box that crosses it, the ceiling behind a light fitted against it. Such points are never
+    /// seen, and their light (dark, or leaking) must not reach the lightmap.
+    ///
+    /// The test is the back-face test of lightmappers (Unity's "backface tolerance"):
+    /// from `p`, lifted off its surface by [`Visibility::epsilon`], a ray along `n` and
+    /// [`BURIED_RAYS`] rays at 60 degrees from it, evenly around `n`; the point is buried when
+    /// the ray along `n` and most of all the rays (more than half) meet a back face first. One
+    /// ray settles most points (it escapes, or meets a front face). The point under a thin,
+    /// one-sided overhang (a table top seen from below) is not buried: its slanted rays pass
+    /// the overhang's edge. The rays are turned off the axes by odd angles (the first one by
+    /// 1.5 degrees), so that in axis-aligned scenes they do not run exactly along an edge
+    /// between two triangles, where a hit can slip through.
+    pub fn buried(&self, p: DVec3, n: DVec3) -> bool {
+        let origin = p + n * self.eps;
+        let (a, b) = n.any_orthonormal_pair();
+        let ray = |theta: f64, phi: f64| {
+            let (sin, cos) = theta.to_radians().sin_cos();
+            n * cos + (a * phi.cos() + b * phi.sin()) * sin
+        };
+        if !self.meets_back_face(origin, ray(1.5, 0.7)) {
+            return false;
         }
+        let backs = 1
+            + (0..BURIED_RAYS)
+                .filter(|&k| {
+                    let phi = std::f64::consts::TAU * (k as f64 + 0.382) / BURIED_RAYS as f64;
+                    self.meets_back_face(origin, ray(60.0, phi))
+                })
+                .count();
+        2 * backs > BURIED_RAYS + 1
     }
 
     /// True when any triangle blocks the open segment from `a` to `b`, ignoring `epsilon` at

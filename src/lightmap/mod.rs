@@ -1,5 +1,7 @@
 //! Lightmap rasterization: for every texel, the irradiance of the receiver mesh at the surface
-//! points its footprint covers, supersampled, then dilated into the padding.
+//! points its footprint covers, supersampled (sub-samples buried under other geometry left
+//! out), then dilated into the padding. [`crate::lightmap::seams`] then stitches the seams
+//! between charts.
 //!
 //! Texel `(x, y)` covers UV `[x, x+1] x [y, y+1]` in atlas texel units; row 0 is the top row of the
 //! image, as glTF's UV origin is the image's top-left corner. An atlas of several pages gives a
@@ -9,8 +11,11 @@ use crate::atlas::Atlas;
 use crate::geometry::barycentric_2d;
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
+use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
+
+pub mod seams;
 
 /// Float RGB images of irradiance H (W/m², linear, without albedo): one or more pages of
 /// `width` x `height` texels.
@@ -22,8 +27,9 @@ pub struct Lightmap {
     pub height: u32,
     /// Page after page ([`Lightmap::pages`] of them), each row-major, top row first.
     pub texels: Vec<DVec3>,
-    /// Fraction of each texel's sub-samples covered by geometry (0 for padding); same layout
-    /// as `texels` (empty for a map read back from a file).
+    /// Fraction of each texel's sub-samples covered by geometry and not buried under other
+    /// geometry (0 for padding); same layout as `texels` (empty for a map read back from a
+    /// file).
     pub coverage: Vec<f32>,
 }
 
@@ -255,16 +261,21 @@ impl<'a> Locator<'a> {
 
 /// Rasterizes the solved irradiance into the atlas. `meshes[m]` with `values[m]` at its vertices;
 /// `mesh_of_polygon[p]` gives the mesh of polygon `p`. `supersample` is the number of sub-samples
-/// per texel side (`n x n` per texel). `dilate` is the number of texel rings filled around
-/// covered texels.
+/// per texel side (`n x n` per texel). The texels no visible sub-sample covers are filled by
+/// [`dilate_into_padding`] over the whole page.
+///
+/// A sub-sample buried under other geometry ([`Visibility::buried`]: the floor under a box) is
+/// not covered: a texel's value is the mean of its visible sub-samples, and a texel with none
+/// is filled by the dilation from its visible neighbours, so that bilinear filtering along a
+/// contact line reads the light beside the box, not the dark under it.
 pub fn rasterize(
     scene: &Scene,
+    vis: &Visibility,
     meshes: &[ReceiverMesh],
     values: &[Vec<DVec3>],
     mesh_of_polygon: &[usize],
     atlas: &Atlas,
     supersample: u32,
-    dilate: u32,
 ) -> Lightmap {
     // The pages are rasterized as one tall image, page p's rows at p x height.
     let (w, page_h) = (atlas.width as usize, atlas.height as usize);
@@ -361,6 +372,9 @@ pub fn rasterize(
                             }
                             claimed[idx] |= bit;
                             let p = t.world[0] * l0 + t.world[1] * l1 + t.world[2] * l2;
+                            if vis.buried(p, poly.frame.n) {
+                                continue;
+                            }
                             sum[idx] += locators[t.mesh].value(poly.frame.plane_from_world(p));
                             count[idx] += 1;
                         }
@@ -388,28 +402,36 @@ pub fn rasterize(
         texels,
         coverage,
     };
-    dilate_into_padding(&mut map, dilate);
+    dilate_into_padding(&mut map, u32::MAX);
     map
 }
 
-/// [`dilate_page`] on every page of `map`, each on its own.
+/// [`dilate_page`] on every page of `map`, each on its own, from the covered texels.
 pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
+    let filled = map.coverage.iter().map(|&c| c > 0.0).collect();
+    dilate_from(map, filled, rings);
+}
+
+/// Dilation on every page of `map`, each on its own, from the texels marked in `filled` (same
+/// layout as the texels): the others are filled, ring by ring outward, with the mean of their
+/// already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole page).
+pub fn dilate_from(map: &mut Lightmap, mut filled: Vec<bool>, rings: u32) {
     let n = map.width as usize * map.height as usize;
     if n == 0 {
         return;
     }
-    for (texels, coverage) in map.texels.chunks_mut(n).zip(map.coverage.chunks(n)) {
-        dilate_page(texels, coverage, map.width, map.height, rings);
+    for (texels, filled) in map.texels.chunks_mut(n).zip(filled.chunks_mut(n)) {
+        dilate_page(texels, filled, map.width, map.height, rings);
     }
 }
 
-/// Fills uncovered texels, ring by ring outward from the covered ones, with the mean of their
-/// already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole image, so that
-/// bilinear filtering and every mipmap level at chart edges see chart colours, not black).
-/// Covered texels are never changed. Each texel is visited once per ring it borders.
-fn dilate_page(texels: &mut [DVec3], coverage: &[f32], width: u32, height: u32, rings: u32) {
+/// Fills the texels not marked in `filled`, ring by ring outward from the marked ones, with
+/// the mean of their already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole
+/// image, so that bilinear filtering and every mipmap level at chart edges see chart colours,
+/// not black). Marked texels are never changed. Each texel is visited once per ring it
+/// borders.
+fn dilate_page(texels: &mut [DVec3], filled: &mut [bool], width: u32, height: u32, rings: u32) {
     let (w, h) = (width as usize, height as usize);
-    let mut filled: Vec<bool> = coverage.iter().map(|&c| c > 0.0).collect();
     let neighbours = |i: usize| {
         let (x, y) = ((i % w) as i64, (i / w) as i64);
         (-1i64..=1)
