@@ -15,6 +15,7 @@ mod matrix;
 mod mutation;
 mod output;
 mod reference;
+mod sky;
 mod stability;
 
 use penumbra::load::{self, Gltf};
