@@ -4,6 +4,7 @@
 //! cargo run --example make_fixtures [OUTPUT_DIR]
 //! cargo run --release --example make_fixtures -- --ladder DIR
 //! cargo run --release --example make_fixtures -- --town TRIANGLES FILE
+//! cargo run --example make_fixtures -- --box-on-ground FILE
 //! ```
 //!
 //! `OUTPUT_DIR` defaults to `fixtures` (relative to the current directory, so run it from the
@@ -14,6 +15,8 @@
 //! megabytes each) to `DIR/<rung>.glb` instead; they are generated on demand and not kept in
 //! `fixtures/`. `--town TRIANGLES FILE` writes the ladder's sunlit town at about that many
 //! triangles (`penumbra::fixtures::ladder::town`), e.g. a small one for `penumbra compare`.
+//! `--box-on-ground FILE` writes the sky's scene (`penumbra::fixtures::box_on_ground`: no light
+//! of its own, so it is not in `fixtures/`; bake it with `--sky`).
 
 use std::path::PathBuf;
 
@@ -22,7 +25,7 @@ fn main() -> std::io::Result<()> {
     let usage = || -> ! {
         eprintln!(
             "usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR \
-             | make_fixtures --town TRIANGLES FILE"
+             | make_fixtures --town TRIANGLES FILE | make_fixtures --box-on-ground FILE"
         );
         std::process::exit(2);
     };
@@ -51,6 +54,13 @@ fn main() -> std::io::Result<()> {
             usage()
         };
         let glb = penumbra::fixtures::ladder::town(triangles);
+        std::fs::write(file, &glb)?;
+        println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
+        return Ok(());
+    }
+    if args.first().is_some_and(|a| a == "--box-on-ground") {
+        let [_, file] = args.as_slice() else { usage() };
+        let glb = penumbra::fixtures::box_on_ground();
         std::fs::write(file, &glb)?;
         println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
         return Ok(());
