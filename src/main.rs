@@ -151,6 +151,9 @@ struct MeshArgs {
     /// As for bake.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
+    /// As for bake: the sky's light drives the mesher's refinement too.
+    #[arg(long, value_name = "R,G,B")]
+    sky: Option<String>,
 }
 
 #[derive(Args)]
@@ -314,6 +317,7 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         dm_threshold: args.dm_threshold,
         solve: SolveOptions {
             bounces: Some(0),
+            sky: sky_radiance(args.sky.as_deref())?,
             ..SolveOptions::default()
         },
         ..BakeOptions::default()

@@ -168,9 +168,10 @@ fn rms_max(e: &[f64]) -> (f64, f64) {
 }
 
 /// The sky's visible fraction `V` at ground points near and far from the box, and at the
-/// box's walls, against the closed form. Measured with 256 rays (the default): RMS 0.0040
-/// and largest 0.015 on the ground, bias 0.0002 (`examples/sky_noise.rs`). An estimator
-/// without the cosine weighting (uniform directions) is off by far more than the tolerance.
+/// box's walls, against the closed form. Measured with 256 rays (the default): RMS 0.0034,
+/// largest 0.016 and bias 2e-5 on the ground, RMS 0.0035 on the wall (`examples/sky_noise.rs`
+/// has more). An estimator without the cosine weighting (uniform directions) is off by 0.021
+/// RMS, more than three times the tolerance.
 #[test]
 fn sky_fraction_matches_the_closed_form_near_and_far_from_the_box() {
     let bytes = fixtures::box_on_ground();
@@ -497,8 +498,9 @@ fn reference_agrees_with_the_bake_under_the_sky() {
     assert!(away.texels > 3000 && contact.texels > 50);
     // The reference's own noise must be small enough to see a 1% error.
     assert!(away.noise < 0.01, "{}", away.noise);
-    assert!(away.rmse < 0.01, "away from contacts: {:?}", away);
-    assert!(contact.rmse < 0.05, "contact: {:?}", contact);
+    // Measured: 0.0014 away from contacts, 0.0084 at them.
+    assert!(away.rmse < 0.005, "away from contacts: {:?}", away);
+    assert!(contact.rmse < 0.03, "contact: {:?}", contact);
     // And the means agree: the bake neither loses nor gains light overall.
     let (mut b_sum, mut r_sum) = (0.0, 0.0);
     for (i, r) in regions.iter().enumerate() {
