@@ -1316,72 +1316,41 @@ pub const SKY_GROUND_HALF: f64 = 8.0;
 /// ([`crate::geometry::point_polygon_form_factor`], clipped to the horizon of `p`). On the
 /// ground the faces are the box's five (under the box: `V = 0`); on the box, the ground's.
 pub fn box_on_ground_open_sky(p: DVec3, n: DVec3) -> f64 {
-    let lo = DVec3::from(SKY_BOX_MIN);
-    let hi = DVec3::from(SKY_BOX_MAX);
-    let g = SKY_GROUND_HALF;
-    let ground = vec![
-        DVec3::new(-g, 0.0, -g),
-        DVec3::new(-g, 0.0, g),
-        DVec3::new(g, 0.0, g),
-        DVec3::new(g, 0.0, -g),
-    ];
+    let (lo, hi) = (DVec3::from(SKY_BOX_MIN), DVec3::from(SKY_BOX_MAX));
     let on_ground = n.y > 0.5 && p.y.abs() < 1e-9;
     let blockers: Vec<Vec<DVec3>> = if on_ground {
         if p.x > lo.x && p.x < hi.x && p.z > lo.z && p.z < hi.z {
             return 0.0;
         }
-        let c = |x: f64, y: f64, z: f64| DVec3::new(x, y, z);
-        vec![
-            vec![
-                c(lo.x, lo.y, lo.z),
-                c(lo.x, hi.y, lo.z),
-                c(lo.x, hi.y, hi.z),
-                c(lo.x, lo.y, hi.z),
-            ],
-            vec![
-                c(hi.x, lo.y, lo.z),
-                c(hi.x, hi.y, lo.z),
-                c(hi.x, hi.y, hi.z),
-                c(hi.x, lo.y, hi.z),
-            ],
-            vec![
-                c(lo.x, lo.y, lo.z),
-                c(hi.x, lo.y, lo.z),
-                c(hi.x, hi.y, lo.z),
-                c(lo.x, hi.y, lo.z),
-            ],
-            vec![
-                c(lo.x, lo.y, hi.z),
-                c(hi.x, lo.y, hi.z),
-                c(hi.x, hi.y, hi.z),
-                c(lo.x, hi.y, hi.z),
-            ],
-            vec![
-                c(lo.x, hi.y, lo.z),
-                c(hi.x, hi.y, lo.z),
-                c(hi.x, hi.y, hi.z),
-                c(lo.x, hi.y, hi.z),
-            ],
+        // The box's faces (no bottom) facing `p`: `p` lies beyond the face's plane, seen from
+        // the box's centre. Corners by `box_corners`' numbering (bit 0: x, 1: y, 2: z).
+        let c = crate::geometry::box_corners(lo, hi);
+        let centre = (lo + hi) * 0.5;
+        [
+            [0, 2, 6, 4],
+            [1, 3, 7, 5],
+            [0, 1, 3, 2],
+            [4, 5, 7, 6],
+            [2, 3, 7, 6],
         ]
+        .iter()
+        .map(|f| f.map(|k| c[k]).to_vec())
+        .filter(|f| {
+            let mid = f.iter().sum::<DVec3>() / 4.0;
+            (mid - centre).dot(p - mid) > 1e-12
+        })
+        .collect()
     } else {
-        vec![ground]
-    };
-    let facing = |face: &[DVec3]| {
-        let normal = (face[1] - face[0]).cross(face[2] - face[0]);
-        normal.dot(p - face[0]).abs() > 1e-12 && {
-            // The face's outward side is away from the box's centre (the ground's is +y).
-            let centre = (lo + hi) * 0.5;
-            let outward = if on_ground {
-                normal * normal.dot(face[0] - centre).signum()
-            } else {
-                DVec3::Y
-            };
-            outward.dot(p - face[0]) > 0.0
-        }
+        let g = SKY_GROUND_HALF;
+        vec![
+            [(-g, -g), (-g, g), (g, g), (g, -g)]
+                .iter()
+                .map(|&(x, z)| DVec3::new(x, 0.0, z))
+                .collect(),
+        ]
     };
     let blocked: f64 = blockers
         .iter()
-        .filter(|f| facing(f))
         .map(|f| crate::geometry::point_polygon_form_factor(p, n, f))
         .sum();
     1.0 - blocked

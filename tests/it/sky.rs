@@ -70,37 +70,37 @@ fn open_plane() -> Vec<u8> {
     g.to_glb()
 }
 
-/// The solvers and form factors the sky must work with.
-fn solvers() -> Vec<(Solver, FormFactors)> {
-    vec![
+/// `input` baked under the sky `L` with every solver and form factors the sky must work with.
+fn bake_with_every_solver(input: &[u8]) -> Vec<(String, Bake)> {
+    [
         (Solver::Hierarchical, FormFactors::ClosedForm),
         (Solver::Progressive, FormFactors::ClosedForm),
         (Solver::Matrix, FormFactors::ClosedForm),
         (Solver::Progressive, FormFactors::Hemicube),
         (Solver::Matrix, FormFactors::Raycast),
     ]
+    .into_iter()
+    .map(|(solver, form_factors)| {
+        let mut o = with_sky();
+        o.solve.solver = solver;
+        o.solve.form_factors = form_factors;
+        o.solve.patches = 64;
+        (format!("{solver:?} {form_factors:?}"), bake(input, &o))
+    })
+    .collect()
 }
 
 /// An open plane gets `pi L` at every vertex, exactly (the bounding-box test casts no ray), and
 /// nothing bounces (a plane does not see itself), with any albedo and every solver.
 #[test]
 fn open_plane_gets_pi_l_exactly_with_every_solver() {
-    let input = open_plane();
-    for (solver, form_factors) in solvers() {
-        let mut o = with_sky();
-        o.solve.solver = solver;
-        o.solve.form_factors = form_factors;
-        o.solve.patches = 64;
-        let b = bake(&input, &o);
+    for (name, b) in bake_with_every_solver(&open_plane()) {
         let all = vertices(&b);
         assert!(all.len() > 100);
         for (_, p, _, h, d) in &all {
             for (got, what) in [(h, "irradiance"), (d, "direct")] {
                 let err = ((*got - L * PI) / (L * PI)).abs().max_element();
-                assert!(
-                    err < 1e-9,
-                    "{solver:?} {form_factors:?} at {p}: {what} {got}"
-                );
+                assert!(err < 1e-9, "{name} at {p}: {what} {got}");
             }
         }
         let sky = b.stats.solve.sky.as_ref().expect("sky stats");
@@ -116,15 +116,9 @@ fn open_plane_gets_pi_l_exactly_with_every_solver() {
 /// wall. Zero at every vertex, with every solver.
 #[test]
 fn closed_box_is_not_lit_by_the_sky() {
-    let input = fixtures::furnace_box_with(0.5, 0.0);
-    for (solver, form_factors) in solvers() {
-        let mut o = with_sky();
-        o.solve.solver = solver;
-        o.solve.form_factors = form_factors;
-        o.solve.patches = 64;
-        let b = bake(&input, &o);
+    for (name, b) in bake_with_every_solver(&fixtures::furnace_box_with(0.5, 0.0)) {
         for (_, p, _, h, _) in vertices(&b) {
-            assert_eq!(h, DVec3::ZERO, "{solver:?} {form_factors:?} at {p}");
+            assert_eq!(h, DVec3::ZERO, "{name} at {p}");
         }
         let sky = b.stats.solve.sky.as_ref().unwrap();
         assert_eq!(sky.open, 0);
