@@ -507,6 +507,55 @@ fn reference_agrees_with_the_bake_under_the_sky() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// The reference of an open plane under the sky: every path leaves at once, so `pi L` exactly
+/// at every texel with no variance, with every bounce and with the direct light only (where the
+/// sky gets a ray of its own).
+#[test]
+fn reference_of_an_open_plane_is_pi_l() {
+    use penumbra::reference::{self, ReferenceOptions};
+    let dir = scratch("sky-reference-plane");
+    let (input, output) = (dir.join("in.glb"), dir.join("out.glb"));
+    std::fs::write(&input, open_plane()).unwrap();
+    let mut o = with_sky();
+    o.resolution = Some(32);
+    penumbra::bake_file(
+        &input,
+        &penumbra::OutputFiles::glb(&output),
+        &o,
+        crate::no_progress(),
+    )
+    .unwrap();
+    let gltf = penumbra::load::read(&output).unwrap();
+    for bounces_max in [None, Some(0), Some(2)] {
+        let options = ReferenceOptions {
+            spp: 8,
+            bounces_max,
+            sky: L,
+            ..Default::default()
+        };
+        let map = reference::reference(&gltf, &options).unwrap();
+        let mut covered = 0;
+        for (i, m) in map.mean.iter().enumerate() {
+            if map.coverage[i] > 0.0 {
+                assert!(
+                    ((*m - L * PI) / (L * PI)).abs().max_element() < 1e-12,
+                    "{bounces_max:?}: {m}"
+                );
+                assert_eq!(map.std_error[i], DVec3::ZERO);
+                covered += 1;
+            }
+        }
+        assert!(covered > 200);
+    }
+    let bad = ReferenceOptions {
+        sky: DVec3::new(1.0, -1.0, 0.0),
+        ..Default::default()
+    };
+    let e = reference::reference(&gltf, &bad).unwrap_err().to_string();
+    assert!(e.contains("--sky") && e.contains("non-negative"), "{e}");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// Under the sky the output bytes do not depend on the thread count.
 #[test]
 fn sky_bakes_are_identical_on_one_and_two_threads() {
