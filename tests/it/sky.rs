@@ -439,26 +439,33 @@ fn walls_receive_bounce_light_from_the_ground() {
     }
 }
 
+/// Bakes `input` to a file in a scratch dir (removed again) and reads the baked file back.
+fn bake_and_read(input: &[u8], options: &BakeOptions, name: &str) -> (Bake, penumbra::load::Gltf) {
+    let dir = scratch(name);
+    let (path, output) = (dir.join("in.glb"), dir.join("out.glb"));
+    std::fs::write(&path, input).unwrap();
+    let baked = penumbra::bake_file(
+        &path,
+        &penumbra::OutputFiles::glb(&output),
+        options,
+        crate::no_progress(),
+    )
+    .unwrap();
+    let gltf = penumbra::load::read(&output).unwrap();
+    let _ = std::fs::remove_dir_all(dir);
+    (baked, gltf)
+}
+
 /// A baked box on the ground under the sky against the Monte Carlo reference (every bounce):
 /// off the contact lines the lightmap agrees with the reference within its noise.
 #[test]
 fn reference_agrees_with_the_bake_under_the_sky() {
     use penumbra::compare::{Region, classify, lightmap_error};
     use penumbra::reference::{self, ReferenceOptions};
-    let dir = scratch("sky-reference");
-    let (input, output) = (dir.join("in.glb"), dir.join("out.glb"));
-    std::fs::write(&input, fixtures::box_on_ground()).unwrap();
     let mut o = with_sky();
     o.budget = Some(6000);
     o.resolution = Some(96);
-    let baked = penumbra::bake_file(
-        &input,
-        &penumbra::OutputFiles::glb(&output),
-        &o,
-        crate::no_progress(),
-    )
-    .unwrap();
-    let gltf = penumbra::load::read(&output).unwrap();
+    let (baked, gltf) = bake_and_read(&fixtures::box_on_ground(), &o, "sky-reference");
     let scene = penumbra::load::scene(&gltf).unwrap();
     let vis = Visibility::new(&scene);
     let options = ReferenceOptions {
@@ -504,7 +511,6 @@ fn reference_agrees_with_the_bake_under_the_sky() {
         }
     }
     assert!((b_sum / r_sum - 1.0).abs() < 0.005, "{b_sum} vs {r_sum}");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// The reference of an open plane under the sky: every path leaves at once, so `pi L` exactly
@@ -513,19 +519,9 @@ fn reference_agrees_with_the_bake_under_the_sky() {
 #[test]
 fn reference_of_an_open_plane_is_pi_l() {
     use penumbra::reference::{self, ReferenceOptions};
-    let dir = scratch("sky-reference-plane");
-    let (input, output) = (dir.join("in.glb"), dir.join("out.glb"));
-    std::fs::write(&input, open_plane()).unwrap();
     let mut o = with_sky();
     o.resolution = Some(32);
-    penumbra::bake_file(
-        &input,
-        &penumbra::OutputFiles::glb(&output),
-        &o,
-        crate::no_progress(),
-    )
-    .unwrap();
-    let gltf = penumbra::load::read(&output).unwrap();
+    let (_, gltf) = bake_and_read(&open_plane(), &o, "sky-reference-plane");
     for bounces_max in [None, Some(0), Some(2)] {
         let options = ReferenceOptions {
             spp: 8,
@@ -553,7 +549,6 @@ fn reference_of_an_open_plane_is_pi_l() {
     };
     let e = reference::reference(&gltf, &bad).unwrap_err().to_string();
     assert!(e.contains("--sky") && e.contains("non-negative"), "{e}");
-    let _ = std::fs::remove_dir_all(dir);
 }
 
 /// Under the sky the output bytes do not depend on the thread count.
