@@ -5,6 +5,7 @@
 //! cargo run --release --example make_fixtures -- --ladder DIR
 //! cargo run --release --example make_fixtures -- --town TRIANGLES FILE
 //! cargo run --release --example make_fixtures -- --tiled-box TILES FILE
+//! cargo run --example make_fixtures -- --box-on-ground FILE
 //! ```
 //!
 //! `OUTPUT_DIR` defaults to `fixtures` (relative to the current directory, so run it from the
@@ -17,6 +18,8 @@
 //! triangles (`penumbra::fixtures::ladder::town`), e.g. a small one for `penumbra compare`.
 //! `--tiled-box TILES FILE` writes the box on a floor of TILES x TILES tiles of the seam
 //! pictures (`penumbra::fixtures::tiled_box_on_floor`).
+//! `--box-on-ground FILE` writes the sky's scene (`penumbra::fixtures::box_on_ground`: no light
+//! of its own, so it is not in `fixtures/`; bake it with `--sky`).
 
 use std::path::PathBuf;
 
@@ -25,7 +28,8 @@ fn main() -> std::io::Result<()> {
     let usage = || -> ! {
         eprintln!(
             "usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR \
-             | make_fixtures --town TRIANGLES FILE | make_fixtures --tiled-box TILES FILE"
+             | make_fixtures --town TRIANGLES FILE | make_fixtures --tiled-box TILES FILE \
+             | make_fixtures --box-on-ground FILE"
         );
         std::process::exit(2);
     };
@@ -59,6 +63,13 @@ fn main() -> std::io::Result<()> {
             usage()
         };
         let glb = generate(size);
+        std::fs::write(file, &glb)?;
+        println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
+        return Ok(());
+    }
+    if args.first().is_some_and(|a| a == "--box-on-ground") {
+        let [_, file] = args.as_slice() else { usage() };
+        let glb = penumbra::fixtures::box_on_ground();
         std::fs::write(file, &glb)?;
         println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
         return Ok(());

@@ -59,6 +59,7 @@ fn main() -> anyhow::Result<()> {
             seed: 0,
             bounces_max: None,
             supersample: options.supersample,
+            sky: options.solve.sky,
         },
     );
     let texels_per_unit = bakes[0].1.atlas.texels_per_unit as f64;

@@ -127,6 +127,15 @@ impl BakeOptions {
                  form factors of its own",
             );
         }
+        if let Err(reason) = solve::sky::check_radiance(self.solve.sky) {
+            return Err(Error::Option {
+                option: "--sky",
+                reason,
+            });
+        }
+        if !solve::sky::SAMPLES_RANGE.contains(&self.solve.sky_samples) {
+            return bad("--sky-samples", "must be between 1 and 65536");
+        }
         if self.solve.matrix_memory_mib == 0 {
             return bad("--matrix-memory", "must be at least 1 MiB");
         }
@@ -244,19 +253,26 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats
         .warnings
         .extend(solution.stats.warnings.iter().cloned());
-    if !scene.has_light() {
+    let sky = options.solve.sky.max_element() > 0.0;
+    if !scene.has_light() && !sky {
         stats
             .warnings
-            .push("the scene has no emitters (no emissive material, no KHR_lights_punctual light): the lightmap is black".into());
+            .push("the scene has no emitters (no emissive material, no KHR_lights_punctual light) and no --sky: the lightmap is black".into());
     } else if solution
         .irradiance
         .iter()
         .flatten()
         .all(|h| h.max_element() <= 0.0)
     {
-        stats.warnings.push(
-            "no surface receives any light (every emitter faces away from the receivers, or is blocked): the lightmap is black".into(),
-        );
+        stats.warnings.push(format!(
+            "no surface receives any light (every emitter faces away from the receivers, or is \
+             blocked{}): the lightmap is black",
+            if sky {
+                ", and every surface is closed off from the sky"
+            } else {
+                ""
+            }
+        ));
     }
     let diverged = stats.solve.unshot_fraction.is_nan()
         || stats.solve.unshot_fraction > 1.0

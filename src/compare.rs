@@ -598,6 +598,8 @@ fn measure(
         seed: o.seed,
         bounces_max: None,
         supersample: o.supersample,
+        // The bakes of the sweep have no sky.
+        sky: glam::DVec3::ZERO,
     };
     let refmap = reference::reference_with(&scene, &vis, &layout, &ref_options);
     let reference_seconds = start.elapsed().as_secs_f64();

@@ -181,8 +181,8 @@ pub struct AreaEmitter {
     pub radius: f64,
 }
 
-/// The radical inverse in base 2 (van der Corput), the second Hammersley coordinate.
-fn radical_inverse2(mut i: u32) -> f64 {
+/// The radical inverse in base 2 (van der Corput), the second Hammersley coordinate, in [0, 1).
+pub fn radical_inverse2(mut i: u32) -> f64 {
     i = i.reverse_bits();
     i as f64 / 4294967296.0
 }

@@ -127,6 +127,10 @@ struct ReferenceArgs {
     /// Sub-samples per texel side (n x n per texel), as the bake's --supersample.
     #[arg(long, default_value_t = 4)]
     supersample: u32,
+    /// Uniform sky radiance R,G,B (W/(m² sr), linear), as the bake's --sky: paths that leave
+    /// the scene receive it [default: no sky].
+    #[arg(long, value_name = "R,G,B")]
+    sky: Option<String>,
     /// Write JSON: lightmap size, covered texels, mean and max relative standard error, time.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
@@ -160,6 +164,9 @@ struct MeshArgs {
     /// As for bake.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
+    /// As for bake: the sky's light drives the mesher's refinement too.
+    #[arg(long, value_name = "R,G,B")]
+    sky: Option<String>,
 }
 
 #[derive(Args)]
@@ -259,6 +266,14 @@ struct BakeArgs {
     /// [0, 1]; 0: every emitter exactly).
     #[arg(long, default_value_t = penumbra::solve::lightcuts::EPSILON)]
     light_error: f64,
+    /// Uniform sky: radiance R,G,B in W/(m² sr), linear (three finite non-negative numbers),
+    /// arriving from every direction the scene does not block; direct light like the
+    /// emitters', and it bounces [default: no sky].
+    #[arg(long, value_name = "R,G,B")]
+    sky: Option<String>,
+    /// Sky: shadow rays per receiving point (cosine-distributed, 1 to 65536).
+    #[arg(long, value_name = "N", default_value_t = penumbra::solve::sky::DEFAULT_SAMPLES)]
+    sky_samples: usize,
     /// Lightmap density in texels per scene unit (metre), kept as given: charts that do not fit
     /// one --page-size page go onto more pages. Default: derived from --resolution.
     #[arg(long, conflicts_with = "resolution")]
@@ -329,6 +344,7 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         dm_threshold: args.dm_threshold,
         solve: SolveOptions {
             bounces: Some(0),
+            sky: sky_radiance(args.sky.as_deref())?,
             ..SolveOptions::default()
         },
         ..BakeOptions::default()
@@ -385,6 +401,7 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
         seed: args.seed,
         bounces_max: args.bounces_max,
         supersample: args.supersample,
+        sky: sky_radiance(args.sky.as_deref())?,
     };
     let map = pool.install(|| penumbra::reference::reference(&gltf, &options))?;
     let mut staged = penumbra::files::Staged::new();
@@ -411,6 +428,7 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
         json["seed"] = args.seed.into();
         json["bounces_max"] = args.bounces_max.into();
         json["supersample"] = args.supersample.into();
+        json["sky"] = options.sky.to_array().to_vec().into();
         json["seconds"] = seconds.into();
         staged.add(&paths[1], &serde_json::to_vec_pretty(&json)?)?;
     }
@@ -482,6 +500,14 @@ fn check_outputs(
     Ok(penumbra::files::check_outputs(&gltf.files_read(), outputs)?)
 }
 
+/// `--sky R,G,B` as a radiance (zero when not given).
+fn sky_radiance(text: Option<&str>) -> anyhow::Result<glam::DVec3> {
+    Ok(match text {
+        Some(t) => penumbra::solve::sky::parse_radiance(t, "--sky")?,
+        None => glam::DVec3::ZERO,
+    })
+}
+
 /// A worker pool of `threads` threads (all cores when `None`).
 fn pool(threads: Option<usize>) -> anyhow::Result<rayon::ThreadPool> {
     let mut pool = rayon::ThreadPoolBuilder::new();
@@ -548,6 +574,8 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             form_factors: args.form_factors,
             hemicube_resolution: args.hemicube_resolution,
             matrix_memory_mib: args.matrix_memory,
+            sky: sky_radiance(args.sky.as_deref())?,
+            sky_samples: args.sky_samples,
             ..SolveOptions::default()
         },
         texels_per_unit: args.texels_per_unit,

@@ -19,6 +19,11 @@
 //! * Indirect light by cosine-weighted hemisphere sampling (density `p_b = cos(theta_x) / pi`,
 //!   so a hit adds `rho(y) · H(y)`), continued at the hit with Russian roulette after two
 //!   bounces (survival `min(0.95, max rho)`).
+//! * The sky (`--sky`, a uniform radiance `L_sky` from every direction): a hemisphere ray that
+//!   leaves the scene adds `pi L_sky` (its `L cos / p_b`). No light sample competes for the
+//!   sky, so that is its whole weight (Veach's MIS with one strategy). At a vertex that traces
+//!   no hemisphere ray (the last under `bounces_max`), one cosine-weighted ray is cast for the
+//!   sky alone.
 //! * The two are combined for the emitters' light by multiple importance sampling with the
 //!   balance heuristic (Veach & Guibas 1995): a light sample and an emitter hit by a hemisphere
 //!   ray both add `L_e cos(theta_x) / (p_l + p_b)`, which is at most `pi L_e`. Plain
@@ -65,6 +70,9 @@ pub struct ReferenceOptions {
     pub bounces_max: Option<u32>,
     /// Sub-samples per texel side (`n x n` per texel), as the bake's `--supersample`.
     pub supersample: u32,
+    /// Uniform sky radiance `L_sky`, W/(m² sr), linear RGB, as the bake's `--sky` (zero: no
+    /// sky).
+    pub sky: DVec3,
 }
 
 impl Default for ReferenceOptions {
@@ -74,6 +82,7 @@ impl Default for ReferenceOptions {
             seed: 0,
             bounces_max: None,
             supersample: 4,
+            sky: DVec3::ZERO,
         }
     }
 }
@@ -425,10 +434,17 @@ struct Tracer<'a> {
     /// Per polygon, its index in `emitters`.
     emitter_of: Vec<Option<usize>>,
     bounces_max: Option<u32>,
+    /// `L_sky`, W/(m² sr).
+    sky: DVec3,
 }
 
 impl<'a> Tracer<'a> {
-    fn new(scene: &'a Scene, vis: &'a Visibility, bounces_max: Option<u32>) -> Tracer<'a> {
+    fn new(
+        scene: &'a Scene,
+        vis: &'a Visibility,
+        bounces_max: Option<u32>,
+        sky: DVec3,
+    ) -> Tracer<'a> {
         let emitters = scene
             .emitters()
             .filter_map(|id| {
@@ -466,6 +482,21 @@ impl<'a> Tracer<'a> {
             emitters,
             emitter_of,
             bounces_max,
+            sky,
+        }
+    }
+
+    /// One estimate of the sky's irradiance at `at` by one cosine-weighted ray of its own
+    /// (for a vertex that traces no hemisphere ray): `pi L_sky` if the ray leaves the scene.
+    fn sky_direct(&self, at: &SurfacePoint, rng: &mut SplitMix64) -> DVec3 {
+        if self.sky == DVec3::ZERO {
+            return DVec3::ZERO;
+        }
+        let dir = cosine_direction(at.n, rng);
+        if self.vis.first_hit(at.ray_origin, dir, f64::MAX).is_none() {
+            self.sky * PI
+        } else {
+            DVec3::ZERO
         }
     }
 
@@ -533,12 +564,17 @@ impl<'a> Tracer<'a> {
         // Whether a hemisphere ray leaves the vertex at this depth.
         let traces = |depth: u32| self.bounces_max.is_none_or(|b| depth < b);
         let mut total = self.area_direct(at, traces(0), rng, Some(&mut *probe));
+        if !traces(0) {
+            total += self.sky_direct(at, rng);
+        }
         let mut throughput = DVec3::ONE;
         let mut at = *at;
         let mut depth = 0u32;
         while traces(depth) {
             let dir = cosine_direction(at.n, rng);
             let Some(hit) = self.vis.first_hit(at.ray_origin, dir, f64::MAX) else {
+                // Left the scene: the sky's light, `L_sky cos / p_b`.
+                total += throughput * self.sky * PI;
                 break;
             };
             if depth == 0 {
@@ -569,6 +605,9 @@ impl<'a> Tracer<'a> {
             let next = SurfacePoint::new(p, frame.n, poly, self.vis);
             total += throughput
                 * (self.area_direct(&next, traces(depth), rng, None) + self.punctual(&next));
+            if !traces(depth) {
+                total += throughput * self.sky_direct(&next, rng);
+            }
             if depth >= 2 {
                 let q = rho.max_element().min(0.95);
                 if rng.next_f64() >= q {
@@ -624,6 +663,10 @@ pub fn reference(gltf: &Gltf, options: &ReferenceOptions) -> Result<ReferenceMap
             reason: "must be between 1 and 1000000".into(),
         });
     }
+    solve::sky::check_radiance(options.sky).map_err(|reason| Error::Option {
+        option: "--sky",
+        reason,
+    })?;
     let scene = load::scene(gltf)?;
     let vis = Visibility::new(&scene);
     let layout = texel_layout(gltf, &scene, &vis, options.supersample)?;
@@ -637,7 +680,7 @@ pub fn reference_with(
     layout: &TexelLayout,
     options: &ReferenceOptions,
 ) -> ReferenceMap {
-    let tracer = Tracer::new(scene, vis, options.bounces_max);
+    let tracer = Tracer::new(scene, vis, options.bounces_max, options.sky);
     let w = layout.width as usize;
     let rows: Vec<Vec<Texel>> = (0..layout.height as usize)
         .into_par_iter()

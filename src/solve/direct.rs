@@ -1,5 +1,5 @@
 //! Direct light at the mesh vertices: every area emitter (exact by backprojection, or sampled
-//! with shadow rays) and every punctual light, per receiver with a cluster tree over its
+//! with shadow rays), every punctual light and the sky ([`super::sky`]), per receiver with a cluster tree over its
 //! vertices so the occluder search is shared.
 //!
 //! The exact method: the point-to-polygon form factor of the part of each emitter that a vertex
@@ -10,6 +10,7 @@
 //! Irradiance in W/m² per linear RGB channel.
 
 use super::lightcuts::LightTree;
+use super::sky::Sky;
 use super::{DirectMethod, SolveOptions, evaluation_points};
 use crate::backproject::{EmitterShape, Limits, Occluders, Scratch, Shaft};
 use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint, punctual_unoccluded};
@@ -89,7 +90,8 @@ struct Tally {
     rays: u64,
 }
 
-/// Direct irradiance at a surface point: the light of every emitter and punctual light.
+/// Direct irradiance at a surface point: the light of every emitter and punctual light, and the
+/// sky's.
 ///
 /// With [`DirectMethod::Exact`], [`Direct::irradiance_points`] evaluates the points of one
 /// receiver together: per emitter, the occluders in the box around the points and the emitter
@@ -108,6 +110,8 @@ pub struct Direct<'a> {
     pub occluders: Occluders,
     /// The light tree over `emitters` (exact method only; empty otherwise).
     tree: LightTree,
+    /// The sky (`--sky`), if any.
+    pub sky: Option<Sky>,
     /// [`SolveOptions::light_error`].
     light_error: f64,
     bounded: AtomicU64,
@@ -136,7 +140,8 @@ impl<'a> Direct<'a> {
         )
     }
 
-    /// Direct light as `options` asks (`direct`, `shadow_samples`, `occluder_cap`).
+    /// Direct light as `options` asks (`direct`, `shadow_samples`, `occluder_cap`, `sky`,
+    /// `sky_samples`).
     pub fn with_options(
         scene: &'a Scene,
         vis: &'a Visibility,
@@ -163,6 +168,7 @@ impl<'a> Direct<'a> {
             },
             occluders,
             tree,
+            sky: Sky::new(scene, options.sky, options.sky_samples),
             light_error: options.light_error,
             bounded: AtomicU64::new(0),
             evaluations: AtomicU64::new(0),
@@ -284,6 +290,9 @@ impl<'a> Direct<'a> {
                 *h += value;
                 tally.rays += r;
             }
+        }
+        if let Some(sky) = &self.sky {
+            sky.add_irradiance(self.vis, points, &mut h);
         }
         self.rays.fetch_add(tally.rays, Ordering::Relaxed);
         self.evaluations
@@ -483,6 +492,13 @@ impl<'a> Direct<'a> {
             let (value, r) = punctual_irradiance(light, self.vis, at);
             h += value;
             rays += r;
+        }
+        if let Some(sky) = &self.sky {
+            sky.add_irradiance(
+                self.vis,
+                std::slice::from_ref(at),
+                std::slice::from_mut(&mut h),
+            );
         }
         self.evaluations.fetch_add(evaluations, Ordering::Relaxed);
         self.rays.fetch_add(rays, Ordering::Relaxed);

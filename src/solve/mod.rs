@@ -1,6 +1,8 @@
 //! Diffuse radiosity at the vertices of the receiver meshes.
 //!
-//! * **Direct light** at every vertex from every emitter. For area emitters, by default
+//! * **Direct light** at every vertex from every emitter, and from the sky (`--sky`, [`sky`]:
+//!   a uniform environment radiance, by cosine-distributed shadow rays; it then bounces like
+//!   the emitters' light in every solver). For area emitters, by default
 //!   ([`DirectMethod::Exact`]) the exact point-to-polygon form factor of the part of the emitter
 //!   that the vertex sees, by backprojection ([`crate::backproject`]); with
 //!   [`DirectMethod::Sampled`] (and as the fallback past an occluder cap) the exact unoccluded
@@ -29,7 +31,8 @@
 //! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
 //! indirect light: patches, progressive refinement, final gather), `matrix.rs` (classic
 //! radiosity), `gauss_seidel.rs` (its iteration, also the progressive solver's test oracle),
-//! `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`. [`radiosity`] is
+//! `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`; the sky's
+//! direct light in `sky.rs`. [`radiosity`] is
 //! the entry point: the direct light, then the indirect solver. The shared physics (form
 //! factors, emitters, the punctual light model) is in [`crate::geometry`] and [`crate::light`].
 
@@ -41,6 +44,7 @@ pub mod hierarchical;
 pub mod lightcuts;
 pub mod matrix;
 pub mod progressive;
+pub mod sky;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
 pub use form_factors::FormFactors;
@@ -133,6 +137,11 @@ pub struct SolveOptions {
     pub hemicube_resolution: u32,
     /// The most memory the matrix solver's form-factor matrix may take, MiB.
     pub matrix_memory_mib: u64,
+    /// Uniform sky radiance `L_sky`, W/(m² sr), linear RGB (`--sky`; zero: no sky). Direct
+    /// light like the emitters', reflected like theirs ([`sky`]).
+    pub sky: DVec3,
+    /// Shadow rays per receiving point for the sky's visible fraction (`--sky-samples`).
+    pub sky_samples: usize,
 }
 
 /// Default of [`SolveOptions::hr_tolerance`]: at 3e-5 the 20x20 box grid's indirect solve was
@@ -155,6 +164,8 @@ impl Default for SolveOptions {
             form_factors: FormFactors::ClosedForm,
             hemicube_resolution: hemicube::DEFAULT_RESOLUTION,
             matrix_memory_mib: matrix::DEFAULT_MEMORY_MIB,
+            sky: DVec3::ZERO,
+            sky_samples: sky::DEFAULT_SAMPLES,
         }
     }
 }
@@ -204,6 +215,9 @@ pub struct SolveStats {
     /// The hemicube's counters (`--form-factors hemicube`): resolution, cells, hemicubes.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub hemicube: Option<form_factors::HemicubeStats>,
+    /// The sky's radiance, points, rays and time (`--sky`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sky: Option<sky::SkyStats>,
     /// Caps that changed the result.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub warnings: Vec<String>,
@@ -320,6 +334,10 @@ pub fn radiosity(
         }
     };
     stats.rays += direct.rays.load(Ordering::Relaxed);
+    if let Some(sky) = &direct.sky {
+        stats.rays += sky.rays();
+        stats.sky = Some(sky.stats());
+    }
     stats.indirect_seconds = start.elapsed().as_secs_f64();
     stats.emitted_power = emitted_power;
     Solution {

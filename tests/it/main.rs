@@ -16,6 +16,7 @@ mod mutation;
 mod output;
 mod reference;
 mod seams;
+mod sky;
 mod stability;
 
 use penumbra::load::{self, Gltf};
