@@ -55,11 +55,18 @@
 //! - **xatlas prints warnings with `printf` to stdout** (e.g. "Chart 3: doesn't have disk
 //!   topology"). The module turns xatlas's printing off once (xatlas `SetPrint(nullptr, false)`),
 //!   so stdout stays the program's own.
+//! - **Its task scheduler can hang at `Destroy`.** xatlas's worker loop checks `m_running`, then
+//!   registers itself as asleep and waits; `Scheduler::stop` clears `m_running` and wakes the
+//!   registered sleepers. A worker between the two steps is missed and sleeps forever, so `stop`
+//!   never joins it (seen once in a few thousand bakes, a test's child process stuck in
+//!   `xatlas::Destroy`). The repository's `.cargo/config.toml` builds xatlas with
+//!   `-DXA_MULTITHREADED=0` (its single-threaded scheduler: no worker threads, the same
+//!   output); a crate that depends on penumbra must set the same `CXXFLAGS`.
 //!
 //! Output is deterministic: xatlas's random generators are seeded with constants per atlas, and
-//! its worker threads write each chart group's results to its own slot, so the same input gives the
-//! same bytes on every run, also when several threads pack at once (each call has its own xatlas
-//! atlas and its own worker pool; the shim stash is thread-local, so calls need no lock).
+//! it runs single-threaded (see above), so the same input gives the same bytes on every run, also
+//! when several threads pack at once (each call has its own xatlas atlas; the shim stash is
+//! thread-local, so calls need no lock).
 //!
 //! Triangle order is kept: xatlas writes output triangle `k` at `indexArray[3k..3k+3]` for input
 //! face `k` (it maps faces back to their source face), and [`pack`] checks that output triangle
