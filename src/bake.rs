@@ -471,6 +471,7 @@ fn mesh_scene(
             let dm = DmOptions {
                 threshold: options.dm_threshold,
                 max_pieces: budget,
+                skip_unseen: true,
             };
             let (segments, mut dm_stats) =
                 stage(&mut t.discontinuity, "discontinuity", progress, || {

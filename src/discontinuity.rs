@@ -68,6 +68,9 @@ pub struct DmOptions {
     pub threshold: f64,
     /// At most this many wedge pieces are kept over the scene (the most significant).
     pub max_pieces: usize,
+    /// Skip the wedges whose generator the light does not see ([`DmStats::unseen`]); `false`
+    /// traces them all (to measure what the skip saves and loses).
+    pub skip_unseen: bool,
 }
 
 /// Counters, reported in `--stats`.
@@ -81,6 +84,10 @@ pub struct DmStats {
     pub kept: usize,
     /// Wedge pieces whose generator was hidden.
     pub hidden: usize,
+    /// Wedges whose generator the light does not see at any of [`GENERATOR_SAMPLES`] points
+    /// (an occluder behind a wall, in another room): not intersected with any receiver, as
+    /// every piece of them would be hidden.
+    pub unseen: usize,
     /// Wedge pieces below the significance threshold.
     pub dropped_threshold: usize,
     /// (Area emitter, occluder edge or vertex) pairs whose wedges were not built: no piece of
@@ -238,15 +245,26 @@ pub fn segments(
     // any of its pieces to reach `threshold` of that bound (their pieces would be dropped
     // below): significance before construction.
     let strongest = strongest_emitter(scene);
+    let skip = options.skip_unseen;
     let first = wedges(scene, &topo, extent, Pass::Strongest(strongest), 0.0);
-    let (mut pieces, hidden) = trace(scene, vis, &index, &first.wedges, 0, extent);
+    let (mut pieces, hidden, unseen) = trace(scene, vis, &index, &first.wedges, 0, extent, skip);
     stats.hidden += hidden;
+    stats.unseen += unseen;
     let peak_so_far = pieces.iter().map(|p| p.significance).fold(0.0, f64::max);
     let cutoff = options.threshold * peak_so_far;
     let rest = wedges(scene, &topo, extent, Pass::Others(strongest), cutoff);
-    let (more, hidden) = trace(scene, vis, &index, &rest.wedges, first.wedges.len(), extent);
+    let (more, hidden, unseen) = trace(
+        scene,
+        vis,
+        &index,
+        &rest.wedges,
+        first.wedges.len(),
+        extent,
+        skip,
+    );
     pieces.extend(more);
     stats.hidden += hidden;
+    stats.unseen += unseen;
     stats.wedges = first.wedges.len() + rest.wedges.len();
     stats.culled = first.culled + rest.culled;
     let wedge_count = stats.wedges;
@@ -319,7 +337,8 @@ struct Piece {
 }
 
 /// Intersects each wedge with the receivers it reaches and keeps the visible pieces; wedge `k`
-/// is event `first_event + k`. Returns the pieces and the number of hidden ones.
+/// is event `first_event + k`. Returns the pieces, the number of hidden ones and the number of
+/// unseen wedges.
 fn trace(
     scene: &Scene,
     vis: &Visibility,
@@ -327,14 +346,18 @@ fn trace(
     wedges: &[Wedge],
     first_event: usize,
     extent: f64,
-) -> (Vec<Piece>, usize) {
+    skip_unseen: bool,
+) -> (Vec<Piece>, usize, usize) {
     let tol = TOLERANCE * extent;
-    let traced: Vec<(Vec<Piece>, usize)> = wedges
+    let traced: Vec<(Vec<Piece>, usize, usize)> = wedges
         .par_iter()
         .enumerate()
         .map(|(k, w)| {
             let mut out = Vec::new();
             let mut hidden = 0;
+            if skip_unseen && !light_sees_generator(vis, w, extent) {
+                return (out, hidden, 1);
+            }
             for r in index.query(&w.hull) {
                 if w.skip.contains(&r) || !faces_light(scene, r, w) {
                     continue;
@@ -358,16 +381,17 @@ fn trace(
                     }
                 }
             }
-            (out, hidden)
+            (out, hidden, 0)
         })
         .collect();
     let mut pieces = Vec::new();
-    let mut hidden = 0;
-    for (p, h) in traced {
+    let (mut hidden, mut unseen) = (0, 0);
+    for (p, h, u) in traced {
         pieces.extend(p);
         hidden += h;
+        unseen += u;
     }
-    (pieces, hidden)
+    (pieces, hidden, unseen)
 }
 
 /// The area emitter with the most power (luminance of its radiance x area; ties: the first).
@@ -1001,6 +1025,43 @@ fn split_by_visibility(
     (0..states.len())
         .map(|i| (a + (b - a) * cuts[i], a + (b - a) * cuts[i + 1], states[i]))
         .collect()
+}
+
+/// Points along a wedge's generator at which [`light_sees_generator`] looks.
+pub const GENERATOR_SAMPLES: usize = 9;
+
+/// Does the light see the wedge's generator at one of [`GENERATOR_SAMPLES`] points along it,
+/// with the same rays [`generator_visible`] casts towards the light? A VE wedge: its emitter
+/// vertex sees a point of the occluder edge; an EV wedge: the occluder vertex sees a point of
+/// the emitter edge; a punctual light's: always (its pieces test it themselves). A wedge whose
+/// generator the light does not see anywhere has no visible piece (up to visible stretches
+/// shorter than the sample spacing), so it is not traced: in a house, the lamp of one room and
+/// the furniture of the others.
+fn light_sees_generator(vis: &Visibility, w: &Wedge, extent: f64) -> bool {
+    let gap = 1e-4 * extent;
+    let Light::Area(e) = w.light else {
+        return true;
+    };
+    let clear = |p: DVec3, q: DVec3| {
+        let d = q - p;
+        let len = d.length();
+        if len <= 2.0 * gap {
+            return true;
+        }
+        let u = d / len;
+        !vis.occluded_skipping(p + u * gap, q - u * gap, [e, usize::MAX])
+    };
+    let along =
+        |a: DVec3, b: DVec3, k: usize| a + (b - a) * ((k as f64 + 0.5) / GENERATOR_SAMPLES as f64);
+    match w.generator {
+        Generator::VertexEdge { v, a, b } => {
+            (0..GENERATOR_SAMPLES).any(|k| clear(along(a, b, k), v))
+        }
+        Generator::EdgeVertex { e0, e1, w } => {
+            (0..GENERATOR_SAMPLES).any(|k| clear(w, along(e0, e1, k)))
+        }
+        Generator::DirectionEdge { .. } => true,
+    }
 }
 
 /// Is the wedge's generator seen from receiver point `x`, and the light from the generator?

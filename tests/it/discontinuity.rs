@@ -428,3 +428,54 @@ fn light_range_drops_shadow_lines_beyond_it() {
     let (long, _) = punctual_segments(&box_under_light([0.2, 0.5], lamp(10.0)));
     assert!(long >= 3, "{long} shadow lines within the range");
 }
+
+/// Significance before construction, by visibility: in a house of two rooms, most wedges of
+/// one room's lamp through the other room's furniture are not traced, as the lamp does not see
+/// their generator (`unseen`), and skipping them changes nothing: the traced pieces (before the
+/// budget) are the same pieces, up to the few stretches shorter than the generator's sample
+/// spacing.
+#[test]
+fn wedges_the_light_cannot_see_are_not_traced() {
+    use penumbra::discontinuity::{self, DmOptions};
+    let glb = penumbra::fixtures::ladder::interior(2);
+    let gltf = parse(&glb, "house.glb");
+    let scene = penumbra::load::scene(&gltf).expect("scene");
+    let vis = penumbra::visibility::Visibility::new(&scene);
+    let run = |skip_unseen| {
+        let o = DmOptions {
+            threshold: 0.01,
+            max_pieces: usize::MAX,
+            skip_unseen,
+        };
+        discontinuity::segments(&scene, &vis, &o)
+    };
+    let (all, all_stats) = run(false);
+    let (skipped, stats) = run(true);
+    assert_eq!(all_stats.unseen, 0);
+    assert_eq!(stats.wedges, all_stats.wedges);
+    assert!(
+        stats.unseen * 3 > stats.wedges,
+        "{} of {} wedges unseen",
+        stats.unseen,
+        stats.wedges
+    );
+    assert!(stats.kept > 100, "{stats:?}");
+    let length = |segs: &[Vec<Segment>]| -> f64 {
+        segs.iter()
+            .flatten()
+            .filter(|s| s.kind != Kind::D0)
+            .map(|s| (s.b - s.a).length())
+            .sum()
+    };
+    let (a, b) = (length(&all), length(&skipped));
+    eprintln!(
+        "{} of {} wedges unseen; lines {b:.3} of {a:.3} m; kept {} of {}",
+        stats.unseen, stats.wedges, stats.kept, all_stats.kept
+    );
+    assert!(b <= a * (1.0 + 1e-12), "{b} > {a}");
+    assert!(
+        b >= 0.99 * a,
+        "skipping lost {:.2}% of the lines' length",
+        100.0 * (1.0 - b / a)
+    );
+}
