@@ -7,7 +7,7 @@ use crate::files::{self, Staged};
 use crate::lightmap::{self, Encoding, Lightmap};
 use crate::load::{self, Gltf};
 use crate::mesh::{self, Mesher, ReceiverMesh};
-use crate::scene::Scene;
+use crate::scene::{Scene, Side};
 use crate::solve::{self, Solution, SolveOptions};
 use crate::stats::{Progress, Stats, stage};
 use crate::visibility::Visibility;
@@ -40,6 +40,32 @@ pub struct BakeOptions {
     pub supersample: u32,
     /// Stitch the lightmap's seams ([`lightmap::seams`]); off: measure them only.
     pub seams: Seams,
+    /// How the output lightmaps the two sides of a double-sided surface (both are solved
+    /// either way).
+    pub double_sided: DoubleSided,
+}
+
+/// What the output does with the back side of a double-sided primitive (`--double-sided`).
+/// The solve has both sides either way: both receive and reflect light.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum DoubleSided {
+    /// Each side its own lightmap: the back becomes an extra primitive with reversed winding
+    /// (and negated normals), and both sides' materials become single-sided copies.
+    #[default]
+    Separate,
+    /// One primitive, the front side's light, the material left double-sided: an engine
+    /// draws the front's lightmap on both sides.
+    Shared,
+}
+
+impl DoubleSided {
+    /// `separate` or `shared`, as on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            DoubleSided::Separate => "separate",
+            DoubleSided::Shared => "shared",
+        }
+    }
 }
 
 /// What the lightmap stage does at the seams between charts (`--seams`).
@@ -66,6 +92,7 @@ impl Default for BakeOptions {
             encoding: Encoding::Srgb,
             supersample: 4,
             seams: Seams::Stitch,
+            double_sided: DoubleSided::Separate,
         }
     }
 }
@@ -229,6 +256,12 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     stats.triangles = scene.triangles.len();
     stats.polygons = scene.polygons.len();
     stats.instances = scene.instances.len();
+    let backs = scene.instances.iter().filter(|i| i.side == Side::Back);
+    stats.double_sided = crate::stats::DoubleSidedStats {
+        back_instances: backs.clone().count(),
+        back_triangles: backs.map(|i| i.indices.len() / 3).sum(),
+        mode: options.double_sided.name().into(),
+    };
     stats.area_emitters = scene.emitters().count();
     stats.punctual_lights = scene.lights.len();
     stats.elements = mesh::element_count(&meshes);
@@ -329,13 +362,19 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::Atla
                 .collect()
         })
         .collect();
+    // With `--double-sided shared` the back sides take no texels (an empty atlas mesh): the
+    // output shows the front's light on both sides.
     let inputs: Vec<AtlasInput> = scene
         .instances
         .iter()
         .zip(&positions)
         .map(|(i, p)| AtlasInput {
             positions: p,
-            indices: &i.indices,
+            indices: if i.side == Side::Back && options.double_sided == DoubleSided::Shared {
+                &[]
+            } else {
+                &i.indices
+            },
         })
         .collect();
     let mut atlas = atlas::pack(

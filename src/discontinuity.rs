@@ -193,13 +193,21 @@ impl Topology {
 }
 
 /// True when the faces at an edge are seen from different sides from `eye` (or the edge has one
-/// face): a silhouette edge. `facing(t)` tells whether triangle `t` faces the eye.
-fn is_silhouette(faces: &[usize], facing: impl Fn(usize) -> i8) -> bool {
-    if faces.len() == 1 {
-        return true;
+/// face): a silhouette edge. `facing(t)` tells whether triangle `t` faces the eye. The back
+/// sides of double-sided surfaces are left out: each coincides with its front and faces the
+/// other way, so it would make every edge of the surface a silhouette (and its boundary edges
+/// are silhouettes through the front alone).
+fn is_silhouette(scene: &Scene, faces: &[usize], facing: impl Fn(usize) -> i8) -> bool {
+    let (mut n, mut towards, mut away) = (0, false, false);
+    for &t in faces.iter().filter(|&&t| !scene.is_back(t)) {
+        n += 1;
+        match facing(t) {
+            1 => towards = true,
+            -1 => away = true,
+            _ => {}
+        }
     }
-    let s: Vec<i8> = faces.iter().map(|&t| facing(t)).collect();
-    s.iter().any(|&x| x > 0) && s.iter().any(|&x| x < 0)
+    n == 1 || towards && away
 }
 
 fn sign(x: f64, tol: f64) -> i8 {
@@ -512,7 +520,10 @@ fn contacts(scene: &Scene, index: &PolygonIndex, r: usize, tol: f64) -> Vec<(DVe
         .flat_map(|&c| [c, c + frame.n * near])
         .collect();
     for other in index.query(&in_front) {
-        if other == r {
+        // The back side of a double-sided surface coincides with its front, which gives the
+        // same contacts (the receiver's own back side gives none: its outline is the
+        // receiver's).
+        if other == r || scene.is_back_polygon(other) {
             continue;
         }
         let op = &scene.polygons[other];
@@ -739,9 +750,12 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
             })
             .collect();
         let in_front = |p: DVec3| ne.dot(p - poly.frame.origin) > tol;
+        // The emitter's own polygon, and its back side if it is double-sided.
+        let twin = scene.twin_polygon(e);
+        let own = |p: Option<usize>| p == Some(e) || p.is_some() && p == twin;
         // VE: emitter vertex x occluder silhouette edge.
         for (&(wa, wb), faces) in &topo.edges {
-            if faces.iter().all(|&t| scene.triangles[t].polygon == Some(e)) {
+            if faces.iter().all(|&t| own(scene.triangles[t].polygon)) {
                 continue;
             }
             let (a, b) = (topo.points[wa as usize], topo.points[wb as usize]);
@@ -758,7 +772,7 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
                     let tri = &scene.triangles[t];
                     sign(tri.normal.dot(v - tri.p[0]), tol)
                 };
-                if !is_silhouette(faces, facing) {
+                if !is_silhouette(scene, faces, facing) {
                     continue;
                 }
                 let nw = (a - v).cross(b - v);
@@ -790,7 +804,7 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
             if topo.neighbours[w_id].is_empty() || !in_front(w) {
                 continue;
             }
-            if topo.vertex_polygons[w_id].iter().all(|&p| p == e) {
+            if topo.vertex_polygons[w_id].iter().all(|&p| own(Some(p))) {
                 continue;
             }
             if !reaches(w.distance(centre)) {
@@ -852,7 +866,7 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
                 LightKind::Directional => {
                     let d = light.direction;
                     let facing = |t: usize| sign(-scene.triangles[t].normal.dot(d), 1e-12);
-                    if !is_silhouette(faces, facing) {
+                    if !is_silhouette(scene, faces, facing) {
                         continue;
                     }
                     let Some(nw) = (b - a).cross(d).try_normalize() else {
@@ -879,7 +893,7 @@ fn wedges(scene: &Scene, topo: &Topology, extent: f64, pass: Pass, cutoff: f64) 
                         let tri = &scene.triangles[t];
                         sign(tri.normal.dot(v - tri.p[0]), tol)
                     };
-                    if !is_silhouette(faces, facing) {
+                    if !is_silhouette(scene, faces, facing) {
                         continue;
                     }
                     let Some(nw) = (a - v).cross(b - v).try_normalize() else {

@@ -85,5 +85,5 @@ pub mod reference;
 /// Pictures of a baked glb.
 pub mod render;
 
-pub use bake::{Bake, BakeOptions, OutputFiles, Seams, bake, bake_file};
+pub use bake::{Bake, BakeOptions, DoubleSided, OutputFiles, Seams, bake, bake_file};
 pub use error::{Error, Result};

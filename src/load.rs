@@ -2,9 +2,14 @@
 //!
 //! Every accessor is bounds-checked here before it is read, so a truncated or inconsistent file
 //! gives an [`Error`] that names the file and the item, never a panic.
+//!
+//! A primitive whose material is `doubleSided` becomes two instances: its front, and right
+//! after it its back ([`Side::Back`]: the same world positions, every triangle's winding
+//! reversed). Both sides then receive, reflect and (if the material emits) emit light as two
+//! ordinary one-sided surfaces back to back; the writer gives the back its own primitive.
 
 use crate::error::{Error, Result};
-use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene};
+use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side};
 use base64::Engine;
 use glam::{DMat3, DMat4, DVec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -190,7 +195,8 @@ impl Gltf {
         files
     }
 
-    /// Names an instance's glTF item: `mesh 2 "chair" primitive 0 (node 7)`.
+    /// Names an instance's glTF item: `mesh 2 "chair" primitive 0 (node 7)`, or
+    /// `mesh 2 "chair" primitive 0 (back side) (node 7)` for the back of a double-sided one.
     pub fn instance_item(&self, instance: &Instance) -> String {
         let name = self
             .document
@@ -198,8 +204,12 @@ impl Gltf {
             .nth(instance.mesh)
             .and_then(|m| m.name().map(|n| format!(" \"{n}\"")))
             .unwrap_or_default();
+        let side = match instance.side {
+            Side::Front => "",
+            Side::Back => " (back side)",
+        };
         format!(
-            "mesh {}{name} primitive {} (node {})",
+            "mesh {}{name} primitive {}{side} (node {})",
             instance.mesh, instance.primitive, instance.node
         )
     }
@@ -466,7 +476,7 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
     let degenerate = scene
         .triangles
         .iter()
-        .filter(|t| t.polygon.is_none())
+        .filter(|t| t.polygon.is_none() && scene.instances[t.instance].side == Side::Front)
         .count();
     if degenerate > 0 {
         scene.warnings.push(format!(
@@ -649,19 +659,24 @@ fn add_primitive(
         return Ok(());
     }
     let material = prim.material().index().unwrap_or(default_material);
-    scene.add_instance(
-        Instance {
-            node: node.index(),
-            mesh: mesh.index(),
-            primitive: prim.index(),
-            gltf_material: prim.material().index(),
-            positions_world,
-            indices,
-            mirrored,
-            first_triangle: 0,
-        },
-        material,
-    );
+    let front = Instance {
+        node: node.index(),
+        mesh: mesh.index(),
+        primitive: prim.index(),
+        gltf_material: prim.material().index(),
+        positions_world,
+        indices,
+        mirrored,
+        side: Side::Front,
+        first_triangle: 0,
+    };
+    // A double-sided material: the back is a second instance right after the front, its
+    // winding reversed, so both sides receive, reflect (and emit) light.
+    let back = prim.material().double_sided().then(|| front.back_side());
+    scene.add_instance(front, material);
+    if let Some(back) = back {
+        scene.add_instance(back, material);
+    }
     Ok(())
 }
 

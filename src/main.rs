@@ -300,6 +300,12 @@ struct BakeArgs {
     /// the two sides agree) or `off` (measured in --stats only).
     #[arg(long, value_enum, default_value_t = penumbra::Seams::Stitch)]
     seams: penumbra::Seams,
+    /// Double-sided materials: both sides are solved either way. `separate`: each side its own
+    /// lightmap (the back becomes an extra primitive with reversed winding, and both sides'
+    /// materials single-sided copies); `shared`: one primitive with the front side's light,
+    /// the material left double-sided.
+    #[arg(long, value_enum, default_value_t = penumbra::DoubleSided::Separate)]
+    double_sided: penumbra::DoubleSided,
     /// Also write the float lightmap (irradiance, W/m², linear) as OpenEXR: page 0 to FILE,
     /// page p >= 1 to FILE's stem plus `-p` (`light.exr`, `light-1.exr`, ...).
     #[arg(long, value_name = "FILE")]
@@ -585,6 +591,7 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         encoding: args.encoding,
         supersample: args.supersample,
         seams: args.seams,
+        double_sided: args.double_sided,
     };
     let bars = Bars::new(args.quiet);
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);

@@ -1014,6 +1014,7 @@ mod tests {
                 positions_world: corners,
                 indices,
                 mirrored: false,
+                side: crate::scene::Side::Front,
                 first_triangle: 0,
             },
             0,

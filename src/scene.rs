@@ -150,6 +150,19 @@ pub struct PunctualLight {
     pub range: Option<f64>,
 }
 
+/// Which side of a glTF primitive an [`Instance`] is.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Side {
+    /// The primitive as written: its front faces are counter-clockwise.
+    #[default]
+    Front,
+    /// The back of a primitive whose material is `doubleSided`: the same positions with every
+    /// triangle's winding reversed, added right after its front instance. Its triangles are
+    /// ordinary one-sided receivers facing the other way, so every stage treats them like any
+    /// other surface.
+    Back,
+}
+
 /// A static mesh primitive placed by one node: the unit that gets its own lightmap space.
 #[derive(Clone, Debug)]
 pub struct Instance {
@@ -168,9 +181,27 @@ pub struct Instance {
     /// True when the node's transform mirrors (negative determinant): `indices` then has the
     /// second and third corner of every glTF triangle swapped so fronts face the right way.
     pub mirrored: bool,
+    /// Front, or the back side of a double-sided primitive (its `indices` reversed).
+    pub side: Side,
     /// Index of this instance's first triangle in [`Scene::triangles`]; its triangles are
     /// consecutive, one per `indices` triple.
     pub first_triangle: usize,
+}
+
+impl Instance {
+    /// The back side of this (front) instance: the same vertices, every triangle's second and
+    /// third corner swapped.
+    pub fn back_side(&self) -> Instance {
+        let mut indices = self.indices.clone();
+        for t in indices.chunks_exact_mut(3) {
+            t.swap(1, 2);
+        }
+        Instance {
+            indices,
+            side: Side::Back,
+            ..self.clone()
+        }
+    }
 }
 
 /// A warning that does not stop the bake (skipped items, degenerate triangles).
@@ -225,6 +256,42 @@ impl Scene {
     /// True when the scene has at least one area emitter or punctual light.
     pub fn has_light(&self) -> bool {
         !self.lights.is_empty() || self.emitters().next().is_some()
+    }
+
+    /// The same triangle on the other side of a double-sided surface (the back copy of a front
+    /// triangle, or the front of a back one); `None` for one-sided surfaces.
+    pub fn twin_triangle(&self, t: usize) -> Option<usize> {
+        let tri = &self.triangles[t];
+        let inst = &self.instances[tri.instance];
+        let other = match inst.side {
+            Side::Back => tri.instance.checked_sub(1)?,
+            Side::Front => tri.instance + 1,
+        };
+        let o = self.instances.get(other)?;
+        let twin = match inst.side {
+            Side::Back => o.side == Side::Front,
+            Side::Front => o.side == Side::Back,
+        } && o.node == inst.node
+            && o.mesh == inst.mesh
+            && o.primitive == inst.primitive;
+        twin.then(|| o.first_triangle + tri.local_index)
+    }
+
+    /// True when triangle `t` is on the back side of a double-sided primitive.
+    pub fn is_back(&self, t: usize) -> bool {
+        self.instances[self.triangles[t].instance].side == Side::Back
+    }
+
+    /// True when polygon `p` is on the back side of a double-sided primitive.
+    pub fn is_back_polygon(&self, p: usize) -> bool {
+        self.instances[self.polygons[p].instance].side == Side::Back
+    }
+
+    /// The polygon on the other side of polygon `p` of a double-sided surface (the polygon of
+    /// its first triangle's twin), if any.
+    pub fn twin_polygon(&self, p: usize) -> Option<usize> {
+        self.twin_triangle(*self.polygons[p].triangles.first()?)
+            .and_then(|t| self.triangles[t].polygon)
     }
 
     /// Appends an instance's triangles and groups them into polygons. `positions_world` and
@@ -431,6 +498,7 @@ mod tests {
             positions_world: corners.to_vec(),
             indices: vec![0, 1, 2, 0, 2, 3],
             mirrored: false,
+            side: Side::Front,
             first_triangle: 0,
         }
     }

@@ -32,6 +32,9 @@ pub struct Stats {
     pub instances: usize,
     pub area_emitters: usize,
     pub punctual_lights: usize,
+    /// The back sides of double-sided primitives: instances and triangles (included in
+    /// `instances` and `triangles`), and how the output writes them (`separate` or `shared`).
+    pub double_sided: DoubleSidedStats,
     /// The element budget the meshers aimed at, and what chose it (`--budget`, `lightmap texels`,
     /// `input triangles`, `minimum` or `maximum`; see `bake::element_budget`).
     pub budget: usize,
@@ -69,4 +72,15 @@ pub fn stage<T>(slot: &mut f64, name: &str, progress: &Progress<'_>, f: impl FnO
     *slot += start.elapsed().as_secs_f64();
     progress(name, 1, 1);
     out
+}
+
+/// The back sides of double-sided primitives (`--stats` `double_sided`).
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct DoubleSidedStats {
+    /// Back-side instances (one per double-sided primitive placement).
+    pub back_instances: usize,
+    /// Their triangles.
+    pub back_triangles: usize,
+    /// `--double-sided`: `separate` (each side its own lightmap and primitive) or `shared`.
+    pub mode: String,
 }

@@ -28,6 +28,12 @@ pub struct Visibility {
     eps: f64,
 }
 
+/// Hits within this many [`Visibility::epsilon`] of each other are a tie, which the face
+/// facing the ray wins (see [`Visibility::first_hit`]). Coincident triangles are met at
+/// distances that differ by the f32 rounding of the intersection, about 1e-7 of the scene's
+/// extent; epsilon is 1e-5 of it, so the window is 1e-6 of the extent.
+pub const TIE: f64 = 0.1;
+
 /// Slanted rays of [`Visibility::buried`], besides the one along the normal.
 pub const BURIED_RAYS: usize = 8;
 
@@ -115,6 +121,8 @@ impl Visibility {
     }
 
     /// The closest hit along `origin + t dir` for `t` in `(epsilon, tmax)`; `dir` must be unit.
+    /// Of two hits within [`TIE`] x epsilon of each other, a face facing the ray wins over one
+    /// showing its back (the two sides of a double-sided surface), deterministically.
     pub fn first_hit(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit> {
         self.closest(origin, dir, tmax).map(|(t, k)| Hit {
             t,
@@ -123,6 +131,12 @@ impl Visibility {
     }
 
     /// [`Visibility::first_hit`] as (distance, BVH primitive).
+    ///
+    /// Ties go to the face that faces the ray: when the closest hit shows the ray its back and
+    /// a triangle facing the ray lies within [`TIE`] x epsilon of it, that one is the hit. The
+    /// two sides of a double-sided surface are coincident triangles of opposite winding, met at
+    /// the same distance up to rounding; the ray must meet the side it sees (its light, its
+    /// reflectance), not the back of the other, which neither emits nor reflects.
     fn closest(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<(f64, usize)> {
         if self.tris.is_empty() {
             return None;
@@ -136,20 +150,43 @@ impl Visibility {
         if RECORDING.load(Ordering::Relaxed) {
             record(&ray, Query::FirstHit, [u32::MAX; 2], found);
         }
-        found.then_some((hit.t as f64, hit.primitive_id as usize))
+        if !found {
+            return None;
+        }
+        let (t, k) = (hit.t as f64, hit.primitive_id as usize);
+        let d = Vec3A::from(dir.as_vec3());
+        if !self.shows_back(k, d) {
+            return Some((t, k));
+        }
+        // A back face: is there a front face at the same distance?
+        let tol = TIE * self.eps;
+        let near = self.ray(origin, dir, (t - tol).max(self.eps), (t + tol).min(tmax));
+        let mut front = RayHit::none();
+        let found = self.bvh.ray_traverse(near, &mut front, |r, id| {
+            if self.shows_back(id, d) {
+                f32::INFINITY
+            } else {
+                tris[id].intersect(r)
+            }
+        });
+        Some(if found {
+            (front.t as f64, front.primitive_id as usize)
+        } else {
+            (t, k)
+        })
+    }
+
+    /// True when BVH primitive `k`'s front normal points along `dir` (the ray meets its back).
+    fn shows_back(&self, k: usize, dir: Vec3A) -> bool {
+        let t = &self.tris[k];
+        (t.v1 - t.v0).cross(t.v2 - t.v0).dot(dir) > 0.0
     }
 
     /// True when the first surface the ray from `origin` along unit `dir` meets shows it its
     /// back (the triangle's front normal points along `dir`).
     fn meets_back_face(&self, origin: DVec3, dir: DVec3) -> bool {
         self.closest(origin, dir, f64::from(f32::MAX))
-            .is_some_and(|(_, k)| {
-                let t = &self.tris[k];
-                (t.v1 - t.v0)
-                    .cross(t.v2 - t.v0)
-                    .dot(Vec3A::from(dir.as_vec3()))
-                    > 0.0
-            })
+            .is_some_and(|(_, k)| self.shows_back(k, Vec3A::from(dir.as_vec3())))
     }
 
     /// True when the surface point `p`, on a surface with front normal `n` (unit), is buried
@@ -297,17 +334,34 @@ impl Visibility {
     /// Brute force closest hit over all triangles (for tests).
     pub fn first_hit_brute_force(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit> {
         let ray = self.ray(origin, dir, self.eps, tmax);
-        let mut best: Option<Hit> = None;
+        let d = Vec3A::from(dir.as_vec3());
+        let mut best: Option<(f64, usize)> = None;
         for (k, t) in self.tris.iter().enumerate() {
-            let d = t.intersect(&ray);
-            if d >= ray.tmin && d < ray.tmax && best.is_none_or(|b| (d as f64) < b.t) {
-                best = Some(Hit {
-                    t: d as f64,
-                    triangle: self.ids[k],
-                });
+            let x = t.intersect(&ray);
+            if x >= ray.tmin && x < ray.tmax && best.is_none_or(|b| (x as f64) < b.0) {
+                best = Some((x as f64, k));
             }
         }
-        best
+        let (t, k) = best?;
+        // The tie-break of `closest`: the nearest face facing the ray within the window.
+        let tol = TIE * self.eps;
+        let mut front: Option<(f64, usize)> = None;
+        if self.shows_back(k, d) {
+            for (j, tri) in self.tris.iter().enumerate() {
+                let x = tri.intersect(&ray) as f64;
+                if !self.shows_back(j, d)
+                    && (t - tol..=t + tol).contains(&x)
+                    && front.is_none_or(|f| x < f.0)
+                {
+                    front = Some((x, j));
+                }
+            }
+        }
+        let (t, k) = front.unwrap_or((t, k));
+        Some(Hit {
+            t,
+            triangle: self.ids[k],
+        })
     }
 }
 
@@ -521,7 +575,8 @@ mod tests {
                     positions_world: p,
                     indices: vec![0, 1, 2],
                     mirrored: false,
-                    first_triangle: 0,
+                    side: crate::scene::Side::Front,
+                first_triangle: 0,
                 },
                 0,
             );

@@ -11,6 +11,14 @@
 //! material used on several pages is cloned per page (each clone's `MOZ_lightmap.index` is its
 //! page's texture).
 //!
+//! The back side of a double-sided primitive (with `--double-sided separate`, the default)
+//! becomes a primitive of its own, placed right after the front's (after all of the front's
+//! per-page parts): its own lightmap UVs, reversed winding, negated normals, and the same
+//! lightmapped material as the front, made single-sided (`doubleSided` removed), so each side
+//! draws its own light and only its own. With `shared` the back has no texels and no
+//! primitive, and the material stays double-sided: an engine shows the front's light on both
+//! sides.
+//!
 //! The writer edits the file's own JSON, so whatever it does not touch (extensions, extras,
 //! animations, unknown properties) is kept as it was. All buffers are merged into the one GLB
 //! binary chunk and external images are embedded, so the output stands alone. xatlas splits
@@ -24,7 +32,7 @@ use crate::atlas::{Atlas, AtlasMesh};
 use crate::error::{Error, Result};
 use crate::lightmap::Encoding;
 use crate::load::Gltf;
-use crate::scene::Scene;
+use crate::scene::{Scene, Side};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 
@@ -296,6 +304,20 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     // first page keeps the material itself unless an unlit primitive shares it; every other
     // page gets a clone.
     let mut material_map: BTreeMap<(Option<usize>, u32), usize> = BTreeMap::new();
+    // Materials whose back sides get primitives of their own (`--double-sided separate`):
+    // their lightmapped versions become single-sided, or the front primitive would draw its
+    // lightmap on the back too, over the back's own primitive.
+    let separate_backs: std::collections::BTreeSet<Option<usize>> = scene
+        .instances
+        .iter()
+        .zip(&atlas.meshes)
+        .filter(|(i, am)| i.side == Side::Back && !am.indices.is_empty())
+        .map(|(i, _)| {
+            gltf.json["meshes"][i.mesh]["primitives"][i.primitive]["material"]
+                .as_u64()
+                .map(|x| x as usize)
+        })
+        .collect();
     for (mat, lit) in &lit_material_uses {
         let shared = all_material_uses.get(mat).copied().unwrap_or(0) > *lit;
         let pages: Vec<u32> = material_pages
@@ -337,6 +359,11 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                 .cloned()
                 .ok_or_else(|| Error::Image(format!("atlas page {page} has no lightmap image")))?;
             m["extensions"]["MOZ_lightmap"] = moz;
+            if separate_backs.contains(mat)
+                && let Some(o) = m.as_object_mut()
+            {
+                o.remove("doubleSided");
+            }
             material_map.insert((*mat, page), index);
         }
     }
@@ -349,10 +376,15 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
         let mut in_place_taken = !users.iter().all(|n| nodes.contains_key(n));
         for (node, insts) in nodes {
             let mut mesh_json = gltf.json["meshes"][*mesh].clone();
-            // Each lightmapped primitive becomes one primitive per page it lies on.
+            // Each lightmapped primitive becomes one primitive per page it lies on, followed
+            // by those of its back side (double-sided, `--double-sided separate`; with `shared`
+            // the back has no texels and no primitive).
             let mut replaced: BTreeMap<usize, Vec<Value>> = BTreeMap::new();
             for &i in insts {
                 let inst = &scene.instances[i];
+                if inst.side == Side::Back && atlas.meshes[i].indices.is_empty() {
+                    continue;
+                }
                 let original = &mesh_json["primitives"][inst.primitive];
                 let mat = original["material"].as_u64().map(|x| x as usize);
                 let uv1_to = moved_uv1.get(&mat).copied();
@@ -367,7 +399,7 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                     }
                     parts.push(prim);
                 }
-                replaced.insert(inst.primitive, parts);
+                replaced.entry(inst.primitive).or_default().extend(parts);
             }
             if let Some(prims) = mesh_json["primitives"].as_array_mut() {
                 let mut out = Vec::with_capacity(prims.len());
@@ -486,6 +518,18 @@ fn rewrite_primitive(
             let src = &bytes[x as usize * elem..(x as usize + 1) * elem];
             data[k * stride..k * stride + elem].copy_from_slice(src);
         }
+        let original = &gltf.json["accessors"][acc_index as usize];
+        let ct = original["componentType"].as_u64().unwrap_or(5126);
+        if inst.side == Side::Back {
+            // The back side faces the other way: its normals are negated, and its tangents'
+            // handedness (w) too, so the bitangent, and so the normal map, stays as it was.
+            let flip: &[usize] = match name.as_str() {
+                "NORMAL" => &[0, 1, 2],
+                "TANGENT" => &[3],
+                _ => &[],
+            };
+            negate_components(&mut data, stride, elem, ct, flip);
+        }
         let view = push_view(
             root,
             bin,
@@ -493,8 +537,6 @@ fn rewrite_primitive(
             (stride != elem).then_some(stride),
             Some(ARRAY_BUFFER),
         );
-        let original = &gltf.json["accessors"][acc_index as usize];
-        let ct = original["componentType"].as_u64().unwrap_or(5126);
         let ty = original["type"].as_str().unwrap_or("SCALAR").to_string();
         let mut new = json!({
             "bufferView": view,
@@ -549,7 +591,8 @@ fn rewrite_primitive(
         // glTF requires TEXCOORD_0 when TEXCOORD_1 is present; the lightmap UVs serve.
         new_attributes.insert("TEXCOORD_0".into(), json!(uv_acc));
     }
-    // Indices: the atlas triangles, in the original glTF winding.
+    // Indices: the atlas triangles, in the original glTF winding (reversed for a back side:
+    // its instance's triangles are, and the mirroring swap is undone the same way).
     let mut indices = am.indices.clone();
     if inst.mirrored {
         for t in indices.chunks_exact_mut(3) {
@@ -581,6 +624,37 @@ fn rewrite_primitive(
         obj.remove("mode"); // strips and fans are now a triangle list (the default mode)
     }
     Ok(())
+}
+
+/// Negates components `which` of every element (`elem` bytes, every `stride` bytes) of
+/// component type `ct`: floats and signed normalized integers (other types are left alone;
+/// glTF stores normals and tangents only as those).
+fn negate_components(data: &mut [u8], stride: usize, elem: usize, ct: u64, which: &[usize]) {
+    let size = match ct {
+        5126 => 4,
+        5122 => 2,
+        5120 => 1,
+        _ => return,
+    };
+    for e in data.chunks_exact_mut(stride) {
+        for &c in which {
+            if (c + 1) * size > elem {
+                continue;
+            }
+            let x = &mut e[c * size..(c + 1) * size];
+            match ct {
+                5126 => {
+                    let v = -f32::from_le_bytes([x[0], x[1], x[2], x[3]]);
+                    x.copy_from_slice(&v.to_le_bytes());
+                }
+                5122 => {
+                    let v = i16::from_le_bytes([x[0], x[1]]).saturating_neg();
+                    x.copy_from_slice(&v.to_le_bytes());
+                }
+                _ => x[0] = (x[0] as i8).saturating_neg() as u8,
+            }
+        }
+    }
 }
 
 /// True when some texture reference in `v` (an object with `index` and `texCoord`) uses set

@@ -113,7 +113,9 @@ impl Hemicube {
     }
 
     /// Form factors from a differential area at `p` with unit normal `n` to each of
-    /// `triangles` (world space), each hiding what lies behind it. Triangles for which `skip`
+    /// `triangles` (world space), each hiding what lies behind it (at equal depth, a triangle
+    /// facing `p` hides one showing it its back: the two sides of a double-sided surface).
+    /// Triangles for which `skip`
     /// is true are not drawn at all (the point's own plane). A triangle's form factor counts
     /// whatever side of it faces `p`: the caller zeroes the back faces it does not want
     /// (one-sided surfaces still hide what is behind them).
@@ -131,6 +133,16 @@ impl Hemicube {
         let mut item = vec![u32::MAX; self.delta.len()];
         let mut clipped = Vec::with_capacity(8);
         let mut scratch = Vec::with_capacity(8);
+        // Which triangles face `p`: at equal depth (the two sides of a double-sided surface,
+        // coincident triangles of opposite winding) the one facing `p` is what it sees.
+        let facing: Vec<bool> = triangles
+            .iter()
+            .map(|t| {
+                let c = (t[0] + t[1] + t[2]) / 3.0;
+                (t[1] - t[0]).cross(t[2] - t[0]).dot(p - c) > 0.0
+            })
+            .collect();
+        let mut front = vec![false; self.delta.len()];
         for (f, &(fwd, right, up)) in faces(u, v, n).iter().enumerate() {
             let (rows, offset, y_min) = if f == 0 {
                 (r, 0, -1.0)
@@ -241,9 +253,20 @@ impl Hemicube {
                         let w = DVec3::new(c.x / scale - 1.0, c.y / scale + y_min, 1.0);
                         let t = m0 / m.dot(w);
                         let cell = offset + j * r + i;
-                        if t.is_finite() && t > 0.0 && t < depth[cell] {
+                        if !(t.is_finite() && t > 0.0) {
+                            continue;
+                        }
+                        let tie = (t - depth[cell]).abs() <= 1e-9 * t;
+                        let nearer = if tie {
+                            facing[k] && !front[cell]
+                                || t < depth[cell] && facing[k] == front[cell]
+                        } else {
+                            t < depth[cell]
+                        };
+                        if nearer {
                             depth[cell] = t;
                             item[cell] = k as u32;
+                            front[cell] = facing[k];
                         }
                     }
                 }
@@ -288,6 +311,28 @@ mod tests {
             let near = if order[0] < order[1] { 0 } else { 1 };
             assert!(f[near] > 0.5, "{f:?}");
             assert_eq!(f[1 - near], 0.0, "{f:?}");
+        }
+    }
+
+    #[test]
+    fn of_two_sides_back_to_back_the_one_facing_the_point_is_seen() {
+        // A double-sided surface: the same triangle twice, winding reversed. Whichever comes
+        // first, the side facing the point takes the whole form factor, seen from either side.
+        let hc = Hemicube::new(32);
+        let up = [[-5.0, -5.0, 1.0], [5.0, -5.0, 1.0], [0.0, 5.0, 1.0]].map(DVec3::from_array);
+        let down = [up[0], up[2], up[1]];
+        for tris in [[up, down], [down, up]] {
+            let facing_down = if tris[0] == down { 0 } else { 1 };
+            let below = hc
+                .form_factors(DVec3::ZERO, DVec3::Z, &tris, &|_| false)
+                .form_factors;
+            assert!(below[facing_down] > 0.5, "{below:?}");
+            assert_eq!(below[1 - facing_down], 0.0, "{below:?}");
+            let above = hc
+                .form_factors(DVec3::new(0.0, 0.0, 2.0), -DVec3::Z, &tris, &|_| false)
+                .form_factors;
+            assert!(above[1 - facing_down] > 0.5, "{above:?}");
+            assert_eq!(above[facing_down], 0.0, "{above:?}");
         }
     }
 }
