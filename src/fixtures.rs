@@ -1234,6 +1234,78 @@ pub fn square_occluder() -> Vec<u8> {
     b.to_glb()
 }
 
+/// Emitted radiance of the area light of [`double_sided_panels`], W/(m² sr).
+pub const DOUBLE_SIDED_PANELS_RADIANCE: f64 = 10.0;
+
+/// Height of the light of [`double_sided_panels`] (m).
+pub const DOUBLE_SIDED_LIGHT_Y: f64 = 3.0;
+
+/// Height of the `shelf` of [`double_sided_panels`] (m).
+pub const DOUBLE_SIDED_SHELF_Y: f64 = 1.5;
+
+/// Double-sided panels under an area light: the scene of the double-sided tests. Every panel's
+/// back receives light that a one-sided panel would lose: direct light (the shelf, the ramp)
+/// or light from the floor (the wall).
+///
+/// * `floor`: [-3, 3]² at y = 0 facing up, reflectance 0.5 grey, one-sided.
+/// * `light`: [-0.5, 0.5]² at y = [`DOUBLE_SIDED_LIGHT_Y`] = 3 facing down, emitting
+///   [`DOUBLE_SIDED_PANELS_RADIANCE`] = 10 W/(m² sr) white, reflectance 0, one-sided.
+/// * `shelf`: [-0.5, 0.5]² at y = [`DOUBLE_SIDED_SHELF_Y`] = 1.5, horizontal, right under the
+///   light and its size. Its front faces **down** (the floor, in its own shadow); its back
+///   faces the light, which is all it sees above it: the back's mean irradiance is exactly
+///   `pi L F`, with `F` the form factor between two coaxial parallel unit squares 1.5 m apart.
+/// * `wall`: x = 1.5, z in [-0.75, 0.75], y in [0, 1.25], vertical, standing on the floor;
+///   front facing -x (the light), back facing +x (only the floor's light).
+/// * `ramp`: a 0.9 √2 m x 1.2 m panel tilted 45° on the -x side, from (-2.05, 1.35) to
+///   (-1.15, 0.45) in (x, y), z in [-0.6, 0.6]; front facing down and away from the light
+///   (-1, -1, 0)/√2, back facing up towards it.
+///
+/// Panels share the material `panel`: reflectance 0.5 grey, **double-sided**.
+pub fn double_sided_panels() -> Vec<u8> {
+    let mut b = GlbBuilder::new();
+    let grey = b.add_material(Material::diffuse("floor", [0.5; 3]));
+    let panel = b.add_material(Material::diffuse("panel", [0.5; 3]).double_sided());
+    let light = b.add_material(
+        Material::diffuse("light", [0.0; 3]).emitting([DOUBLE_SIDED_PANELS_RADIANCE; 3]),
+    );
+    b.add_mesh_node(
+        "floor",
+        &horizontal_rect([-3.0, 3.0], [-3.0, 3.0], 0.0, true),
+        grey,
+    );
+    b.add_mesh_node(
+        "shelf",
+        &horizontal_rect([-0.5, 0.5], [-0.5, 0.5], DOUBLE_SIDED_SHELF_Y, false),
+        panel,
+    );
+    b.add_mesh_node(
+        "wall",
+        &quad([
+            [1.5, 0.0, -0.75],
+            [1.5, 0.0, 0.75],
+            [1.5, 1.25, 0.75],
+            [1.5, 1.25, -0.75],
+        ]),
+        panel,
+    );
+    b.add_mesh_node(
+        "ramp",
+        &quad([
+            [-2.05, 1.35, -0.6],
+            [-1.15, 0.45, -0.6],
+            [-1.15, 0.45, 0.6],
+            [-2.05, 1.35, 0.6],
+        ]),
+        panel,
+    );
+    b.add_mesh_node(
+        "light",
+        &horizontal_rect([-0.5, 0.5], [-0.5, 0.5], DOUBLE_SIDED_LIGHT_Y, false),
+        light,
+    );
+    b.to_glb()
+}
+
 /// Emitted radiance of the 1 m × 1 m area lights in [`box_on_floor`] and [`instanced`],
 /// W/(m² sr).
 pub const AREA_LIGHT_RADIANCE: f64 = 10.0;
@@ -1644,6 +1716,7 @@ pub fn all() -> Vec<(&'static str, Vec<u8>)> {
         ("directional-light", directional_light()),
         ("plane-uniform", plane_uniform()),
         ("instanced", instanced()),
+        ("double-sided-panels", double_sided_panels()),
     ]
 }
 

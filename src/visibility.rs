@@ -701,6 +701,79 @@ mod tests {
         assert_eq!(r.stride, 16);
     }
 
+    /// A double-sided square: the same two triangles twice, the second copy's winding
+    /// reversed (as the loader adds a back side), in either order.
+    fn back_to_back(back_first: bool) -> Scene {
+        let mut scene = Scene::default();
+        scene.materials.push(Material {
+            name: "m".into(),
+            rho: DVec3::splat(0.5),
+            radiance: DVec3::ZERO,
+        });
+        let front = Instance {
+            node: 0,
+            mesh: 0,
+            primitive: 0,
+            gltf_material: None,
+            positions_world: vec![
+                DVec3::new(-1.0, 0.3, -1.0),
+                DVec3::new(-1.0, 0.3, 1.0),
+                DVec3::new(1.0, 0.3, 1.0),
+                DVec3::new(1.0, 0.3, -1.0),
+            ],
+            indices: vec![0, 1, 2, 0, 2, 3],
+            mirrored: false,
+            side: crate::scene::Side::Front,
+            first_triangle: 0,
+        };
+        let back = front.back_side();
+        let (a, b) = if back_first {
+            (back, front)
+        } else {
+            (front, back)
+        };
+        scene.add_instance(a, 0);
+        scene.add_instance(b, 0);
+        scene
+    }
+
+    #[test]
+    fn of_two_coincident_sides_the_ray_meets_the_one_facing_it() {
+        let mut rng = SplitMix(5);
+        for back_first in [false, true] {
+            let scene = back_to_back(back_first);
+            let vis = Visibility::new(&scene);
+            let mut hits = 0;
+            for _ in 0..2000 {
+                // From above or below, at random slants, at the square's interior.
+                let target = DVec3::new(
+                    rng.next_f64() * 1.8 - 0.9,
+                    0.3,
+                    rng.next_f64() * 1.8 - 0.9,
+                );
+                let from = rng.vec(-3.0, 3.0);
+                if (from.y - 0.3).abs() < 0.05 {
+                    continue;
+                }
+                let dir = (target - from).normalize();
+                for hit in [
+                    vis.first_hit(from, dir, 100.0),
+                    vis.first_hit_brute_force(from, dir, 100.0),
+                ] {
+                    let hit = hit.expect("the ray meets the square");
+                    let n = scene.triangles[hit.triangle].normal;
+                    assert!(n.dot(dir) < 0.0, "met the back: {from} -> {target}");
+                    assert!((hit.t - (target - from).length()).abs() < 1e-5);
+                    hits += 1;
+                }
+                // So a point on either side is not buried (its rays meet no back face).
+                let up = DVec3::Y * (from.y - 0.3).signum();
+                assert!(!vis.buried(target, up));
+            }
+            assert!(hits > 3000, "{hits}");
+        }
+    }
+
     #[test]
     fn near_origin_hits_are_found() {
         // A ray starting just above a plate must hit it when pointed at it: the CWBVH trap.

@@ -12,7 +12,8 @@
 //! - **Seam edges** ([`find`]): a scene edge (two world positions, so vertices that a glTF file
 //!   duplicates for its own normals or UVs still join) shared by two receiving triangles that
 //!   run it in opposite directions (both fronts on one side) and whose lightmap UV edges differ
-//!   (another chart, another place of the chart, or another page). Only edges where the surface
+//!   (another chart, another place of the chart, or another page); a triangle and its own back
+//!   side (a double-sided surface) are not such a pair. Only edges where the surface
 //!   is smooth are stitched: the two triangles' normals within [`SMOOTH_COS`]. Across a crease
 //!   (a box's edge, a wall's foot) the irradiance really differs on the two sides, since it
 //!   depends on the normal, and a jump there is the right answer; such edges are counted as
@@ -201,6 +202,9 @@ pub fn find(scene: &Scene, atlas: &Atlas) -> Seams {
             for b in &group[i + 1..] {
                 if a.triangle == b.triangle || a.forward == b.forward {
                     continue; // not two sides of one surface
+                }
+                if scene.twin_triangle(a.triangle) == Some(b.triangle) {
+                    continue; // the two sides of a double-sided surface, back to back
                 }
                 let same = a.side.page == b.side.page
                     && (0..2).all(|e| a.side.ends[e].distance(b.side.ends[e]) <= SAME_UV);

@@ -4,6 +4,7 @@ mod bad_input;
 mod compare;
 mod direct;
 mod discontinuity;
+mod double_sided;
 mod failure_scenes;
 mod fixtures;
 mod hardening;
