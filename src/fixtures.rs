@@ -1777,7 +1777,7 @@ mod tests {
     fn every_scene_parses_and_is_deterministic() {
         let first = all();
         let second = all();
-        assert_eq!(first.len(), 9);
+        assert_eq!(first.len(), 10);
         for ((name, a), (_, b)) in first.iter().zip(&second) {
             assert_eq!(a, b, "{name}: bytes differ between calls");
             let g = parse(a);
@@ -2002,6 +2002,30 @@ mod tests {
                 .get(&gltf::Semantic::TexCoords(0))
                 .is_some()
         );
+    }
+
+    #[test]
+    fn double_sided_panels_layout() {
+        let glb = double_sided_panels();
+        let g = parse(&glb);
+        for m in g.materials() {
+            assert_eq!(m.double_sided(), m.name() == Some("panel"), "{:?}", m.name());
+        }
+        let tris = world_triangles(&glb);
+        let s = std::f64::consts::FRAC_1_SQRT_2;
+        for (name, n) in [
+            ("floor", DVec3::Y),
+            ("shelf", DVec3::NEG_Y),
+            ("wall", DVec3::NEG_X),
+            ("ramp", DVec3::new(-s, -s, 0.0)),
+            ("light", DVec3::NEG_Y),
+        ] {
+            let mine: Vec<_> = tris.iter().filter(|(m, _)| m == name).collect();
+            assert_eq!(mine.len(), 2, "{name}");
+            for (_, t) in mine {
+                assert!((normal(t) - n).length() < 1e-6, "{name}: {}", normal(t));
+            }
+        }
     }
 
     #[test]

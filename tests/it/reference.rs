@@ -193,7 +193,9 @@ fn square_occluder_direct_matches_exact_profile() {
         })
         .collect();
     let covered = exact.iter().flatten().count();
-    assert!(covered > 30, "only {covered} texels along z = 0");
+    // 29 at 64 x 64 texels since the occluder's back side has texels of its own (it is
+    // double-sided), 31 before.
+    assert!(covered > 25, "only {covered} texels along z = 0");
     let z = z_scores(&r.map, &exact);
     let (within3, max) = report("square occluder", &z);
     assert!(within3 > 0.97, "fraction within 3 stderr {within3}");
