@@ -367,3 +367,60 @@ fn shared_output_keeps_one_double_sided_primitive() {
         .all(|p| p.n.y < 0.0);
     assert!(shelf_front_down);
 }
+
+/// Per polygon side of the panels: the mean of its mesh vertices' irradiance (mean channel).
+fn vertex_means(b: &Bake) -> Vec<(String, f64)> {
+    let mut out = Vec::new();
+    for (name, on, front) in panel_sides() {
+        for (s, side) in ["front", "back"].iter().enumerate() {
+            let mut sum = (0.0, 0.0);
+            for (mi, m) in b.meshes.iter().enumerate() {
+                let poly = &b.scene.polygons[m.polygon];
+                let here = on(poly.frame.origin) && (poly.frame.n.dot(front) < 0.0) == (s == 1);
+                if here {
+                    for h in &b.solution.irradiance[mi] {
+                        sum.0 += h.element_sum() / 3.0;
+                        sum.1 += 1.0;
+                    }
+                }
+            }
+            out.push((format!("{name} {side}"), sum.0 / sum.1));
+        }
+    }
+    out
+}
+
+/// Every solver and form factor method lights both sides, with no NaN from the coincident
+/// planes of the two sides (their form factor is 0: they face away from each other), and
+/// agrees with the default on the directly lit backs.
+#[test]
+fn every_solver_lights_both_sides() {
+    use penumbra::solve::{FormFactors, Solver};
+    let input = fixtures::double_sided_panels();
+    let default = vertex_means(&crate::bake(&input, &options(DoubleSided::Separate)));
+    for (solver, form_factors) in [
+        (Solver::Progressive, FormFactors::ClosedForm),
+        (Solver::Matrix, FormFactors::ClosedForm),
+        (Solver::Progressive, FormFactors::Hemicube),
+        (Solver::Matrix, FormFactors::Raycast),
+    ] {
+        let mut o = options(DoubleSided::Separate);
+        o.solve.solver = solver;
+        o.solve.form_factors = form_factors;
+        o.solve.patches = 256;
+        let b = crate::bake(&input, &o);
+        assert!(b.solution.irradiance.iter().flatten().all(|h| h.is_finite()));
+        for ((name, got), (_, want)) in vertex_means(&b).iter().zip(&default) {
+            eprintln!("{solver:?} {form_factors:?} {name}: {got:.4} (default {want:.4})");
+            assert!(*got > 0.0, "{solver:?} {form_factors:?} {name}: {got}");
+            // The backs lit by the light directly agree within 1% (measured: 0.3% at most).
+            // The sides lit only by bounce light differ by the patch solvers' coarseness: a
+            // floor patch that reaches under the wall lends its lit part's light to the
+            // wall's back (up to 70% more with the hemicube, 23% with closed forms; the same
+            // with two one-sided quads back to back).
+            if name == "shelf back" || name == "ramp back" {
+                assert!((got / want - 1.0).abs() < 0.01, "{name}: {got} vs {want}");
+            }
+        }
+    }
+}
