@@ -2009,7 +2009,12 @@ mod tests {
         let glb = double_sided_panels();
         let g = parse(&glb);
         for m in g.materials() {
-            assert_eq!(m.double_sided(), m.name() == Some("panel"), "{:?}", m.name());
+            assert_eq!(
+                m.double_sided(),
+                m.name() == Some("panel"),
+                "{:?}",
+                m.name()
+            );
         }
         let tris = world_triangles(&glb);
         let s = std::f64::consts::FRAC_1_SQRT_2;

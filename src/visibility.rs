@@ -576,7 +576,7 @@ mod tests {
                     indices: vec![0, 1, 2],
                     mirrored: false,
                     side: crate::scene::Side::Front,
-                first_triangle: 0,
+                    first_triangle: 0,
                 },
                 0,
             );
@@ -746,11 +746,8 @@ mod tests {
             let mut hits = 0;
             for _ in 0..2000 {
                 // From above or below, at random slants, at the square's interior.
-                let target = DVec3::new(
-                    rng.next_f64() * 1.8 - 0.9,
-                    0.3,
-                    rng.next_f64() * 1.8 - 0.9,
-                );
+                let target =
+                    DVec3::new(rng.next_f64() * 1.8 - 0.9, 0.3, rng.next_f64() * 1.8 - 0.9);
                 let from = rng.vec(-3.0, 3.0);
                 if (from.y - 0.3).abs() < 0.05 {
                     continue;

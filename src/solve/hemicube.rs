@@ -258,8 +258,7 @@ impl Hemicube {
                         }
                         let tie = (t - depth[cell]).abs() <= 1e-9 * t;
                         let nearer = if tie {
-                            facing[k] && !front[cell]
-                                || t < depth[cell] && facing[k] == front[cell]
+                            facing[k] && !front[cell] || t < depth[cell] && facing[k] == front[cell]
                         } else {
                             t < depth[cell]
                         };

@@ -27,9 +27,27 @@ fn options(mode: DoubleSided) -> BakeOptions {
 
 /// Bakes the panels to a scratch file and reads the output back.
 fn bake_panels(mode: DoubleSided, name: &str) -> (Bake, Gltf) {
+    bake_input(&fixtures::double_sided_panels(), mode, name)
+}
+
+/// The panels with the shelf's node mirrored (scale -1 in x: the shelf is symmetric, so the
+/// scene is the same, but the loader swaps its winding to keep its front).
+fn mirrored_shelf() -> Vec<u8> {
+    let g = crate::parse(&fixtures::double_sided_panels(), "panels.glb");
+    let mut root = g.json.clone();
+    for node in root["nodes"].as_array_mut().unwrap() {
+        if node["name"] == "shelf" {
+            node["scale"] = serde_json::json!([-1.0, 1.0, 1.0]);
+        }
+    }
+    penumbra::write::to_glb(&root, g.buffers[0].clone())
+}
+
+/// Bakes `bytes` to a scratch file and reads the output back.
+fn bake_input(bytes: &[u8], mode: DoubleSided, name: &str) -> (Bake, Gltf) {
     let dir = scratch(&format!("double-sided-{name}"));
     let (input, output) = (dir.join("in.glb"), dir.join("out.glb"));
-    std::fs::write(&input, fixtures::double_sided_panels()).unwrap();
+    std::fs::write(&input, bytes).unwrap();
     let baked = penumbra::bake_file(
         &input,
         &penumbra::OutputFiles::glb(&output),
@@ -42,8 +60,11 @@ fn bake_panels(mode: DoubleSided, name: &str) -> (Bake, Gltf) {
     (baked, gltf)
 }
 
-/// The panels' sides: name, a test for a point on the panel, its front normal.
-fn panel_sides() -> Vec<(&'static str, fn(DVec3) -> bool, DVec3)> {
+/// A panel: name, a test for a point on it, its front normal.
+type Panel = (&'static str, fn(DVec3) -> bool, DVec3);
+
+/// The panels of the scene.
+fn panel_sides() -> Vec<Panel> {
     let shelf = |p: DVec3| (p.y - fixtures::DOUBLE_SIDED_SHELF_Y).abs() < 1e-4;
     let wall = |p: DVec3| (p.x - 1.5).abs() < 1e-4;
     let ramp = |p: DVec3| (p.x + p.y + 0.7).abs() < 1e-4;
@@ -174,7 +195,10 @@ fn both_sides_of_every_panel_match_the_reference() {
         assert!(*n >= 20, "{name}: only {n} texels");
         // The reference's noise stays below the bake's allowance, so the test resolves it.
         let allowance = 0.03 * reference + 1e-3 * brightest;
-        assert!(4.0 * se < allowance, "{name}: the reference is too noisy: {se}");
+        assert!(
+            4.0 * se < allowance,
+            "{name}: the reference is too noisy: {se}"
+        );
         let tolerance = 4.0 * se + allowance;
         assert!(
             (bake - reference).abs() <= tolerance,
@@ -190,10 +214,16 @@ fn both_sides_of_every_panel_match_the_reference() {
         (s.1, s.2, s.3)
     };
     eprintln!("shelf back: closed form {exact:.4} W/m²");
-    assert!((reference - exact).abs() < 4.0 * se, "{reference} vs {exact}");
+    assert!(
+        (reference - exact).abs() < 4.0 * se,
+        "{reference} vs {exact}"
+    );
     assert!((back / exact - 1.0).abs() < 0.02, "{back} vs {exact}");
     let front = value("shelf front").1;
-    assert!(front > 0.0 && back / front > 4.0, "back {back}, front {front}");
+    assert!(
+        front > 0.0 && back / front > 4.0,
+        "back {back}, front {front}"
+    );
 }
 
 #[test]
@@ -230,6 +260,12 @@ fn every_double_sided_primitive_gets_a_back_side_in_the_solve() {
             let dot = scene.triangles[f].normal.dot(scene.triangles[t].normal);
             assert!((dot + 1.0).abs() < 1e-12, "reversed winding");
         }
+        let g = crate::parse(&fixtures::double_sided_panels(), "panels.glb");
+        assert!(
+            g.instance_item(back)
+                .contains(" primitive 0 (back side) (node ")
+        );
+        assert!(!g.instance_item(front).contains("back side"));
         // With `shared` the back takes no texels; it still has light in the solve.
         assert!(baked.atlas.meshes[b].indices.is_empty());
         assert!(!baked.atlas.meshes[b - 1].indices.is_empty());
@@ -244,11 +280,14 @@ fn every_double_sided_primitive_gets_a_back_side_in_the_solve() {
         .polygons
         .iter()
         .position(|p| {
-            scene.instances[p.instance].side == Side::Back
-                && (p.frame.n - DVec3::Y).length() < 1e-9
+            scene.instances[p.instance].side == Side::Back && (p.frame.n - DVec3::Y).length() < 1e-9
         })
         .unwrap();
-    let mi = baked.meshes.iter().position(|m| m.polygon == shelf_back).unwrap();
+    let mi = baked
+        .meshes
+        .iter()
+        .position(|m| m.polygon == shelf_back)
+        .unwrap();
     let h = &baked.solution.irradiance[mi];
     let mean = h.iter().map(|v| v.x).sum::<f64>() / h.len() as f64;
     assert!(mean > 2.0, "the shelf's back gets {mean} W/m²");
@@ -271,15 +310,27 @@ fn primitives<'a>(root: &'a Value, name: &str) -> &'a Vec<Value> {
     root["meshes"][mesh]["primitives"].as_array().unwrap()
 }
 
-/// World-space (the fixture's nodes have no transform) triangle normals of a primitive.
+/// Triangle normals of a primitive in its mesh's own frame (the fixture's world frame but
+/// for the mirrored shelf, which is symmetric about its normal).
 fn normals(gltf: &Gltf, prim: &Value) -> Vec<DVec3> {
     use gltf::accessor::Dimensions;
-    let acc = |i: &Value| gltf.document.accessors().nth(i.as_u64().unwrap() as usize).unwrap();
+    let acc = |i: &Value| {
+        gltf.document
+            .accessors()
+            .nth(i.as_u64().unwrap() as usize)
+            .unwrap()
+    };
     let p = gltf
         .read_floats(&acc(&prim["attributes"]["POSITION"]), Dimensions::Vec3)
         .unwrap();
     let idx = gltf.read_indices(&acc(&prim["indices"])).unwrap();
-    let at = |i: u32| DVec3::new(p[3 * i as usize], p[3 * i as usize + 1], p[3 * i as usize + 2]);
+    let at = |i: u32| {
+        DVec3::new(
+            p[3 * i as usize],
+            p[3 * i as usize + 1],
+            p[3 * i as usize + 2],
+        )
+    };
     idx.chunks_exact(3)
         .map(|t| (at(t[1]) - at(t[0])).cross(at(t[2]) - at(t[0])).normalize())
         .collect()
@@ -287,10 +338,13 @@ fn normals(gltf: &Gltf, prim: &Value) -> Vec<DVec3> {
 
 /// `separate` (the default): each panel's mesh has a second primitive, its back: reversed
 /// winding, negated normals, and both primitives use a single-sided copy of the material with
-/// the lightmap. The floor and the light are untouched.
+/// the lightmap. The floor and the light are untouched. The shelf's node is mirrored: the
+/// front keeps the input's winding in the mesh's frame, the back has it reversed.
 #[test]
 fn separate_output_has_a_back_primitive_with_reversed_winding() {
-    let (_, gltf) = bake_panels(DoubleSided::Separate, "separate");
+    let (baked, gltf) = bake_input(&mirrored_shelf(), DoubleSided::Separate, "separate");
+    let shelf = baked.scene.instances.iter().filter(|i| i.mirrored).count();
+    assert_eq!(shelf, 2, "the shelf's front and back are mirrored");
     let root = json(&gltf);
     assert_eq!(BakeOptions::default().double_sided, DoubleSided::Separate);
     for (name, _, front_normal) in panel_sides() {
@@ -409,7 +463,13 @@ fn every_solver_lights_both_sides() {
         o.solve.form_factors = form_factors;
         o.solve.patches = 256;
         let b = crate::bake(&input, &o);
-        assert!(b.solution.irradiance.iter().flatten().all(|h| h.is_finite()));
+        assert!(
+            b.solution
+                .irradiance
+                .iter()
+                .flatten()
+                .all(|h| h.is_finite())
+        );
         for ((name, got), (_, want)) in vertex_means(&b).iter().zip(&default) {
             eprintln!("{solver:?} {form_factors:?} {name}: {got:.4} (default {want:.4})");
             assert!(*got > 0.0, "{solver:?} {form_factors:?} {name}: {got}");
