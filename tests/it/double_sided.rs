@@ -484,3 +484,52 @@ fn every_solver_lights_both_sides() {
         }
     }
 }
+
+/// The panels with their material made one-sided.
+fn one_sided_panels() -> Vec<u8> {
+    let g = crate::parse(&fixtures::double_sided_panels(), "panels.glb");
+    let mut root = g.json.clone();
+    for m in root["materials"].as_array_mut().unwrap() {
+        m.as_object_mut().unwrap().remove("doubleSided");
+    }
+    penumbra::write::to_glb(&root, g.buffers[0].clone())
+}
+
+/// The discontinuity stage is not fooled by the two sides back to back: the same wedges (the
+/// silhouettes are judged on the fronts: a front and its back face opposite ways, which
+/// would make every edge of a panel a silhouette, its diagonal too) and the same contact lines
+/// (taken from the fronts only; a receiver's own back gives none) as with one-sided panels.
+#[test]
+fn discontinuities_are_not_doubled() {
+    use penumbra::discontinuity::{self, DmOptions, Kind};
+    let run = |bytes: &[u8]| {
+        let scene = load::scene(&crate::parse(bytes, "panels.glb")).unwrap();
+        let vis = Visibility::new(&scene);
+        let options = DmOptions {
+            threshold: 0.0,
+            max_pieces: usize::MAX,
+            skip_unseen: true,
+        };
+        let (segments, stats) = discontinuity::segments(&scene, &vis, &options);
+        (scene, segments, stats)
+    };
+    let (one_scene, one_segs, one) = run(&one_sided_panels());
+    let (two_scene, two_segs, two) = run(&fixtures::double_sided_panels());
+    assert_eq!(two_scene.polygons.len(), one_scene.polygons.len() + 3);
+    eprintln!("one-sided: {one:?}\ndouble-sided: {two:?}");
+    assert_eq!(two.wedges, one.wedges);
+    assert_eq!(two.d0, one.d0);
+    assert!(one.d0 > 0, "the wall stands on the floor");
+    // Every front receives the same D0 lines; the backs receive none but their own.
+    let d0 =
+        |segs: &Vec<discontinuity::Segment>| segs.iter().filter(|s| s.kind == Kind::D0).count();
+    for (p, poly) in one_scene.polygons.iter().enumerate() {
+        let q = (0..two_scene.polygons.len())
+            .find(|&q| {
+                two_scene.instances[two_scene.polygons[q].instance].side == Side::Front
+                    && two_scene.polygons[q].frame == poly.frame
+            })
+            .unwrap();
+        assert_eq!(d0(&two_segs[q]), d0(&one_segs[p]), "polygon {p}");
+    }
+}
