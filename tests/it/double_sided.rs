@@ -533,3 +533,57 @@ fn discontinuities_are_not_doubled() {
         assert_eq!(d0(&two_segs[q]), d0(&one_segs[p]), "polygon {p}");
     }
 }
+
+/// `--double-sided` on the command line: `separate` by default, `shared` on request, in
+/// `--stats`; a bad value is refused.
+#[test]
+fn double_sided_through_the_command_line() {
+    use crate::bad_input::penumbra;
+    let dir = scratch("double-sided-cli");
+    let input = dir.join("in.glb");
+    std::fs::write(&input, fixtures::double_sided_panels()).unwrap();
+    let bake = |mode: Option<&str>| {
+        let (output, stats) = (dir.join("out.glb"), dir.join("stats.json"));
+        let mut args: Vec<std::ffi::OsString> = vec![
+            "bake".into(),
+            input.clone().into(),
+            output.clone().into(),
+            "--budget".into(),
+            "2000".into(),
+            "--resolution".into(),
+            "64".into(),
+            "--quiet".into(),
+            "--stats".into(),
+            stats.clone().into(),
+        ];
+        if let Some(m) = mode {
+            args.extend(["--double-sided".into(), m.into()]);
+        }
+        let refs: Vec<&std::ffi::OsStr> = args.iter().map(|s| s.as_os_str()).collect();
+        let run = penumbra(&refs);
+        let json: Option<Value> = (run.code == Some(0))
+            .then(|| serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap());
+        let prims = (run.code == Some(0)).then(|| {
+            let g = load::read(&output).unwrap();
+            primitives(&g.json, "shelf").len()
+        });
+        (run, json, prims)
+    };
+    for (mode, name, prims) in [
+        (None, "separate", 2),
+        (Some("separate"), "separate", 2),
+        (Some("shared"), "shared", 1),
+    ] {
+        let (run, json, p) = bake(mode);
+        assert_eq!(run.code, Some(0), "{}", run.stderr);
+        let ds = &json.unwrap()["double_sided"];
+        assert_eq!(ds["mode"], name);
+        assert_eq!(ds["back_instances"], 3);
+        assert_eq!(ds["back_triangles"], 6);
+        assert_eq!(p, Some(prims), "{mode:?}");
+    }
+    let (bad, ..) = bake(Some("both"));
+    assert_ne!(bad.code, Some(0));
+    assert!(bad.stderr.contains("--double-sided"), "{}", bad.stderr);
+    let _ = std::fs::remove_dir_all(dir);
+}
