@@ -360,9 +360,15 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         use std::io::Write;
         let mut out = std::io::stdout().lock();
         for (i, p) in scene.polygons.iter().enumerate() {
+            // The back side of a double-sided primitive is a polygon of its own.
+            let side = if scene.is_back_polygon(i) {
+                " (back side)"
+            } else {
+                ""
+            };
             let line = writeln!(
                 out,
-                "{i}\t{}\tarea {:.6}\t{} segments\t{} triangles",
+                "{i}\t{}{side}\tarea {:.6}\t{} segments\t{} triangles",
                 scene.materials[p.material].name,
                 p.area,
                 segments.get(i).map_or(0, |s| s.len()),

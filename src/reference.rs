@@ -43,6 +43,13 @@
 //! The texel value is the mean over its covered sub-samples, each given the same number of
 //! paths (stratified sampling); its standard error is that of the stratified mean.
 //!
+//! Double-sided surfaces need nothing of their own: the scene comes from the same loader as the
+//! bake's, so a double-sided material has both sides, each reflecting (a path meets the side
+//! facing it: [`Visibility::first_hit`]'s tie-break). In a `--double-sided separate` output the
+//! two sides are two single-sided primitives back to back, each with its own texels; in a
+//! `shared` one both sides of a primitive map to the same texels, which the front claims (its
+//! triangles come first), as an engine shows them.
+//!
 //! Every texel has its own random stream, seeded from the seed and the texel index, so the
 //! result does not depend on the thread count.
 
