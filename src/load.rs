@@ -659,6 +659,7 @@ fn add_primitive(
             indices,
             mirrored,
             first_triangle: 0,
+            derived: Vec::new(),
         },
         material,
     );

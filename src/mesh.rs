@@ -1015,6 +1015,7 @@ mod tests {
                 indices,
                 mirrored: false,
                 first_triangle: 0,
+                derived: Vec::new(),
             },
             0,
         );

@@ -27,7 +27,10 @@ pub struct Stats {
     pub input: String,
     pub mesher: String,
     pub threads: usize,
+    /// Input triangles (before any cut).
     pub triangles: usize,
+    /// Triangles too long for one atlas page, cut before the bake (`scene::cut`).
+    pub cut: crate::scene::cut::Cut,
     pub polygons: usize,
     pub instances: usize,
     pub area_emitters: usize,

@@ -522,6 +522,7 @@ mod tests {
                     indices: vec![0, 1, 2],
                     mirrored: false,
                     first_triangle: 0,
+                    derived: Vec::new(),
                 },
                 0,
             );

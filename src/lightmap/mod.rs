@@ -267,7 +267,10 @@ impl<'a> Locator<'a> {
 /// A sub-sample buried under other geometry ([`Visibility::buried`]: the floor under a box) is
 /// not covered: a texel's value is the mean of its visible sub-samples, and a texel with none
 /// is filled by the dilation from its visible neighbours, so that bilinear filtering along a
-/// contact line reads the light beside the box, not the dark under it.
+/// contact line reads the light beside the box, not the dark under it. The test runs at the
+/// texel corners (about one ray query per texel); only a texel whose corners disagree (a
+/// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
+/// that touches none of its corners is missed (its sub-samples count as visible).
 pub fn rasterize(
     scene: &Scene,
     vis: &Visibility,
@@ -354,9 +357,32 @@ pub fn rasterize(
                 let ya = (lo.y.floor().max(0.0) as usize).max(y_lo);
                 let yb = (hi.y.floor().max(0.0) as usize).min(y_hi - 1);
                 let poly = &scene.polygons[meshes[t.mesh].polygon];
+                let world = |q: DVec2| {
+                    let [l0, l1, l2] = barycentric_2d(&t.uv, q);
+                    t.world[0] * l0 + t.world[1] * l1 + t.world[2] * l2
+                };
+                // Buried or not at the texel corners (on the triangle's plane, also beyond
+                // its edges), found once per corner: a texel whose four corners agree takes
+                // their answer for all its sub-samples; one whose corners differ (a contact
+                // line crosses it) tests every sub-sample.
+                let cw = x1 - x0 + 2;
+                let mut corner = vec![0u8; cw * (yb + 2 - ya)];
+                let mut corner_buried = |cx: usize, cy: usize| {
+                    let c = &mut corner[(cy - ya) * cw + cx - x0];
+                    if *c == 0 {
+                        let q = DVec2::new(cx as f64, cy as f64);
+                        *c = if vis.buried(world(q), poly.frame.n) {
+                            2
+                        } else {
+                            1
+                        };
+                    }
+                    *c == 2
+                };
                 for y in ya..=yb {
                     for x in x0..=x1 {
                         let idx = (y - y_lo) * w + x;
+                        let mut corners: Option<[bool; 4]> = None;
                         for s in 0..n * n {
                             let bit = 1u64 << (s % 64);
                             if claimed[idx] & bit != 0 {
@@ -372,7 +398,16 @@ pub fn rasterize(
                             }
                             claimed[idx] |= bit;
                             let p = t.world[0] * l0 + t.world[1] * l1 + t.world[2] * l2;
-                            if vis.buried(p, poly.frame.n) {
+                            let c = *corners.get_or_insert_with(|| {
+                                [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)]
+                                    .map(|(cx, cy)| corner_buried(cx, cy))
+                            });
+                            let buried = if c.iter().all(|&b| b == c[0]) {
+                                c[0]
+                            } else {
+                                vis.buried(p, poly.frame.n)
+                            };
+                            if buried {
                                 continue;
                             }
                             sum[idx] += locators[t.mesh].value(poly.frame.plane_from_world(p));
