@@ -211,8 +211,24 @@ impl<'a> Locator<'a> {
     /// The interpolated value at plane point `q`. A point outside every triangle (rounding at
     /// the polygon's edge) takes the value of the nearest point of the nearest candidate.
     pub fn value(&self, q: DVec2) -> DVec3 {
+        self.value_near(q, &mut None)
+    }
+
+    /// [`Locator::value`], trying the triangle `hint` first and leaving in it the triangle that
+    /// held `q`: neighbouring queries (the sub-samples of a texel, then of the next) mostly fall
+    /// in the same triangle, and skip the search.
+    pub fn value_near(&self, q: DVec2, hint: &mut Option<u32>) -> DVec3 {
         if self.mesh.triangles.is_empty() {
             return DVec3::ZERO;
+        }
+        if let Some(k) = *hint
+            && let Some(t) = self.mesh.triangles.get(k as usize)
+        {
+            let l = self.barycentric(k, q);
+            if l.iter().all(|&v| v >= 0.0 && v.is_finite()) {
+                let s = l[0] + l[1] + l[2];
+                return (0..3).map(|i| self.values[t[i] as usize] * (l[i] / s)).sum();
+            }
         }
         let (x, y) = Self::cell_of(self.min, self.cell, self.dims, q);
         // (distance outside in barycentric units, triangle, barycentrics) of the best candidate.
@@ -249,6 +265,7 @@ impl<'a> Locator<'a> {
         let Some((_, k, l)) = best else {
             return DVec3::ZERO;
         };
+        *hint = Some(k);
         // Clamp to the triangle and renormalise.
         let l = l.map(|x| x.max(0.0));
         let s = l[0] + l[1] + l[2];
@@ -365,6 +382,7 @@ pub fn rasterize(
                 // its edges), found once per corner: a texel whose four corners agree takes
                 // their answer for all its sub-samples; one whose corners differ (a contact
                 // line crosses it) tests every sub-sample.
+                let mut hint = None;
                 let cw = x1 - x0 + 2;
                 let mut corner = vec![0u8; cw * (yb + 2 - ya)];
                 let mut corner_buried = |cx: usize, cy: usize| {
@@ -410,7 +428,8 @@ pub fn rasterize(
                             if buried {
                                 continue;
                             }
-                            sum[idx] += locators[t.mesh].value(poly.frame.plane_from_world(p));
+                            let q = poly.frame.plane_from_world(p);
+                            sum[idx] += locators[t.mesh].value_near(q, &mut hint);
                             count[idx] += 1;
                         }
                     }
