@@ -90,6 +90,10 @@ compile_error!(
 /// 47 s flat / 157 s bumpy; 2000: 3.0 s / 9.5 s; 1000: 1.0 s / 4.5 s; 500: 0.6 s / 2.5 s.
 pub const TRIANGLES_PER_CHART: f64 = 1000.0;
 
+/// With a fixed density, a chart's outline is at most `2 x BOUNDARY_MARGIN` page sides (xatlas
+/// `maxBoundaryLength`), so that it fits on one page.
+const BOUNDARY_MARGIN: f64 = 0.8;
+
 /// Largest atlas side, in texels, that [`pack`] accepts or produces.
 pub const MAX_RESOLUTION: u32 = 16384;
 
@@ -302,15 +306,7 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             texels_per_unit,
             page_size,
         } => {
-            // xatlas packs at about 75% utilization; refuse before it allocates huge pages.
-            let side = (stats.area / 0.75).sqrt() * f64::from(texels_per_unit);
-            if side > f64::from(MAX_RESOLUTION) {
-                return Err(AtlasError::TooLarge {
-                    texels_per_unit,
-                    texels: side.ceil() as u64,
-                    max: MAX_RESOLUTION,
-                });
-            }
+            check_density(stats.area, texels_per_unit)?;
             let size = page_size.saturating_sub(options.padding + 1);
             if size < 1 {
                 return Err(AtlasError::InvalidOptions {
@@ -364,6 +360,19 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
 
     let chart_options = xatlas_rs::ChartOptions {
         max_chart_area: (stats.area / stats.triangles as f64 * TRIANGLES_PER_CHART) as f32,
+        // With a fixed density a chart must fit on one page: a chart whose outline is at most
+        // twice the page side is at most a page side across (two points split the outline
+        // into two paths, each at least their distance), in any rotation. A margin covers the
+        // parameterization's stretch of non-flat charts. (A single triangle is a chart however
+        // long its outline: the caller cuts long ones, see `scene::cut`.)
+        max_boundary_length: match sizing {
+            Sizing::Pages {
+                texels_per_unit, ..
+            } => {
+                (2.0 * BOUNDARY_MARGIN * max_chart_size as f64 / f64::from(texels_per_unit)) as f32
+            }
+            Sizing::Fixed { .. } => 0.0,
+        },
         ..Default::default()
     };
     let mut pack_options = ffi::PackOptions {
@@ -505,6 +514,21 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             info = PackInfo::read(handle);
         }
     }
+}
+
+/// Refuses a density at which `area` (scene units²) would need more texels than one
+/// [`MAX_RESOLUTION`]² page holds ([`AtlasError::TooLarge`]): xatlas packs at about 75%
+/// utilization, and this is checked before it allocates huge pages.
+pub fn check_density(area: f64, texels_per_unit: f32) -> Result<(), AtlasError> {
+    let side = (area / 0.75).sqrt() * f64::from(texels_per_unit);
+    if side > f64::from(MAX_RESOLUTION) {
+        return Err(AtlasError::TooLarge {
+            texels_per_unit,
+            texels: side.ceil() as u64,
+            max: MAX_RESOLUTION,
+        });
+    }
+    Ok(())
 }
 
 /// xatlas-rs's views of the output meshes, checked to be one per added mesh. The views borrow

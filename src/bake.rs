@@ -7,7 +7,7 @@ use crate::files::{self, Staged};
 use crate::lightmap::{self, Encoding, Lightmap};
 use crate::load::{self, Gltf};
 use crate::mesh::{self, Mesher, ReceiverMesh};
-use crate::scene::{Scene, Side};
+use crate::scene::{self, Scene, Side};
 use crate::solve::{self, Solution, SolveOptions};
 use crate::stats::{Progress, Stats, stage};
 use crate::visibility::Visibility;
@@ -197,7 +197,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         ..Default::default()
     };
     let t = &mut stats.timings_s;
-    let scene = stage(&mut t.load, "scene", progress, || load::scene(gltf))?;
+    let (scene, cut) = stage(&mut t.load, "scene", progress, || scene_for(gltf, options))?;
+    stats.cut = cut;
     // Classic radiosity's matrix is refused before any expensive stage.
     if options.solve.solver == solve::Solver::Matrix && options.solve.bounces != Some(0) {
         let n = solve::patches(&scene, options.solve.patches).len();
@@ -253,7 +254,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         (map, seams)
     });
     stats.seams = seams;
-    stats.triangles = scene.triangles.len();
+    stats.triangles = scene.triangles.len() + stats.cut.triangles_cut - stats.cut.pieces;
     stats.polygons = scene.polygons.len();
     stats.instances = scene.instances.len();
     let backs = scene.instances.iter().filter(|i| i.side == Side::Back);
@@ -340,6 +341,48 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         stats,
     })
 }
+
+/// The glTF's scene, its triangles cut where they are too long for one atlas page.
+///
+/// With a fixed texel density (`--texels-per-unit` without `--resolution`), every chart must fit
+/// on one page of `page_size` texels at that density, and a chart is at least one triangle: so
+/// every edge longer than half a page is cut ([`crate::scene::cut`]), and the atlas keeps each
+/// chart's outline within a page ([`AtlasOptions`]). The cut triangles go into the output with
+/// interpolated attributes.
+fn scene_for(gltf: &Gltf, options: &BakeOptions) -> Result<(Scene, scene::cut::Cut)> {
+    let mut scene = load::scene(gltf)?;
+    let cut = match (options.texels_per_unit, options.resolution) {
+        (Some(tpu), None) => {
+            // An atlas too large for any page count is refused before anything is cut.
+            let area: f64 = scene.triangles.iter().map(|t| t.area()).sum();
+            atlas::check_density(area, tpu).map_err(|error| Error::Atlas {
+                path: gltf.path.clone(),
+                error,
+            })?;
+            let usable = options.page_size.saturating_sub(options.padding + 1) as f64;
+            let max_edge = 0.5 * usable / tpu as f64;
+            let pieces = scene::cut::estimate_pieces(&scene, max_edge);
+            if pieces > MAX_CUT_PIECES {
+                return Err(Error::BadItem {
+                    path: gltf.path.clone(),
+                    item: "--page-size".into(),
+                    reason: format!(
+                        "at {tpu} texels per unit, {} texel pages would cut the scene's long \
+                         triangles into about {pieces} pieces (at most {MAX_CUT_PIECES}): \
+                         raise the page size or lower the density",
+                        options.page_size
+                    ),
+                });
+            }
+            scene::cut::cut_long_edges(&mut scene, max_edge)
+        }
+        _ => scene::cut::Cut::default(),
+    };
+    Ok((scene, cut))
+}
+
+/// Most pieces [`scene_for`] cuts long triangles into before it refuses the page size.
+const MAX_CUT_PIECES: usize = 1_000_000;
 
 /// Charts and packs every instance. xatlas works in f32 and drops triangles whose area is
 /// below `f32::EPSILON`, and its density estimate clamps small scenes; so the positions it sees
@@ -571,7 +614,7 @@ pub fn meshes(
     options: &BakeOptions,
 ) -> Result<(Scene, Vec<Vec<Segment>>, Vec<ReceiverMesh>)> {
     options.check()?;
-    let scene = load::scene(gltf)?;
+    let (scene, _) = scene_for(gltf, options)?;
     let vis = Visibility::new(&scene);
     let texels_per_unit = match options.budget {
         Some(_) => 0.0,

@@ -669,6 +669,7 @@ fn add_primitive(
         mirrored,
         side: Side::Front,
         first_triangle: 0,
+        derived: Vec::new(),
     };
     // A double-sided material: the back is a second instance right after the front, its
     // winding reversed, so both sides receive, reflect (and emit) light.

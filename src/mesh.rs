@@ -1016,6 +1016,7 @@ mod tests {
                 mirrored: false,
                 side: crate::scene::Side::Front,
                 first_triangle: 0,
+                derived: Vec::new(),
             },
             0,
         );

@@ -7,6 +7,8 @@
 use glam::{DVec2, DVec3};
 use std::collections::BTreeMap;
 
+pub mod cut;
+
 /// A Lambertian surface material.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
@@ -186,6 +188,24 @@ pub struct Instance {
     /// Index of this instance's first triangle in [`Scene::triangles`]; its triangles are
     /// consecutive, one per `indices` triple.
     pub first_triangle: usize,
+    /// Vertices added by [`cut::cut_long_edges`], in order: vertex `positions_world.len() -
+    /// derived.len() + i` is `derived[i]`. Empty when nothing was cut.
+    pub derived: Vec<Derived>,
+}
+
+impl Instance {
+    /// Number of the primitive's own glTF vertices (the first ones of `positions_world`).
+    pub fn source_vertices(&self) -> usize {
+        self.positions_world.len() - self.derived.len()
+    }
+}
+
+/// A vertex that is not in the glTF primitive: a weighted mean of up to three of its vertices
+/// (the corners of the glTF triangle it lies in), with weights summing to 1.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Derived {
+    /// (glTF vertex index, weight) pairs, ascending by vertex.
+    pub weights: Vec<(u32, f64)>,
 }
 
 impl Instance {
@@ -500,6 +520,7 @@ mod tests {
             mirrored: false,
             side: Side::Front,
             first_triangle: 0,
+            derived: Vec::new(),
         }
     }
 

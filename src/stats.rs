@@ -27,7 +27,10 @@ pub struct Stats {
     pub input: String,
     pub mesher: String,
     pub threads: usize,
+    /// Input triangles (before any cut).
     pub triangles: usize,
+    /// Triangles too long for one atlas page, cut before the bake (`scene::cut`).
+    pub cut: crate::scene::cut::Cut,
     pub polygons: usize,
     pub instances: usize,
     pub area_emitters: usize,
@@ -79,7 +82,7 @@ pub fn stage<T>(slot: &mut f64, name: &str, progress: &Progress<'_>, f: impl FnO
 pub struct DoubleSidedStats {
     /// Back-side instances (one per double-sided primitive placement).
     pub back_instances: usize,
-    /// Their triangles.
+    /// Their triangles (after long edges are cut, see `cut`).
     pub back_triangles: usize,
     /// `--double-sided`: `separate` (each side its own lightmap and primitive) or `shared`.
     pub mode: String,

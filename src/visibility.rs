@@ -577,6 +577,7 @@ mod tests {
                     mirrored: false,
                     side: crate::scene::Side::Front,
                     first_triangle: 0,
+                    derived: Vec::new(),
                 },
                 0,
             );
@@ -725,6 +726,7 @@ mod tests {
             mirrored: false,
             side: crate::scene::Side::Front,
             first_triangle: 0,
+            derived: Vec::new(),
         };
         let back = front.back_side();
         let (a, b) = if back_first {

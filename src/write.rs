@@ -513,13 +513,29 @@ fn rewrite_primitive(
             })?;
         let (bytes, elem) = gltf.accessor_bytes(&accessor)?;
         let stride = elem.div_ceil(4) * 4;
-        let mut data = vec![0u8; stride * am.xref.len()];
-        for (k, &x) in am.xref.iter().enumerate() {
-            let src = &bytes[x as usize * elem..(x as usize + 1) * elem];
-            data[k * stride..k * stride + elem].copy_from_slice(src);
-        }
         let original = &gltf.json["accessors"][acc_index as usize];
         let ct = original["componentType"].as_u64().unwrap_or(5126);
+        let ty = original["type"].as_str().unwrap_or("SCALAR").to_string();
+        let source = inst.source_vertices();
+        let mut data = vec![0u8; stride * am.xref.len()];
+        for (k, &x) in am.xref.iter().enumerate() {
+            let out = &mut data[k * stride..k * stride + elem];
+            match (x as usize).checked_sub(source) {
+                None => out.copy_from_slice(&bytes[x as usize * elem..(x as usize + 1) * elem]),
+                Some(d) => {
+                    let kind = AttributeKind::of(name, ct, original["normalized"].as_bool());
+                    interpolate(
+                        &bytes,
+                        elem,
+                        ct,
+                        components(&ty),
+                        kind,
+                        &inst.derived[d],
+                        out,
+                    );
+                }
+            }
+        }
         if inst.side == Side::Back {
             // The back side faces the other way: its normals are negated, and its tangents'
             // handedness (w) too, so the bitangent, and so the normal map, stays as it was.
@@ -537,7 +553,6 @@ fn rewrite_primitive(
             (stride != elem).then_some(stride),
             Some(ARRAY_BUFFER),
         );
-        let ty = original["type"].as_str().unwrap_or("SCALAR").to_string();
         let mut new = json!({
             "bufferView": view,
             "componentType": ct,
@@ -653,6 +668,81 @@ fn negate_components(data: &mut [u8], stride: usize, elem: usize, ct: u64, which
                 }
                 _ => x[0] = (x[0] as i8).saturating_neg() as u8,
             }
+        }
+    }
+}
+
+/// How an attribute is carried onto a vertex that [`crate::scene::cut`] added.
+#[derive(Clone, Copy, PartialEq)]
+enum AttributeKind {
+    /// Interpolated, then the xyz part renormalised (`NORMAL`, `TANGENT`: its w, the
+    /// handedness, comes from the heaviest corner).
+    Direction,
+    /// Interpolated (positions, UVs, colours, weights, normalised integers).
+    Linear,
+    /// Taken from the heaviest corner (`JOINTS_n`, integer ids: a mean means nothing).
+    Nearest,
+}
+
+impl AttributeKind {
+    fn of(name: &str, ct: u64, normalized: Option<bool>) -> AttributeKind {
+        if name == "NORMAL" || name == "TANGENT" {
+            AttributeKind::Direction
+        } else if ct == 5126 || normalized == Some(true) || name.starts_with("WEIGHTS_") {
+            AttributeKind::Linear
+        } else {
+            AttributeKind::Nearest
+        }
+    }
+}
+
+/// Writes into `out` the attribute of a derived vertex: its corners' `elem`-byte elements in
+/// `bytes` (`nc` components of type `ct`) combined by its weights as `kind` says.
+fn interpolate(
+    bytes: &[u8],
+    elem: usize,
+    ct: u64,
+    nc: usize,
+    kind: AttributeKind,
+    derived: &crate::scene::Derived,
+    out: &mut [u8],
+) {
+    let cs = elem / nc.max(1);
+    let value = |v: u32, c: usize| {
+        let at = v as usize * elem + c * cs;
+        component_value(ct, &bytes[at..at + cs])
+    };
+    let heaviest = derived
+        .weights
+        .iter()
+        .fold((0, f64::NEG_INFINITY), |best, &(v, w)| {
+            if w > best.1 { (v, w) } else { best }
+        })
+        .0;
+    let mut x: Vec<f64> = (0..nc)
+        .map(|c| match kind {
+            AttributeKind::Nearest => value(heaviest, c),
+            _ => derived.weights.iter().map(|&(v, w)| w * value(v, c)).sum(),
+        })
+        .collect();
+    if kind == AttributeKind::Direction {
+        let n = x.iter().take(3).map(|a| a * a).sum::<f64>().sqrt();
+        if n > 0.0 {
+            x.iter_mut().take(3).for_each(|a| *a /= n);
+        }
+        if nc == 4 {
+            x[3] = value(heaviest, 3);
+        }
+    }
+    for (c, v) in x.into_iter().enumerate() {
+        let o = &mut out[c * cs..(c + 1) * cs];
+        match ct {
+            5120 => o[0] = (v.round() as i8) as u8,
+            5121 => o[0] = v.round() as u8,
+            5122 => o.copy_from_slice(&(v.round() as i16).to_le_bytes()),
+            5123 => o.copy_from_slice(&(v.round() as u16).to_le_bytes()),
+            5125 => o.copy_from_slice(&(v.round() as u32).to_le_bytes()),
+            _ => o.copy_from_slice(&(v as f32).to_le_bytes()),
         }
     }
 }

@@ -211,8 +211,26 @@ impl<'a> Locator<'a> {
     /// The interpolated value at plane point `q`. A point outside every triangle (rounding at
     /// the polygon's edge) takes the value of the nearest point of the nearest candidate.
     pub fn value(&self, q: DVec2) -> DVec3 {
+        self.value_near(q, &mut None)
+    }
+
+    /// [`Locator::value`], trying the triangle `hint` first and leaving in it the triangle that
+    /// held `q`: neighbouring queries (the sub-samples of a texel, then of the next) mostly fall
+    /// in the same triangle, and skip the search.
+    pub fn value_near(&self, q: DVec2, hint: &mut Option<u32>) -> DVec3 {
         if self.mesh.triangles.is_empty() {
             return DVec3::ZERO;
+        }
+        if let Some(k) = *hint
+            && let Some(t) = self.mesh.triangles.get(k as usize)
+        {
+            let l = self.barycentric(k, q);
+            if l.iter().all(|&v| v >= 0.0 && v.is_finite()) {
+                let s = l[0] + l[1] + l[2];
+                return (0..3)
+                    .map(|i| self.values[t[i] as usize] * (l[i] / s))
+                    .sum();
+            }
         }
         let (x, y) = Self::cell_of(self.min, self.cell, self.dims, q);
         // (distance outside in barycentric units, triangle, barycentrics) of the best candidate.
@@ -249,6 +267,7 @@ impl<'a> Locator<'a> {
         let Some((_, k, l)) = best else {
             return DVec3::ZERO;
         };
+        *hint = Some(k);
         // Clamp to the triangle and renormalise.
         let l = l.map(|x| x.max(0.0));
         let s = l[0] + l[1] + l[2];
@@ -267,7 +286,10 @@ impl<'a> Locator<'a> {
 /// A sub-sample buried under other geometry ([`Visibility::buried`]: the floor under a box) is
 /// not covered: a texel's value is the mean of its visible sub-samples, and a texel with none
 /// is filled by the dilation from its visible neighbours, so that bilinear filtering along a
-/// contact line reads the light beside the box, not the dark under it.
+/// contact line reads the light beside the box, not the dark under it. The test runs at the
+/// texel corners (about one ray query per texel); only a texel whose corners disagree (a
+/// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
+/// that touches none of its corners is missed (its sub-samples count as visible).
 pub fn rasterize(
     scene: &Scene,
     vis: &Visibility,
@@ -354,9 +376,33 @@ pub fn rasterize(
                 let ya = (lo.y.floor().max(0.0) as usize).max(y_lo);
                 let yb = (hi.y.floor().max(0.0) as usize).min(y_hi - 1);
                 let poly = &scene.polygons[meshes[t.mesh].polygon];
+                let world = |q: DVec2| {
+                    let [l0, l1, l2] = barycentric_2d(&t.uv, q);
+                    t.world[0] * l0 + t.world[1] * l1 + t.world[2] * l2
+                };
+                // Buried or not at the texel corners (on the triangle's plane, also beyond
+                // its edges), found once per corner: a texel whose four corners agree takes
+                // their answer for all its sub-samples; one whose corners differ (a contact
+                // line crosses it) tests every sub-sample.
+                let mut hint = None;
+                let cw = x1 - x0 + 2;
+                let mut corner = vec![0u8; cw * (yb + 2 - ya)];
+                let mut corner_buried = |cx: usize, cy: usize| {
+                    let c = &mut corner[(cy - ya) * cw + cx - x0];
+                    if *c == 0 {
+                        let q = DVec2::new(cx as f64, cy as f64);
+                        *c = if vis.buried(world(q), poly.frame.n) {
+                            2
+                        } else {
+                            1
+                        };
+                    }
+                    *c == 2
+                };
                 for y in ya..=yb {
                     for x in x0..=x1 {
                         let idx = (y - y_lo) * w + x;
+                        let mut corners: Option<[bool; 4]> = None;
                         for s in 0..n * n {
                             let bit = 1u64 << (s % 64);
                             if claimed[idx] & bit != 0 {
@@ -372,10 +418,20 @@ pub fn rasterize(
                             }
                             claimed[idx] |= bit;
                             let p = t.world[0] * l0 + t.world[1] * l1 + t.world[2] * l2;
-                            if vis.buried(p, poly.frame.n) {
+                            let c = *corners.get_or_insert_with(|| {
+                                [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)]
+                                    .map(|(cx, cy)| corner_buried(cx, cy))
+                            });
+                            let buried = if c.iter().all(|&b| b == c[0]) {
+                                c[0]
+                            } else {
+                                vis.buried(p, poly.frame.n)
+                            };
+                            if buried {
                                 continue;
                             }
-                            sum[idx] += locators[t.mesh].value(poly.frame.plane_from_world(p));
+                            let q = poly.frame.plane_from_world(p);
+                            sum[idx] += locators[t.mesh].value_near(q, &mut hint);
                             count[idx] += 1;
                         }
                     }
