@@ -655,3 +655,23 @@ fn cut_triangles_keep_the_two_sides_twins() {
         );
     }
 }
+
+/// The floor under a box standing on it is buried (the lightmap fills it from its visible
+/// neighbours) when the box is one-sided, not when it is double-sided: its inside faces are
+/// then real surfaces, facing the floor (see the README's "Double-sided surfaces").
+#[test]
+fn under_a_double_sided_box_the_floor_is_not_buried() {
+    let g = crate::parse(&fixtures::box_on_floor(), "box.glb");
+    let mut root = g.json.clone();
+    for m in root["materials"].as_array_mut().unwrap() {
+        m["doubleSided"] = Value::Bool(true);
+    }
+    let double = penumbra::write::to_glb(&root, g.buffers[0].clone());
+    let under = DVec3::new(0.1, 0.0, 0.2);
+    for (bytes, buried) in [(fixtures::box_on_floor(), true), (double, false)] {
+        let scene = load::scene(&crate::parse(&bytes, "box.glb")).unwrap();
+        let vis = Visibility::new(&scene);
+        assert_eq!(vis.buried(under, DVec3::Y), buried);
+        assert!(!vis.buried(DVec3::new(1.5, 0.0, 0.2), DVec3::Y));
+    }
+}
