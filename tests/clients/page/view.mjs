@@ -113,6 +113,8 @@ window.renderGlb = async function renderGlb({ url, width, height, exposure, ligh
     materials: materials.length,
     lightmapped: materials.filter((m) => m.lightMap).length,
     lightmapChannels: [...channels],
+    // Distinct lightmap images three.js decoded (one per atlas page the scene uses).
+    lightmapImages: new Set(materials.filter((m) => m.lightMap?.image?.width > 0).map((m) => m.lightMap.image)).size,
     lightsRemoved: lights.length,
   };
   scene.traverse((obj) => { if (obj.isMesh) result.meshes++; });
