@@ -675,3 +675,57 @@ fn under_a_double_sided_box_the_floor_is_not_buried() {
         assert!(!vis.buried(DVec3::new(1.5, 0.0, 0.2), DVec3::Y));
     }
 }
+
+/// A double-sided emitter emits from both sides: halfway between a floor and a ceiling, it
+/// lights both alike (the scene is symmetric), where a one-sided one lights the floor only.
+#[test]
+fn a_double_sided_emitter_emits_from_both_sides() {
+    use penumbra::fixtures::{GlbBuilder, Material, horizontal_rect};
+    let scene = |double_sided: bool| {
+        let mut b = GlbBuilder::new();
+        let grey = b.add_material(Material::diffuse("grey", [0.5; 3]));
+        let mut lamp = Material::diffuse("lamp", [0.0; 3]).emitting([5.0; 3]);
+        if double_sided {
+            lamp = lamp.double_sided();
+        }
+        let lamp = b.add_material(lamp);
+        b.add_mesh_node(
+            "floor",
+            &horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
+            grey,
+        );
+        b.add_mesh_node(
+            "ceiling",
+            &horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 2.0, false),
+            grey,
+        );
+        b.add_mesh_node(
+            "lamp",
+            &horizontal_rect([-0.5, 0.5], [-0.5, 0.5], 1.0, false),
+            lamp,
+        );
+        b.to_glb()
+    };
+    let mean = |b: &Bake, y: f64| {
+        let (mut sum, mut n) = (0.0, 0.0);
+        for (mi, m) in b.meshes.iter().enumerate() {
+            if (b.scene.polygons[m.polygon].frame.origin.y - y).abs() < 1e-9 {
+                for h in &b.solution.irradiance[mi] {
+                    sum += h.x;
+                    n += 1.0;
+                }
+            }
+        }
+        sum / n
+    };
+    let two = crate::bake(&scene(true), &options(DoubleSided::Separate));
+    let (floor, ceiling) = (mean(&two, 0.0), mean(&two, 2.0));
+    eprintln!("double-sided lamp: floor {floor:.4}, ceiling {ceiling:.4} W/m²");
+    // Means over the vertices of two different meshes (measured 2.4% apart), not areas.
+    assert!(floor > 0.1 && (ceiling / floor - 1.0).abs() < 0.05);
+    assert_eq!(two.scene.emitters().count(), 2);
+    let one = crate::bake(&scene(false), &options(DoubleSided::Separate));
+    let (floor1, ceiling1) = (mean(&one, 0.0), mean(&one, 2.0));
+    eprintln!("one-sided lamp: floor {floor1:.4}, ceiling {ceiling1:.4} W/m²");
+    assert!(ceiling1 < 0.5 * ceiling && floor1 < floor);
+}
