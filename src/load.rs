@@ -6,7 +6,9 @@
 //! A primitive whose material is `doubleSided` becomes two instances: its front, and right
 //! after it its back ([`Side::Back`]: the same world positions, every triangle's winding
 //! reversed). Both sides then receive, reflect and (if the material emits) emit light as two
-//! ordinary one-sided surfaces back to back; the writer gives the back its own primitive.
+//! ordinary one-sided surfaces back to back; the writer gives the back its own primitive. A
+//! closed primitive ([`Instance::is_closed`]: a box with all its faces) gets no back: its back
+//! is inside the volume, which many exporters mark double-sided by default.
 
 use crate::error::{Error, Result};
 use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side};
@@ -672,8 +674,10 @@ fn add_primitive(
         derived: Vec::new(),
     };
     // A double-sided material: the back is a second instance right after the front, its
-    // winding reversed, so both sides receive, reflect (and emit) light.
-    let back = prim.material().double_sided().then(|| front.back_side());
+    // winding reversed, so both sides receive, reflect (and emit) light. Not for a closed
+    // surface: its back is inside the volume (and a box's bottom would lie face up on the
+    // floor it stands on, a duplicate of the floor).
+    let back = (prim.material().double_sided() && !front.is_closed()).then(|| front.back_side());
     scene.add_instance(front, material);
     if let Some(back) = back {
         scene.add_instance(back, material);

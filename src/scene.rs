@@ -211,6 +211,39 @@ pub struct Derived {
 impl Instance {
     /// The back side of this (front) instance: the same vertices, every triangle's second and
     /// third corner swapped.
+    /// True when the triangles, welded by exact position, close a volume: every edge is used
+    /// by exactly two triangles, once in each direction (a consistently wound closed
+    /// surface, such as a box exported with all six faces). The back of such a surface lies
+    /// inside the volume, where no ray from outside reaches: a double-sided material on it
+    /// gives it no back side. Degenerate triangles (two corners at one position) are ignored.
+    pub fn is_closed(&self) -> bool {
+        let mut weld: BTreeMap<[u64; 3], u32> = BTreeMap::new();
+        let id: Vec<u32> = self
+            .positions_world
+            .iter()
+            .map(|p| {
+                let n = weld.len() as u32;
+                *weld
+                    .entry([p.x.to_bits(), p.y.to_bits(), p.z.to_bits()])
+                    .or_insert(n)
+            })
+            .collect();
+        let mut directed: BTreeMap<(u32, u32), u32> = BTreeMap::new();
+        for t in self.indices.chunks_exact(3) {
+            let v = [id[t[0] as usize], id[t[1] as usize], id[t[2] as usize]];
+            if v[0] == v[1] || v[1] == v[2] || v[2] == v[0] {
+                continue;
+            }
+            for e in 0..3 {
+                *directed.entry((v[e], v[(e + 1) % 3])).or_default() += 1;
+            }
+        }
+        !directed.is_empty()
+            && directed
+                .iter()
+                .all(|(&(a, b), &n)| n == 1 && directed.get(&(b, a)) == Some(&1))
+    }
+
     pub fn back_side(&self) -> Instance {
         let mut indices = self.indices.clone();
         for t in indices.chunks_exact_mut(3) {
@@ -508,6 +541,54 @@ fn tri_vertices_of<'a>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A unit cube's six faces (two triangles each, outward), as one instance; `drop` faces
+    /// left out from the end.
+    fn cube(drop: usize) -> Instance {
+        let c = |i: usize| DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64);
+        // Faces as corner indices, counter-clockwise seen from outside.
+        let faces = [
+            [0, 2, 3, 1], // z = 0
+            [4, 5, 7, 6], // z = 1
+            [0, 1, 5, 4], // y = 0
+            [2, 6, 7, 3], // y = 1
+            [0, 4, 6, 2], // x = 0
+            [1, 3, 7, 5], // x = 1
+        ];
+        let mut positions_world = Vec::new();
+        let mut indices = Vec::new();
+        for f in &faces[..6 - drop] {
+            // Every face its own four vertices (split normals), as exporters write boxes.
+            let base = positions_world.len() as u32;
+            positions_world.extend(f.iter().map(|&i| c(i)));
+            indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
+        }
+        let mut inst = quad_instance([DVec3::ZERO, DVec3::X, DVec3::ONE, DVec3::Y]);
+        inst.positions_world = positions_world;
+        inst.indices = indices;
+        inst
+    }
+
+    #[test]
+    fn a_box_with_all_faces_is_closed_and_an_open_one_is_not() {
+        let closed = cube(0);
+        assert!(closed.is_closed());
+        assert!(!cube(1).is_closed(), "no bottom");
+        assert!(
+            closed.back_side().is_closed(),
+            "turned inside out, still closed"
+        );
+        // The same faces twice (front and back in one primitive) use each edge four times.
+        let mut both = closed.clone();
+        let back = closed.back_side();
+        let n = both.positions_world.len() as u32;
+        both.positions_world
+            .extend(back.positions_world.iter().copied());
+        both.indices.extend(back.indices.iter().map(|i| i + n));
+        assert!(!both.is_closed());
+        // One quad is open.
+        assert!(!quad_instance([DVec3::ZERO, DVec3::X, DVec3::ONE, DVec3::Y]).is_closed());
+    }
 
     fn quad_instance(corners: [DVec3; 4]) -> Instance {
         Instance {

@@ -177,7 +177,9 @@ fn bisect(inst: &mut Instance, max_edge: f64) -> usize {
             }
         }
         // Split every triangle by its marked edges, the longest first.
-        let plan: Vec<Vec<([u32; 3], usize, [bool; 3])>> = pieces
+        // Per piece: its corners, its longest edge, which of its edges are marked.
+        type Plan = ([u32; 3], usize, [bool; 3]);
+        let plan: Vec<Vec<Plan>> = pieces
             .iter()
             .map(|ts| {
                 ts.iter()

@@ -676,6 +676,44 @@ fn under_a_double_sided_box_the_floor_is_not_buried() {
     }
 }
 
+/// A closed double-sided box (all six faces) gets no back side: its back would be inside, and
+/// its bottom turned around would duplicate the floor under it (the bounces then diverge). So
+/// the floor under it is buried as under a one-sided box, and the bake converges.
+#[test]
+fn a_closed_double_sided_box_gets_no_back_side() {
+    use penumbra::fixtures::{GlbBuilder, Material, block, horizontal_rect};
+    let mut b = GlbBuilder::new();
+    let grey = b.add_material(Material::diffuse("grey", [0.8; 3]).double_sided());
+    let light = Material::diffuse("light", [0.0; 3]).emitting([10.0; 3]);
+    let light = b.add_material(light);
+    b.add_mesh_node(
+        "floor",
+        &horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
+        grey,
+    );
+    let top = [
+        [-0.5, 1.0, -0.5],
+        [-0.5, 1.0, 0.5],
+        [0.5, 1.0, 0.5],
+        [0.5, 1.0, -0.5],
+    ];
+    b.add_mesh_node("box", &block(top, 0.0, true), grey);
+    let panel = horizontal_rect([-0.5, 0.5], [-0.5, 0.5], 3.0, false);
+    b.add_mesh_node("light", &panel, light);
+    let bytes = b.to_glb();
+    let scene = load::scene(&crate::parse(&bytes, "closed.glb")).unwrap();
+    let backs: Vec<usize> = (0..scene.instances.len())
+        .filter(|&i| scene.instances[i].side == penumbra::scene::Side::Back)
+        .collect();
+    // The floor (open) has its back; the box (closed) has none.
+    assert_eq!(backs.len(), 1, "{backs:?}");
+    assert!(!scene.instances[backs[0]].is_closed());
+    let vis = Visibility::new(&scene);
+    assert!(vis.buried(DVec3::new(0.1, 0.0, 0.2), DVec3::Y));
+    let (baked, _) = bake_input(&bytes, DoubleSided::Separate, "closed");
+    assert!(baked.stats.converged);
+}
+
 /// A double-sided emitter emits from both sides: halfway between a floor and a ceiling, it
 /// lights both alike (the scene is symmetric), where a one-sided one lights the floor only.
 #[test]
