@@ -156,20 +156,19 @@ pub fn triangulate_with(
             .cmp(&(s.kind == Kind::D0))
             .then(t.significance.total_cmp(&s.significance))
     });
-    let mut obstacles: Vec<[DVec2; 2]> = outline.clone();
+    let mut obstacles = Obstacles::new(lo, hi, clearance, order.len() + outline.len());
+    for &[p, q] in &outline {
+        obstacles.push(p, q);
+    }
     let mut crowded = 0;
     for s in order {
-        let along = s.kind != Kind::D0
-            && obstacles.iter().any(|[p, q]| {
-                dist_to_segment(s.a, *p, *q) < clearance && dist_to_segment(s.b, *p, *q) < clearance
-            });
-        if along {
+        if s.kind != Kind::D0 && obstacles.along(s.a, s.b) {
             crowded += 1;
             continue;
         }
         if let Some((a, b)) = keep_clear(s.a, s.b, &outline, gap) {
             input.push((a, b, Some((s.kind, s.event))));
-            obstacles.push([a, b]);
+            obstacles.push(a, b);
         }
     }
     let arr = arrangement::build(&input, tol);
@@ -382,6 +381,65 @@ fn keep_clear(a: DVec2, b: DVec2, outline: &[[DVec2; 2]], gap: f64) -> Option<(D
         return None;
     }
     Some((a + u * ta, b - u * tb))
+}
+
+/// The segments already placed in a polygon's plane, bucketed in a uniform grid so that
+/// [`Obstacles::along`] looks only at those near a point (the polygon's wedges would otherwise
+/// each be tested against every one placed before: quadratic in the wedges).
+struct Obstacles {
+    segments: Vec<[DVec2; 2]>,
+    lo: DVec2,
+    cell: f64,
+    dims: usize,
+    buckets: Vec<Vec<u32>>,
+    clearance: f64,
+}
+
+impl Obstacles {
+    /// A grid over `lo..hi` of about `expected` cells, none smaller than the clearance.
+    fn new(lo: DVec2, hi: DVec2, clearance: f64, expected: usize) -> Obstacles {
+        let size = (hi - lo).max_element().max(1e-300);
+        let dims = ((expected as f64).sqrt().ceil() as usize).clamp(1, 256);
+        let cell = (size / dims as f64).max(clearance).max(1e-300);
+        let dims = ((size / cell).ceil() as usize).clamp(1, 256);
+        Obstacles {
+            segments: Vec::new(),
+            lo,
+            cell,
+            dims,
+            buckets: vec![Vec::new(); dims * dims],
+            clearance,
+        }
+    }
+
+    fn cell_of(&self, p: DVec2) -> (usize, usize) {
+        let c = ((p - self.lo) / self.cell).floor();
+        let clamp = |x: f64| (x.max(0.0) as usize).min(self.dims - 1);
+        (clamp(c.x), clamp(c.y))
+    }
+
+    /// Adds segment `p q` to every cell its box, grown by the clearance, touches.
+    fn push(&mut self, p: DVec2, q: DVec2) {
+        let k = self.segments.len() as u32;
+        self.segments.push([p, q]);
+        let (x0, y0) = self.cell_of(p.min(q) - DVec2::splat(self.clearance));
+        let (x1, y1) = self.cell_of(p.max(q) + DVec2::splat(self.clearance));
+        for y in y0..=y1 {
+            for x in x0..=x1 {
+                self.buckets[y * self.dims + x].push(k);
+            }
+        }
+    }
+
+    /// True when both `a` and `b` lie within the clearance of one placed segment: the new
+    /// segment would run along it.
+    fn along(&self, a: DVec2, b: DVec2) -> bool {
+        let (x, y) = self.cell_of(a);
+        self.buckets[y * self.dims + x].iter().any(|&k| {
+            let [p, q] = self.segments[k as usize];
+            dist_to_segment(a, p, q) < self.clearance && dist_to_segment(b, p, q) < self.clearance
+        })
+    }
 }
 
 fn dist_to_segment(x: DVec2, p: DVec2, q: DVec2) -> f64 {
