@@ -226,10 +226,7 @@ impl<'a> Locator<'a> {
         {
             let l = self.barycentric(k, q);
             if l.iter().all(|&v| v >= 0.0 && v.is_finite()) {
-                let s = l[0] + l[1] + l[2];
-                return (0..3)
-                    .map(|i| self.values[t[i] as usize] * (l[i] / s))
-                    .sum();
+                return self.interpolate(*t, l);
             }
         }
         let (x, y) = Self::cell_of(self.min, self.cell, self.dims, q);
@@ -268,10 +265,13 @@ impl<'a> Locator<'a> {
             return DVec3::ZERO;
         };
         *hint = Some(k);
-        // Clamp to the triangle and renormalise.
-        let l = l.map(|x| x.max(0.0));
+        // Clamp to the triangle.
+        self.interpolate(self.mesh.triangles[k as usize], l.map(|x| x.max(0.0)))
+    }
+
+    /// The values at triangle `t`'s corners weighted by `l` (non-negative), renormalised.
+    fn interpolate(&self, t: [u32; 3], l: [f64; 3]) -> DVec3 {
         let s = l[0] + l[1] + l[2];
-        let t = self.mesh.triangles[k as usize];
         (0..3)
             .map(|i| self.values[t[i] as usize] * (l[i] / s))
             .sum()

@@ -4,7 +4,7 @@
 //! area light, and three double-sided panels (a shelf whose back faces the light, a wall whose
 //! back sees only the floor, a ramp tilted with its back to the light).
 
-use crate::{no_progress, scratch};
+use crate::{no_progress, parallel_rectangles, scratch};
 use glam::DVec3;
 use penumbra::fixtures;
 use penumbra::load::{self, Gltf};
@@ -73,21 +73,6 @@ fn panel_sides() -> Vec<Panel> {
         ("wall", wall, DVec3::NEG_X),
         ("ramp", ramp, DVec3::new(-1.0, -1.0, 0.0).normalize()),
     ]
-}
-
-/// Form factor between two equal, coaxial, parallel `a` x `b` rectangles `c` apart (the
-/// classic closed form; Howell's catalogue, configuration C-11).
-fn parallel_rectangles(a: f64, b: f64, c: f64) -> f64 {
-    let (x, y) = (a / c, b / c);
-    let (x1, y1) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
-    2.0 / (PI * x * y)
-        * ((((1.0 + x * x) * (1.0 + y * y)) / (1.0 + x * x + y * y))
-            .sqrt()
-            .ln()
-            + x * y1 * (x / y1).atan()
-            + y * x1 * (y / x1).atan()
-            - x * x.atan()
-            - y * y.atan())
 }
 
 /// Per side of each panel, over the texels that lie on that side only: (name, bake mean,

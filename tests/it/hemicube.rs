@@ -12,24 +12,11 @@
 //! `cargo test --release --test it hemicube -- --nocapture` prints the tables that the README
 //! quotes.
 
+use crate::parallel_rectangles;
 use glam::DVec3;
 use penumbra::geometry::point_polygon_form_factor;
 use penumbra::solve::hemicube::Hemicube;
 use std::f64::consts::PI;
-
-/// Howell C-11: parallel, directly opposed `a x b` rectangles at distance `c`.
-fn parallel_rectangles(a: f64, b: f64, c: f64) -> f64 {
-    let (x, y) = (a / c, b / c);
-    let (x1, y1) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
-    2.0 / (PI * x * y)
-        * ((((1.0 + x * x) * (1.0 + y * y)) / (1.0 + x * x + y * y))
-            .sqrt()
-            .ln()
-            + x * y1 * (x / y1).atan()
-            + y * x1 * (y / x1).atan()
-            - x * x.atan()
-            - y * y.atan())
-}
 
 /// Howell C-14: from a rectangle of width `w` to a perpendicular one of height `h` sharing its
 /// edge of length 1.

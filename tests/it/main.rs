@@ -86,3 +86,19 @@ impl Rng {
         (self.next_u64() % n.max(1) as u64) as usize
     }
 }
+
+/// Form factor between two equal, coaxial, parallel `a` x `b` rectangles `c` apart (Howell's
+/// catalogue, configuration C-11).
+pub fn parallel_rectangles(a: f64, b: f64, c: f64) -> f64 {
+    use std::f64::consts::PI;
+    let (x, y) = (a / c, b / c);
+    let (x1, y1) = ((1.0 + x * x).sqrt(), (1.0 + y * y).sqrt());
+    2.0 / (PI * x * y)
+        * ((((1.0 + x * x) * (1.0 + y * y)) / (1.0 + x * x + y * y))
+            .sqrt()
+            .ln()
+            + x * y1 * (x / y1).atan()
+            + y * x1 * (y / x1).atan()
+            - x * x.atan()
+            - y * y.atan())
+}
