@@ -15,7 +15,8 @@
 /// Reading glTF and building the scene.
 pub mod load;
 
-/// Planar receiver polygons, materials, emitters, lights.
+/// Planar receiver polygons, materials, emitters, lights; the back sides of double-sided
+/// surfaces; triangles too long for one lightmap page cut (`scene::cut`).
 pub mod scene;
 
 /// BVH ray queries.
