@@ -4,10 +4,10 @@
 //! gives an [`Error`] that names the file and the item, never a panic.
 //!
 //! A primitive whose material is `doubleSided` becomes two instances: its front, and right
-//! after it its back ([`Side::Back`]: the same world positions, every triangle's winding
+//! after it its back ([`crate::scene::Side::Back`]: the same world positions, every triangle's winding
 //! reversed). Both sides then receive, reflect and (if the material emits) emit light as two
 //! ordinary one-sided surfaces back to back; the writer gives the back its own primitive. A
-//! closed primitive ([`Instance::is_closed`]: a box with all its faces) gets no back: its back
+//! closed primitive ([`crate::scene::Instance::is_closed`]: a box with all its faces) gets no back: its back
 //! is inside the volume, which many exporters mark double-sided by default.
 
 use crate::error::{Error, Result};
@@ -303,7 +303,7 @@ impl Gltf {
         Ok((out, elem))
     }
 
-    /// An accessor of `dims` components as f64, with normalized integers mapped to [0,1]/[-1,1].
+    /// An accessor of `dims` components as f64, with normalized integers mapped to 0..1 / -1..1.
     pub fn read_floats(&self, accessor: &gltf::Accessor, dims: Dimensions) -> Result<Vec<f64>> {
         let item = format!("accessor {}", accessor.index());
         if accessor.dimensions() != dims {
@@ -836,7 +836,7 @@ impl TextureMeans {
     }
 }
 
-/// The sRGB electro-optical transfer function (IEC 61966-2-1), value in [0,1].
+/// The sRGB electro-optical transfer function (IEC 61966-2-1), value in 0..1.
 pub fn srgb_to_linear(c: f64) -> f64 {
     if c <= 0.04045 {
         c / 12.92

@@ -14,7 +14,7 @@ pub mod cut;
 pub struct Material {
     /// Name from the glTF file (for messages).
     pub name: String,
-    /// Diffuse reflectance `rho` in [0,1] per channel: baseColorFactor x mean of baseColorTexture.
+    /// Diffuse reflectance `rho` in 0..1 per channel: baseColorFactor x mean of baseColorTexture.
     pub rho: DVec3,
     /// Emitted radiance `L_e` in W/(m² sr) per channel (front face only); exitance is `pi L_e`.
     pub radiance: DVec3,
