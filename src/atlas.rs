@@ -459,11 +459,17 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
     let mut fitting: Option<f32> = None;
     let mut failing: Option<f32> = None;
     let mut refinements = 0;
+    // The output of the densest packing that fit, kept so that it need not be packed again.
+    let mut best_output: Option<Atlas> = None;
     loop {
         let tried = info.texels_per_unit;
         let shrink = {
             let meshes = output_meshes(&mut xatlas, added.len())?;
-            fixed_page_shrink(&meshes, &info, max_chart_size)
+            let shrink = fixed_page_shrink(&meshes, &info, max_chart_size);
+            if shrink.is_none() && fitting.is_none_or(|f| tried > f) {
+                best_output = Some(collect_output(inputs, &added, &meshes, &info, false)?);
+            }
+            shrink
         };
         let next = match shrink {
             None => {
@@ -488,14 +494,13 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
                 }
             }
         };
-        let next = match (next, fitting) {
-            (Some(next), _) if attempts < MAX_PACK_ATTEMPTS => next,
-            // Done: re-pack at the best density that fit, unless that was the last packing.
-            (_, Some(best)) if best == tried => {
-                let meshes = output_meshes(&mut xatlas, added.len())?;
-                return collect_output(inputs, &added, &meshes, &info, false);
+        let next = match (next, best_output.take()) {
+            (Some(next), best) if attempts < MAX_PACK_ATTEMPTS => {
+                best_output = best;
+                next
             }
-            (_, Some(best)) => best,
+            // Done: the densest packing that fit.
+            (_, Some(best)) => return Ok(best),
             (_, None) => {
                 return Err(AtlasError::DoesNotFit {
                     resolution,
