@@ -1063,21 +1063,7 @@ mod tests {
             rho: DVec3::splat(0.5),
             radiance: DVec3::ZERO,
         });
-        scene.add_instance(
-            Instance {
-                node: 0,
-                mesh: 0,
-                primitive: 0,
-                gltf_material: None,
-                positions_world: corners,
-                indices,
-                mirrored: false,
-                side: crate::scene::Side::Front,
-                first_triangle: 0,
-                derived: Vec::new(),
-            },
-            0,
-        );
+        scene.add_instance(Instance::new(corners, indices), 0);
         scene
     }
 

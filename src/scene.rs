@@ -193,13 +193,6 @@ pub struct Instance {
     pub derived: Vec<Derived>,
 }
 
-impl Instance {
-    /// Number of the primitive's own glTF vertices (the first ones of `positions_world`).
-    pub fn source_vertices(&self) -> usize {
-        self.positions_world.len() - self.derived.len()
-    }
-}
-
 /// A vertex that is not in the glTF primitive: a weighted mean of up to three of its vertices
 /// (the corners of the glTF triangle it lies in), with weights summing to 1.
 #[derive(Clone, Debug, PartialEq)]
@@ -209,8 +202,28 @@ pub struct Derived {
 }
 
 impl Instance {
-    /// The back side of this (front) instance: the same vertices, every triangle's second and
-    /// third corner swapped.
+    /// The front side of node 0's mesh 0 primitive 0, nothing mirrored or cut: a triangle list
+    /// over world positions, for scenes built in code.
+    pub fn new(positions_world: Vec<DVec3>, indices: Vec<u32>) -> Instance {
+        Instance {
+            node: 0,
+            mesh: 0,
+            primitive: 0,
+            gltf_material: None,
+            positions_world,
+            indices,
+            mirrored: false,
+            side: Side::Front,
+            first_triangle: 0,
+            derived: Vec::new(),
+        }
+    }
+
+    /// Number of the primitive's own glTF vertices (the first ones of `positions_world`).
+    pub fn source_vertices(&self) -> usize {
+        self.positions_world.len() - self.derived.len()
+    }
+
     /// True when the triangles, welded by exact position, close a volume: every edge is used
     /// by exactly two triangles, once in each direction (a consistently wound closed
     /// surface, such as a box exported with all six faces). The back of such a surface lies
@@ -244,6 +257,8 @@ impl Instance {
                 .all(|(&(a, b), &n)| n == 1 && directed.get(&(b, a)) == Some(&1))
     }
 
+    /// The back side of this (front) instance: the same vertices, every triangle's second and
+    /// third corner swapped.
     pub fn back_side(&self) -> Instance {
         let mut indices = self.indices.clone();
         for t in indices.chunks_exact_mut(3) {
@@ -591,18 +606,7 @@ mod tests {
     }
 
     fn quad_instance(corners: [DVec3; 4]) -> Instance {
-        Instance {
-            node: 0,
-            mesh: 0,
-            primitive: 0,
-            gltf_material: None,
-            positions_world: corners.to_vec(),
-            indices: vec![0, 1, 2, 0, 2, 3],
-            mirrored: false,
-            side: Side::Front,
-            first_triangle: 0,
-            derived: Vec::new(),
-        }
+        Instance::new(corners.to_vec(), vec![0, 1, 2, 0, 2, 3])
     }
 
     fn grey() -> Material {

@@ -566,21 +566,7 @@ mod tests {
         for _ in 0..n {
             let c = rng.vec(-5.0, 5.0) + offset;
             let p = vec![c, c + rng.vec(-1.0, 1.0), c + rng.vec(-1.0, 1.0)];
-            scene.add_instance(
-                Instance {
-                    node: 0,
-                    mesh: 0,
-                    primitive: 0,
-                    gltf_material: None,
-                    positions_world: p,
-                    indices: vec![0, 1, 2],
-                    mirrored: false,
-                    side: crate::scene::Side::Front,
-                    first_triangle: 0,
-                    derived: Vec::new(),
-                },
-                0,
-            );
+            scene.add_instance(Instance::new(p, vec![0, 1, 2]), 0);
         }
         scene
     }
@@ -711,23 +697,15 @@ mod tests {
             rho: DVec3::splat(0.5),
             radiance: DVec3::ZERO,
         });
-        let front = Instance {
-            node: 0,
-            mesh: 0,
-            primitive: 0,
-            gltf_material: None,
-            positions_world: vec![
+        let front = Instance::new(
+            vec![
                 DVec3::new(-1.0, 0.3, -1.0),
                 DVec3::new(-1.0, 0.3, 1.0),
                 DVec3::new(1.0, 0.3, 1.0),
                 DVec3::new(1.0, 0.3, -1.0),
             ],
-            indices: vec![0, 1, 2, 0, 2, 3],
-            mirrored: false,
-            side: crate::scene::Side::Front,
-            first_triangle: 0,
-            derived: Vec::new(),
-        };
+            vec![0, 1, 2, 0, 2, 3],
+        );
         let back = front.back_side();
         let (a, b) = if back_first {
             (back, front)

@@ -517,13 +517,13 @@ fn rewrite_primitive(
         let ct = original["componentType"].as_u64().unwrap_or(5126);
         let ty = original["type"].as_str().unwrap_or("SCALAR").to_string();
         let source = inst.source_vertices();
+        let kind = AttributeKind::of(name, ct, original["normalized"].as_bool());
         let mut data = vec![0u8; stride * am.xref.len()];
         for (k, &x) in am.xref.iter().enumerate() {
             let out = &mut data[k * stride..k * stride + elem];
             match (x as usize).checked_sub(source) {
                 None => out.copy_from_slice(&bytes[x as usize * elem..(x as usize + 1) * elem]),
                 Some(d) => {
-                    let kind = AttributeKind::of(name, ct, original["normalized"].as_bool());
                     interpolate(
                         &bytes,
                         elem,

@@ -282,21 +282,7 @@ mod tests {
             DVec3::new(w, 0.0, 0.0),
             DVec3::new(w, 0.0, d),
         ];
-        s.add_instance(
-            Instance {
-                node: 0,
-                mesh: 0,
-                primitive: 0,
-                gltf_material: None,
-                positions_world: p,
-                indices: vec![0, 1, 2, 0, 4, 3],
-                mirrored: false,
-                side: crate::scene::Side::Front,
-                first_triangle: 0,
-                derived: Vec::new(),
-            },
-            0,
-        );
+        s.add_instance(Instance::new(p, vec![0, 1, 2, 0, 4, 3]), 0);
         s
     }
 
