@@ -44,8 +44,9 @@
 //!   on the same atlas, charts are not recomputed) with a smaller `texels_per_unit` until
 //!   everything fits, starting from an estimate of the fitting density read off the
 //!   overflowing packing ([`fitting_density`]), then closes in on the densest packing that fits.
-//!   Each packing costs (0.3 s for 2 400 charts, 0.9 s for 9 600), and one that overflows costs
-//!   most: every chart that does not fit tries every full page first. With a fixed density it uses the pages (each vertex's `atlasIndex`), refuses
+//!   Every packing counts (0.3 s for 2 400 charts, 0.9 s for 9 600), one that overflows most:
+//!   each chart that does not fit first tries every full page. With a fixed density it uses
+//!   the pages (each vertex's `atlasIndex`), refuses
 //!   a chart that reached the page size ([`AtlasError::ChartTooLarge`]), and checks that every UV
 //!   lies in `[0, width] x [0, height]` and that the three corners of every triangle are on one
 //!   page.

@@ -502,9 +502,9 @@ fn reference_agrees_with_the_bake_under_the_sky() {
     // Measured: 0.0014 away from contacts; at them 0.010 with the atlas at 2.42 texels per
     // unit and 0.041 at 2.47, where the wall charts' bottom texel row covers only its lowest
     // quarter, within 0.05 m of the wall's base: there the reference falls to 0.44-0.53 of
-    // pi L (the ground next to the box is in the box's sky shadow) and the bake, interpolating
-    // its elements' mean indirect light, reads 0.67. The element-mean indirect light at
-    // concave corners is the hierarchical solver's known weakness (see its module doc).
+    // pi L (the ground next to the box is in the box's sky shadow) and the bake reads 0.67:
+    // the light falls steeply into the corner within the wall's lowest element, which linear
+    // interpolation between its vertices cannot follow (see the hierarchical solver's doc).
     assert!(away.rmse < 0.005, "away from contacts: {:?}", away);
     assert!(contact.rmse < 0.05, "contact: {:?}", contact);
     // And the means agree: the bake neither loses nor gains light overall.
