@@ -214,15 +214,30 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         Visibility::new(&scene)
     });
     // The atlas depends on the scene only: it runs before the expensive stages, so a request
-    // that cannot be packed fails in seconds.
-    let atlas = stage(&mut t.atlas, "atlas", progress, || {
-        scene_atlas(gltf, &scene, options)
-    })?;
+    // that cannot be packed fails in seconds. The discontinuity stage's wedges do not depend on
+    // it (only how many pieces the element budget keeps, which `mesh_scene` applies): they are
+    // traced meanwhile, on the core xatlas's single-threaded packing leaves idle.
+    let (atlas, traced) = rayon::join(
+        || {
+            stage(&mut t.atlas, "atlas", progress, || {
+                scene_atlas(gltf, &scene, options)
+            })
+        },
+        || {
+            (options.mesher == Mesher::Discontinuity).then(|| {
+                stage(&mut t.discontinuity, "discontinuity", progress, || {
+                    discontinuity::segments(&scene, &vis, &dm_options(options, usize::MAX))
+                })
+            })
+        },
+    );
+    let atlas = atlas?;
     let (segments, meshes) = mesh_scene(
         &scene,
         &vis,
         options,
         atlas.texels_per_unit as f64,
+        traced,
         &mut stats,
         progress,
     );
@@ -527,13 +542,25 @@ pub fn element_budget(scene: &Scene, requested: Option<usize>, texels_per_unit: 
     }
 }
 
+/// The discontinuity stage's options for at most `max_pieces` wedge pieces.
+fn dm_options(options: &BakeOptions, max_pieces: usize) -> DmOptions {
+    DmOptions {
+        threshold: options.dm_threshold,
+        max_pieces,
+        skip_unseen: true,
+    }
+}
+
 /// The discontinuity and mesh stages: segments per polygon (empty unless discontinuity
-/// meshing) and the receiver meshes. Fills their timings and counters into `stats`.
+/// meshing) and the receiver meshes. `traced`: the discontinuity stage's output with no limit
+/// on the pieces, when it already ran (else it runs here). Fills their timings and counters
+/// into `stats`.
 fn mesh_scene(
     scene: &Scene,
     vis: &Visibility,
     options: &BakeOptions,
     texels_per_unit: f64,
+    traced: Option<(Vec<Vec<Segment>>, discontinuity::DmStats)>,
     stats: &mut Stats,
     progress: &Progress<'_>,
 ) -> (Vec<Vec<Segment>>, Vec<ReceiverMesh>) {
@@ -550,15 +577,15 @@ fn mesh_scene(
             (Vec::new(), meshes)
         }
         Mesher::Discontinuity => {
-            let dm = DmOptions {
-                threshold: options.dm_threshold,
-                max_pieces: budget,
-                skip_unseen: true,
+            let (segments, mut dm_stats) = match traced {
+                Some((mut segments, mut dm_stats)) => {
+                    discontinuity::keep_most_significant(&mut segments, budget, &mut dm_stats);
+                    (segments, dm_stats)
+                }
+                None => stage(&mut t.discontinuity, "discontinuity", progress, || {
+                    discontinuity::segments(scene, vis, &dm_options(options, budget))
+                }),
             };
-            let (segments, mut dm_stats) =
-                stage(&mut t.discontinuity, "discontinuity", progress, || {
-                    discontinuity::segments(scene, vis, &dm)
-                });
             // The budget left after the lines refines where the direct light varies most.
             let direct = crate::solve::Direct::with_options(scene, vis, &options.solve);
             let evaluate = |meshes: &[ReceiverMesh]| {
@@ -625,6 +652,7 @@ pub fn meshes(
         &vis,
         options,
         texels_per_unit,
+        None,
         &mut Stats::default(),
         &|_, _, _| {},
     );

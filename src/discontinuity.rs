@@ -289,18 +289,6 @@ pub fn segments(
     let before = pieces.len();
     pieces.retain(|p| p.significance >= options.threshold);
     stats.dropped_threshold = before - pieces.len();
-    if pieces.len() > options.max_pieces {
-        // Most significant first; ties by event and polygon so the order is total.
-        pieces.sort_by(|x, y| {
-            y.significance
-                .total_cmp(&x.significance)
-                .then(x.event.cmp(&y.event))
-                .then(x.polygon.cmp(&y.polygon))
-        });
-        stats.dropped_budget = pieces.len() - options.max_pieces;
-        pieces.truncate(options.max_pieces);
-        pieces.sort_by(|x, y| x.event.cmp(&y.event).then(x.polygon.cmp(&y.polygon)));
-    }
     stats.kept = pieces.len();
 
     let mut out: Vec<Vec<Segment>> = vec![Vec::new(); scene.polygons.len()];
@@ -330,7 +318,62 @@ pub fn segments(
             significance: p.significance,
         });
     }
+    keep_most_significant(&mut out, options.max_pieces, &mut stats);
     (out, stats)
+}
+
+/// Keeps at most `max_pieces` wedge segments over the scene, the most significant (ties by
+/// event, then polygon); D0 segments all stay. A polygon's kept wedge segments end up in event
+/// order (then most significant first). Updates `kept` and `dropped_budget`. Applying it to
+/// the output of [`segments`] with no limit gives the output of [`segments`] with this limit,
+/// so the bake can trace the wedges before it knows its element budget.
+pub fn keep_most_significant(
+    segments: &mut [Vec<Segment>],
+    max_pieces: usize,
+    stats: &mut DmStats,
+) {
+    let mut wedge: Vec<(f64, u32, usize, usize)> = Vec::new();
+    for (polygon, segs) in segments.iter().enumerate() {
+        for (i, s) in segs.iter().enumerate() {
+            if s.kind != Kind::D0 {
+                wedge.push((s.significance, s.event, polygon, i));
+            }
+        }
+    }
+    if wedge.len() <= max_pieces {
+        return;
+    }
+    // Most significant first; ties by event and polygon, then list position: a total order.
+    wedge.sort_by(|x, y| {
+        y.0.total_cmp(&x.0)
+            .then(x.1.cmp(&y.1))
+            .then(x.2.cmp(&y.2))
+            .then(x.3.cmp(&y.3))
+    });
+    let mut keep: Vec<Vec<bool>> = segments.iter().map(|s| vec![false; s.len()]).collect();
+    for &(_, _, polygon, i) in &wedge[..max_pieces] {
+        keep[polygon][i] = true;
+    }
+    stats.dropped_budget += wedge.len() - max_pieces;
+    stats.kept = stats.kept.saturating_sub(wedge.len() - max_pieces);
+    for (segs, keep) in segments.iter_mut().zip(&keep) {
+        let mut kept: Vec<Segment> = Vec::with_capacity(segs.len());
+        let mut wedges: Vec<Segment> = Vec::new();
+        for (s, &k) in std::mem::take(segs).into_iter().zip(keep) {
+            if s.kind == Kind::D0 {
+                kept.push(s);
+            } else if k {
+                wedges.push(s);
+            }
+        }
+        wedges.sort_by(|x, y| {
+            x.event
+                .cmp(&y.event)
+                .then(y.significance.total_cmp(&x.significance))
+        });
+        kept.extend(wedges);
+        *segs = kept;
+    }
 }
 
 /// A visible wedge piece on a receiver, before ranking.

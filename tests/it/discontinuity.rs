@@ -479,3 +479,50 @@ fn wedges_the_light_cannot_see_are_not_traced() {
         100.0 * (1.0 - b / a)
     );
 }
+
+/// The bake traces the wedges before the atlas gives it its element budget, and applies the
+/// budget afterwards: the pieces a limit keeps afterwards are the pieces, in the same order,
+/// that the same limit keeps during the trace. And the kept ones are the most significant.
+#[test]
+fn a_budget_applied_after_the_trace_keeps_what_it_keeps_during_it() {
+    use penumbra::discontinuity::{self, DmOptions};
+    let glb = penumbra::fixtures::ladder::interior(2);
+    let gltf = parse(&glb, "house.glb");
+    let scene = penumbra::load::scene(&gltf).expect("scene");
+    let vis = penumbra::visibility::Visibility::new(&scene);
+    let run = |max_pieces| {
+        let o = DmOptions {
+            threshold: 0.01,
+            max_pieces,
+            skip_unseen: true,
+        };
+        discontinuity::segments(&scene, &vis, &o)
+    };
+    let (all, all_stats) = run(usize::MAX);
+    assert!(all_stats.kept > 200, "{all_stats:?}");
+    let wedges =
+        |segs: &[Vec<Segment>]| segs.iter().flatten().filter(|s| s.kind != Kind::D0).count();
+    for max in [0, 1, all_stats.kept / 3, all_stats.kept - 1, all_stats.kept] {
+        let (during, during_stats) = run(max);
+        let (mut after, mut after_stats) = (all.clone(), all_stats.clone());
+        discontinuity::keep_most_significant(&mut after, max, &mut after_stats);
+        assert_eq!(wedges(&after), max.min(all_stats.kept));
+        assert_eq!(after, during, "limit {max}");
+        assert_eq!(after_stats.kept, during_stats.kept);
+        assert_eq!(after_stats.dropped_budget, during_stats.dropped_budget);
+        // None dropped is more significant than any kept.
+        let weakest_kept = after
+            .iter()
+            .flatten()
+            .filter(|s| s.kind != Kind::D0)
+            .map(|s| s.significance)
+            .fold(f64::INFINITY, f64::min);
+        let strongest_dropped = all
+            .iter()
+            .flatten()
+            .filter(|s| s.kind != Kind::D0 && !after.iter().flatten().any(|k| k == *s))
+            .map(|s| s.significance)
+            .fold(0.0, f64::max);
+        assert!(strongest_dropped <= weakest_kept, "limit {max}");
+    }
+}
