@@ -833,7 +833,7 @@ fn fitting_density(boxes: &[ChartBox], tried: f32, padding: u32) -> Option<f32> 
         b += e * (w + h);
     }
     let c = boxes.len() as f64 * e * e - full;
-    if !(full > 0.0) || c >= 0.0 || a <= 0.0 {
+    if full.is_nan() || full <= 0.0 || c >= 0.0 || a <= 0.0 {
         return None;
     }
     let s = (-b + (b * b - 4.0 * a * c).sqrt()) / (2.0 * a);
