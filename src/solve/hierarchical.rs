@@ -355,6 +355,15 @@ struct Refined {
     rays: u64,
 }
 
+impl Refined {
+    /// Adds `other` after what `self` holds.
+    fn append(&mut self, other: Refined) {
+        self.links.extend(other.links);
+        self.refinements += other.refinements;
+        self.rays += other.rays;
+    }
+}
+
 /// What the refinement oracle decides for one link.
 #[derive(Clone, Copy, Debug, PartialEq)]
 enum Decision {
@@ -976,9 +985,10 @@ impl Hierarchy {
     /// links, the refinements and the rays.
     pub fn link(&self, vis: &Visibility, b: &Sources, limits: Limits) -> (Vec<Link>, u64, u64) {
         let root = self.root();
-        let (mut links, refinements, rays) = self.refine(vis, b, limits, root, root);
-        links.sort_by_key(|l| (l.receiver, l.source));
-        (links, refinements, rays)
+        let mut out = Refined::default();
+        self.refine_into(vis, b, limits, root, root, &mut out);
+        out.links.sort_by_key(|l| (l.receiver, l.source));
+        (out.links, out.refinements, out.rays)
     }
 
     /// Refines existing `links` with new source radiosities `b` (W/m², scalar): a link the
@@ -991,40 +1001,31 @@ impl Hierarchy {
         b: &Sources,
         limits: Limits,
     ) -> (Vec<Link>, u64, u64) {
-        let parts: Vec<(Vec<Link>, u64, u64)> = links
-            .par_iter()
-            .map(|l| {
-                let (bs, ds) = (b.b[l.source as usize], b.spread[l.source as usize]);
-                if bs * l.power > limits.power
-                    || bs * l.spread > limits.variation
-                    || ds * l.reach > limits.source
-                {
-                    self.refine(vis, b, limits, l.receiver, l.source)
-                } else {
-                    (vec![*l], 0, 0)
+        // In chunks of links, each refined in turn into one output: most links are kept as
+        // they are, and a task or a vector per link would cost more than the test.
+        let parts: Vec<Refined> = links
+            .par_chunks(1024)
+            .map(|chunk| {
+                let mut out = Refined::default();
+                for l in chunk {
+                    let (bs, ds) = (b.b[l.source as usize], b.spread[l.source as usize]);
+                    if bs * l.power > limits.power
+                        || bs * l.spread > limits.variation
+                        || ds * l.reach > limits.source
+                    {
+                        self.refine_into(vis, b, limits, l.receiver, l.source, &mut out);
+                    } else {
+                        out.links.push(*l);
+                    }
                 }
+                out
             })
             .collect();
-        let mut out = (Vec::with_capacity(links.len()), 0u64, 0u64);
-        for (l, n, k) in parts {
-            out.0.extend(l);
-            out.1 += n;
-            out.2 += k;
-        }
-        out.0.sort_by_key(|l| (l.receiver, l.source));
-        out
-    }
-
-    fn refine(
-        &self,
-        vis: &Visibility,
-        b: &Sources,
-        limits: Limits,
-        r: u32,
-        s: u32,
-    ) -> (Vec<Link>, u64, u64) {
         let mut out = Refined::default();
-        self.refine_into(vis, b, limits, r, s, &mut out);
+        for part in parts {
+            out.append(part);
+        }
+        out.links.sort_by_key(|l| (l.receiver, l.source));
         (out.links, out.refinements, out.rays)
     }
 
@@ -1052,9 +1053,7 @@ impl Hierarchy {
                     })
                     .collect();
                 for part in parts {
-                    out.links.extend(part.links);
-                    out.refinements += part.refinements;
-                    out.rays += part.rays;
+                    out.append(part);
                 }
             } else {
                 for &(r, s) in pairs {
