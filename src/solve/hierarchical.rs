@@ -176,8 +176,12 @@
 //!   estimate) are 0.1-3.5% low on the Cornell box at the default tolerance (1.2% over all
 //!   elements), half that at a 10x tighter one: coarse links underestimate a little, and that
 //!   is why the Cornell box's mean indirect light is a few per cent low (absorbed/emitted
-//!   0.681 against progressive's 0.695). Weighting a node's four samples by the area they stand
-//!   for (the mesh is finer along shadow lines) did not change them.
+//!   0.681 against progressive's 0.695). Not the cause (each tried; none raised the row sums):
+//!   weighting a node's four samples by the area they stand for, the contour sum at every
+//!   distance instead of the far-field disk formula, the clipped contour sum for every source
+//!   straddling a sample's horizon. The deficit is on the floor, the ceiling, the back wall,
+//!   the slightly tilted right wall and the box sides; the left wall and the box tops match
+//!   to 0.1%.
 //!
 //! Units: lengths in scene units; irradiance `H` and radiosity `B` in W/m² per linear RGB
 //! channel; powers in W (mean over RGB); form factors and `K` dimensionless.
