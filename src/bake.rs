@@ -213,10 +213,11 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     let vis = stage(&mut t.visibility, "visibility", progress, || {
         Visibility::new(&scene)
     });
-    // The atlas depends on the scene only: it runs before the expensive stages, so a request
-    // that cannot be packed fails in seconds. The discontinuity stage's wedges do not depend on
-    // it (only how many pieces the element budget keeps, which `mesh_scene` applies): they are
-    // traced meanwhile, on the core xatlas's single-threaded packing leaves idle.
+    // The atlas depends on the scene only: it runs before the mesh and the solve, so a request
+    // that cannot be packed fails before them. The discontinuity stage's wedges do not depend
+    // on it (only how many pieces the element budget keeps, which `mesh_scene` applies): they
+    // are traced meanwhile, on the core xatlas's single-threaded packing leaves idle (a failed
+    // atlas is reported once they are done).
     let (atlas, traced) = rayon::join(
         || {
             stage(&mut t.atlas, "atlas", progress, || {
