@@ -434,7 +434,7 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             let too_big = {
                 let meshes = output_meshes(&mut xatlas, added.len())?;
                 // A chart that reached `max_chart_size` may have been scaled down by xatlas.
-                let largest = largest_chart(&meshes);
+                let largest = largest_side(&chart_boxes(&meshes));
                 if largest > max_chart_size as f32 - 0.5 {
                     return Err(AtlasError::ChartTooLarge {
                         page_size,
@@ -483,14 +483,13 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
         let tried = info.texels_per_unit;
         let (shrink, estimate) = {
             let meshes = output_meshes(&mut xatlas, added.len())?;
-            let shrink = fixed_page_shrink(&meshes, &info, max_chart_size);
+            let boxes = chart_boxes(&meshes);
+            let shrink = fixed_page_shrink(&meshes, &boxes, &info, max_chart_size);
             if shrink.is_none() && fitting.is_none_or(|f| tried > f) {
                 best_output = Some(collect_output(inputs, &added, &meshes, &info, false)?);
             }
             let estimate = match shrink {
-                Some(_) if info.atlas_count > 1 => {
-                    fitting_density(&chart_boxes(&meshes), tried, options.padding)
-                }
+                Some(_) if info.atlas_count > 1 => fitting_density(&boxes, tried, options.padding),
                 _ => None,
             };
             (shrink, estimate)
@@ -740,6 +739,7 @@ fn check_inputs(inputs: &[AtlasInput<'_>]) -> Result<InputStats, AtlasError> {
 /// to multiply the texel density by before packing again.
 fn fixed_page_shrink(
     meshes: &[xatlas_rs::Mesh<'_>],
+    boxes: &[ChartBox],
     info: &PackInfo,
     max_chart_size: u32,
 ) -> Option<f32> {
@@ -755,15 +755,15 @@ fn fixed_page_shrink(
                 || !(0.0..=h).contains(&v.uv[1]))
     });
     // A chart that reached `max_chart_size` may have been scaled down by xatlas on its own.
-    if misplaced || largest_chart(meshes) > max_chart_size as f32 - 0.5 {
+    if misplaced || largest_side(boxes) > max_chart_size as f32 - 0.5 {
         return Some(0.9);
     }
     None
 }
 
-/// The largest side, in texels, of any chart's UV bounding box.
-fn largest_chart(meshes: &[xatlas_rs::Mesh<'_>]) -> f32 {
-    chart_boxes(meshes)
+/// The largest side, in texels, of any of `boxes`.
+fn largest_side(boxes: &[ChartBox]) -> f32 {
+    boxes
         .iter()
         .fold(0.0f32, |m, b| m.max(b.width).max(b.height))
 }
@@ -1240,17 +1240,8 @@ mod tests {
         let positions = (0..8)
             .map(|i| [0, 1, 2].map(|axis| origin[axis] + size * ((i >> axis) & 1) as f32))
             .collect();
-        // Corner i has x = bit 0, y = bit 1, z = bit 2. Faces as quads, counter-clockwise seen
-        // from outside.
-        let quads = [
-            [0, 2, 3, 1], // z = 0
-            [4, 5, 7, 6], // z = 1
-            [0, 1, 5, 4], // y = 0
-            [2, 6, 7, 3], // y = 1
-            [0, 4, 6, 2], // x = 0
-            [1, 3, 7, 5], // x = 1
-        ];
-        let indices = quads
+        // Corner i has x = bit 0, y = bit 1, z = bit 2, as `BOX_FACES` numbers them.
+        let indices = crate::geometry::BOX_FACES
             .iter()
             .flat_map(|q| [q[0], q[1], q[2], q[0], q[2], q[3]])
             .collect();

@@ -1321,16 +1321,16 @@ fn add_area_light(b: &mut GlbBuilder) {
     );
 }
 
-/// The box of [`box_on_floor`]: [-0.5, 0.5] × [0, 1] × [-0.5, 0.5], 5 outward faces, node
-/// `box`.
-fn add_unit_box(b: &mut GlbBuilder, material: usize) {
+/// The box of [`box_on_floor`]: [-0.5, 0.5] × [0, 1] × [-0.5, 0.5], node `box`, with 5
+/// outward faces, or 6 with `bottom` (a closed box).
+pub fn add_unit_box(b: &mut GlbBuilder, material: usize, bottom: bool) {
     let top = [
         [-0.5, 1.0, -0.5],
         [-0.5, 1.0, 0.5],
         [0.5, 1.0, 0.5],
         [0.5, 1.0, -0.5],
     ];
-    b.add_mesh_node("box", &block(top, 0.0, false), material);
+    b.add_mesh_node("box", &block(top, 0.0, bottom), material);
 }
 
 /// A 1 m cube standing on a floor, lit by an area light.
@@ -1349,7 +1349,7 @@ pub fn box_on_floor() -> Vec<u8> {
         &horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
         grey,
     );
-    add_unit_box(&mut b, grey);
+    add_unit_box(&mut b, grey, false);
     add_area_light(&mut b);
     b.to_glb()
 }
@@ -1378,7 +1378,7 @@ pub fn tiled_box_on_floor(n: usize) -> Vec<u8> {
     );
     floor.normals = None;
     b.add_mesh_node("floor", &floor, grey);
-    add_unit_box(&mut b, grey);
+    add_unit_box(&mut b, grey, false);
     add_area_light(&mut b);
     let camera = b.add_camera(PerspectiveCamera {
         name: "camera".into(),

@@ -324,6 +324,18 @@ pub fn triangle_area(p: &[DVec3; 3]) -> f64 {
 // ---------------------------------------------------------------------------------------------
 // Barycentric coordinates
 
+/// The six faces of a box as quads of [`box_corners`] indices (corner `c` has x from bit 0,
+/// y from bit 1, z from bit 2), counter-clockwise seen from outside: z = 0, z = 1, y = 0,
+/// y = 1, x = 0, x = 1.
+pub const BOX_FACES: [[u32; 4]; 6] = [
+    [0, 2, 3, 1],
+    [4, 5, 7, 6],
+    [0, 1, 5, 4],
+    [2, 6, 7, 3],
+    [0, 4, 6, 2],
+    [1, 3, 7, 5],
+];
+
 /// The eight corners of the axis-aligned box `[min, max]`.
 pub fn box_corners(min: DVec3, max: DVec3) -> [DVec3; 8] {
     std::array::from_fn(|c| {

@@ -560,28 +560,16 @@ mod tests {
     /// A unit cube's six faces (two triangles each, outward), as one instance; `drop` faces
     /// left out from the end.
     fn cube(drop: usize) -> Instance {
-        let c = |i: usize| DVec3::new((i & 1) as f64, ((i >> 1) & 1) as f64, ((i >> 2) & 1) as f64);
-        // Faces as corner indices, counter-clockwise seen from outside.
-        let faces = [
-            [0, 2, 3, 1], // z = 0
-            [4, 5, 7, 6], // z = 1
-            [0, 1, 5, 4], // y = 0
-            [2, 6, 7, 3], // y = 1
-            [0, 4, 6, 2], // x = 0
-            [1, 3, 7, 5], // x = 1
-        ];
-        let mut positions_world = Vec::new();
+        let c = crate::geometry::box_corners(DVec3::ZERO, DVec3::ONE);
+        let mut positions = Vec::new();
         let mut indices = Vec::new();
-        for f in &faces[..6 - drop] {
+        for f in &crate::geometry::BOX_FACES[..6 - drop] {
             // Every face its own four vertices (split normals), as exporters write boxes.
-            let base = positions_world.len() as u32;
-            positions_world.extend(f.iter().map(|&i| c(i)));
+            let base = positions.len() as u32;
+            positions.extend(f.iter().map(|&i| c[i as usize]));
             indices.extend([base, base + 1, base + 2, base, base + 2, base + 3]);
         }
-        let mut inst = quad_instance([DVec3::ZERO, DVec3::X, DVec3::ONE, DVec3::Y]);
-        inst.positions_world = positions_world;
-        inst.indices = indices;
-        inst
+        Instance::new(positions, indices)
     }
 
     #[test]

@@ -207,13 +207,7 @@ fn box_with_side_lamp() -> Vec<u8> {
         &fixtures::horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
         grey,
     );
-    let top = [
-        [-0.5, 1.0, -0.5],
-        [-0.5, 1.0, 0.5],
-        [0.5, 1.0, 0.5],
-        [0.5, 1.0, -0.5],
-    ];
-    g.add_mesh_node("box", &fixtures::block(top, 0.0, true), grey);
+    fixtures::add_unit_box(&mut g, grey, true);
     let light = g.add_light(fixtures::Light::point("lamp", 10.0));
     g.add_node(
         fixtures::Node::new("lamp")
@@ -436,21 +430,9 @@ fn light_range_drops_shadow_lines_beyond_it() {
 /// spacing.
 #[test]
 fn wedges_the_light_cannot_see_are_not_traced() {
-    use penumbra::discontinuity::{self, DmOptions};
-    let glb = penumbra::fixtures::ladder::interior(2);
-    let gltf = parse(&glb, "house.glb");
-    let scene = penumbra::load::scene(&gltf).expect("scene");
-    let vis = penumbra::visibility::Visibility::new(&scene);
-    let run = |skip_unseen| {
-        let o = DmOptions {
-            threshold: 0.01,
-            max_pieces: usize::MAX,
-            skip_unseen,
-        };
-        discontinuity::segments(&scene, &vis, &o)
-    };
-    let (all, all_stats) = run(false);
-    let (skipped, stats) = run(true);
+    let house = two_room_house();
+    let (all, all_stats) = house.segments(usize::MAX, false);
+    let (skipped, stats) = house.segments(usize::MAX, true);
     assert_eq!(all_stats.unseen, 0);
     assert_eq!(stats.wedges, all_stats.wedges);
     assert!(
@@ -485,19 +467,8 @@ fn wedges_the_light_cannot_see_are_not_traced() {
 /// that the same limit keeps during the trace. And the kept ones are the most significant.
 #[test]
 fn a_budget_applied_after_the_trace_keeps_what_it_keeps_during_it() {
-    use penumbra::discontinuity::{self, DmOptions};
-    let glb = penumbra::fixtures::ladder::interior(2);
-    let gltf = parse(&glb, "house.glb");
-    let scene = penumbra::load::scene(&gltf).expect("scene");
-    let vis = penumbra::visibility::Visibility::new(&scene);
-    let run = |max_pieces| {
-        let o = DmOptions {
-            threshold: 0.01,
-            max_pieces,
-            skip_unseen: true,
-        };
-        discontinuity::segments(&scene, &vis, &o)
-    };
+    let house = two_room_house();
+    let run = |max_pieces| house.segments(max_pieces, true);
     let (all, all_stats) = run(usize::MAX);
     assert!(all_stats.kept > 200, "{all_stats:?}");
     let wedges =
@@ -505,7 +476,7 @@ fn a_budget_applied_after_the_trace_keeps_what_it_keeps_during_it() {
     for max in [0, 1, all_stats.kept / 3, all_stats.kept - 1, all_stats.kept] {
         let (during, during_stats) = run(max);
         let (mut after, mut after_stats) = (all.clone(), all_stats.clone());
-        discontinuity::keep_most_significant(&mut after, max, &mut after_stats);
+        penumbra::discontinuity::keep_most_significant(&mut after, max, &mut after_stats);
         assert_eq!(wedges(&after), max.min(all_stats.kept));
         assert_eq!(after, during, "limit {max}");
         assert_eq!(after_stats.kept, during_stats.kept);
@@ -524,5 +495,34 @@ fn a_budget_applied_after_the_trace_keeps_what_it_keeps_during_it() {
             .map(|s| s.significance)
             .fold(0.0, f64::max);
         assert!(strongest_dropped <= weakest_kept, "limit {max}");
+    }
+}
+
+/// The ladder's house of two furnished rooms, loaded, with its ray caster.
+struct House {
+    scene: penumbra::scene::Scene,
+    vis: penumbra::visibility::Visibility,
+}
+
+fn two_room_house() -> House {
+    let glb = penumbra::fixtures::ladder::interior(2);
+    let scene = penumbra::load::scene(&parse(&glb, "house.glb")).expect("scene");
+    let vis = penumbra::visibility::Visibility::new(&scene);
+    House { scene, vis }
+}
+
+impl House {
+    /// The discontinuity stage at significance threshold 0.01.
+    fn segments(
+        &self,
+        max_pieces: usize,
+        skip_unseen: bool,
+    ) -> (Vec<Vec<Segment>>, penumbra::discontinuity::DmStats) {
+        let o = penumbra::discontinuity::DmOptions {
+            threshold: 0.01,
+            max_pieces,
+            skip_unseen,
+        };
+        penumbra::discontinuity::segments(&self.scene, &self.vis, &o)
     }
 }

@@ -666,7 +666,7 @@ fn under_a_double_sided_box_the_floor_is_not_buried() {
 /// the floor under it is buried as under a one-sided box, and the bake converges.
 #[test]
 fn a_closed_double_sided_box_gets_no_back_side() {
-    use penumbra::fixtures::{GlbBuilder, Material, block, horizontal_rect};
+    use penumbra::fixtures::{GlbBuilder, Material, add_unit_box, horizontal_rect};
     let mut b = GlbBuilder::new();
     let grey = b.add_material(Material::diffuse("grey", [0.8; 3]).double_sided());
     let light = Material::diffuse("light", [0.0; 3]).emitting([10.0; 3]);
@@ -676,13 +676,7 @@ fn a_closed_double_sided_box_gets_no_back_side() {
         &horizontal_rect([-2.0, 2.0], [-2.0, 2.0], 0.0, true),
         grey,
     );
-    let top = [
-        [-0.5, 1.0, -0.5],
-        [-0.5, 1.0, 0.5],
-        [0.5, 1.0, 0.5],
-        [0.5, 1.0, -0.5],
-    ];
-    b.add_mesh_node("box", &block(top, 0.0, true), grey);
+    add_unit_box(&mut b, grey, true);
     let panel = horizontal_rect([-0.5, 0.5], [-0.5, 0.5], 3.0, false);
     b.add_mesh_node("light", &panel, light);
     let bytes = b.to_glb();
