@@ -3,7 +3,7 @@
 //! that sees a reflecting receiver): `cargo run --release --example hier_rowsum -- [scene.glb]
 //! [tol] [budget]` (the furnace box when no scene is given).
 use glam::DVec3;
-use penumbra::solve::hierarchical::{Hierarchy, Limits, VARIATION};
+use penumbra::solve::hierarchical::{Hierarchy, Limits, PARTIAL_VISIBILITY, VARIATION};
 use penumbra::visibility::Visibility;
 use penumbra::{BakeOptions, load};
 use std::path::Path;
@@ -35,6 +35,7 @@ fn main() -> anyhow::Result<()> {
         power: tol * total,
         variation: VARIATION,
         source: 1.0,
+        visibility: PARTIAL_VISIBILITY,
     };
     let (links, _, _) = h.link(&vis, &h.sources(&ones), limits);
     let got = h.push(&h.gather(&links, &bn));

@@ -228,6 +228,10 @@ pub const VARIATION: f64 = 3e-3;
 /// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
 pub const SOURCE_VARIATION: f64 = 0.03;
 
+/// The refinement oracle's bound on the irradiance a partially visible link may carry, as a
+/// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
+pub const PARTIAL_VISIBILITY: f64 = 0.01;
+
 /// Distance, in bounding radii of a surface source node, past which its form factor is the
 /// disk formula instead of the exact contour sum (see [`Hierarchy::point_factor`]).
 pub const FAR_FIELD: f64 = 6.0;
@@ -343,6 +347,10 @@ pub struct Link {
     /// the source as uniform (its radiosity spread `ΔB_s` times the most the receiver can see
     /// of it); zero when the source has no children.
     pub reach: f64,
+    /// The oracle's visibility factor (dimensionless): the unoccluded `K` of a partially
+    /// visible link, whose `B_s × shade` is the irradiance its visible fraction decides; zero
+    /// when the link is wholly visible or hidden, or neither end can be split.
+    pub shade: f64,
 }
 
 /// The source radiosities the refinement oracle reads, per node (W/m², mean over RGB).
@@ -356,12 +364,13 @@ pub struct Sources {
 
 /// The oracle's limits: the most power one link may carry (W), the most a source's irradiance
 /// may vary across a receiver (W/m²), the most irradiance a source's non-uniformity may
-/// misplace (W/m²).
+/// misplace (W/m²), the most irradiance a partially visible link may carry (W/m²).
 #[derive(Clone, Copy, Debug)]
 pub struct Limits {
     pub power: f64,
     pub variation: f64,
     pub source: f64,
+    pub visibility: f64,
 }
 
 /// The output of refining links: the links kept, the links split, the shadow rays cast.
@@ -386,8 +395,8 @@ impl Refined {
 enum Decision {
     /// Split the receiver (`true`) or the source.
     Split(bool),
-    /// Keep the link with this `K`, power factor, spread and reach (see [`Link`]).
-    Keep(f64, f64, f64, f64),
+    /// Keep the link with this `K`, power factor, spread, reach and shade (see [`Link`]).
+    Keep(f64, f64, f64, f64, f64),
     /// The link carries nothing.
     Drop,
 }
@@ -1002,7 +1011,7 @@ impl Hierarchy {
             };
             // A zero estimate is kept (as `K = 0`) for the next pass to test again: four
             // samples of a cluster may miss what it sees.
-            return Decision::Keep(t.k, power, spread, reach);
+            return Decision::Keep(t.k, power, spread, reach, 0.0);
         };
         let f = &f[..n];
         let unoccluded = f.iter().sum::<f64>() / n as f64;
@@ -1038,14 +1047,24 @@ impl Hierarchy {
             }
             if hidden && tested {
                 // Kept as `K = 0` for the next pass to test again.
-                return Decision::Keep(0.0, power, spread, reach);
+                return Decision::Keep(0.0, power, spread, reach, 0.0);
             }
             return split;
         }
-        let (seen, tested, _, cast) = pair_visibility(vis, sr, ss, facing);
+        let (seen, tested, partial, cast) = pair_visibility(vis, sr, ss, facing);
         *rays += cast;
+        // Partially visible: the visible fraction of 16 pairs stands for the whole link, and
+        // the parts that see each other are usually the near ones, of the larger form factor.
+        let shade = if partial && can_split {
+            unoccluded
+        } else {
+            0.0
+        };
+        if b_s * shade > limits.visibility {
+            return Decision::Split(larger);
+        }
         let v = if tested > 0.0 { seen / tested } else { 1.0 };
-        Decision::Keep(unoccluded * v, power, spread, reach)
+        Decision::Keep(unoccluded * v, power, spread, reach, shade)
     }
 
     /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
@@ -1082,6 +1101,7 @@ impl Hierarchy {
                     if bs * l.power > limits.power
                         || bs * l.spread > limits.variation
                         || ds * l.reach > limits.source
+                        || bs * l.shade > limits.visibility
                     {
                         self.refine_into(vis, b, limits, l.receiver, l.source, &mut out);
                     } else {
@@ -1156,7 +1176,7 @@ impl Hierarchy {
                 out.refinements += 1;
                 split(&pairs, out);
             }
-            Decision::Keep(k, power, spread, reach)
+            Decision::Keep(k, power, spread, reach, shade)
                 if k > 0.0 || power > 0.0 || spread > 0.0 || reach > 0.0 =>
             {
                 out.links.push(Link {
@@ -1166,6 +1186,7 @@ impl Hierarchy {
                     power,
                     spread,
                     reach,
+                    shade,
                 });
             }
             Decision::Keep(..) | Decision::Drop => {}
@@ -1366,6 +1387,7 @@ pub fn indirect(
         let total_area: f64 = els.iter().map(|e| e.area).sum();
         let variation = VARIATION * initial / total_area;
         let source_variation = SOURCE_VARIATION * initial / total_area;
+        let visibility = PARTIAL_VISIBILITY * initial / total_area;
         let mut previous: Option<Vec<Link>> = None;
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
@@ -1376,6 +1398,7 @@ pub fn indirect(
                     power: tolerance * initial,
                     variation,
                     source: source_variation,
+                    visibility,
                 };
                 let (links, refinements, rays) = match &previous {
                     Some(p) => h.relink(vis, p, &sources, limits),
