@@ -191,8 +191,8 @@ fn hierarchical_bake_is_thread_count_independent() {
 /// hemisphere that sees a reflecting surface, 16 × 16 stratified rays from its centroid),
 /// area-weighted over all elements. Behind the boxes only some sample pairs of a link see each
 /// other, and the near ones, of larger form factor, see each other more often: without
-/// refining partially visible links the sums came out 2% short (the back wall's share of the
-/// floor 30% short).
+/// refining partially visible links the sums came out 1.1% short here (2.1% at 20 000
+/// elements, where the back wall's share of the floor was 30% short); with it, within 0.1%.
 #[test]
 fn hierarchical_row_sums_match_ray_casting_past_occluders() {
     let mut o = quick();
