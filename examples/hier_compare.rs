@@ -36,13 +36,20 @@ fn main() -> anyhow::Result<()> {
         let t = std::time::Instant::now();
         let mut b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
         b.stats.timings_s.total = t.elapsed().as_secs_f64();
+        // A directional light's emitted power is not defined (it lights an unbounded plane),
+        // and `emitted_power` leaves it out: no ratio then.
+        let emitted = b.stats.solve.emitted_power;
+        let balance = if emitted > 0.0 {
+            format!("{:.4}", b.stats.solve.absorbed_power / emitted)
+        } else {
+            "n/a".to_string()
+        };
         println!(
-            "{solver:?}: solve {:.2} s, bake {:.2} s, rays {}, vertices {}, absorbed/emitted {:.4}, unshot {:.2e}",
+            "{solver:?}: solve {:.2} s, bake {:.2} s, rays {}, vertices {}, absorbed/emitted {balance}, unshot {:.2e}",
             b.stats.timings_s.solve,
             b.stats.timings_s.total,
             b.stats.solve.rays,
             b.stats.vertices,
-            b.stats.solve.absorbed_power / b.stats.solve.emitted_power.max(1e-300),
             b.stats.solve.unshot_fraction,
         );
         if let Some(h) = &b.stats.solve.hierarchical {

@@ -77,7 +77,8 @@
 //! (the "refined where it is partial"): first the pairs `(k mod 4, k mod 4)`, one per
 //! sample; when at least two are tested and all agree (all visible or all hidden), the other
 //! pairs are taken to agree too, else every pair is cast. Most links are wholly visible, so
-//! this casts about half the rays: on the 20x20 box grid 6.9 M instead of 12.2 M, with the same
+//! this casts about half the rays: on the 20x20 box grid 6.9 M instead of 12.2 M (measured
+//! before partially visible links were refined, below), with the same
 //! error against the Monte Carlo reference in every region (and on the Cornell box).
 //! Deterministic points, no randomness.
 //!
@@ -114,8 +115,8 @@
 //!   is pushed unchanged to elements whose true `K` differs (measured on the furnace box: row
 //!   sums of `K` per element from 0.84 to 1.25 at `hr_tolerance` 1e-5; with it, within 6e-4
 //!   of 1 at 1e-4). [`VARIATION`] is 3e-3, the largest at which the furnace holds to 1e-3 at
-//!   every vertex (at 5e-3 its worst vertex is off by 1.1e-3): against 1e-3 it takes 40% less
-//!   refinement time on the town, and the error against the Monte Carlo reference is the same
+//!   every vertex (at 5e-3 its worst vertex is off by 1.1e-3): against 1e-3 it took about a
+//!   third less refinement time on a 13 000-triangle town (1.5 s to 1.0 s, one run each), and the error against the Monte Carlo reference is the same
 //!   in every region of the Cornell box and town-6k (within 0.0004 of the lit mean). The
 //!   source's coarseness needs no such test: the contour formula is exact
 //!   for the whole source from each receiver point. A large surface source straddling the
@@ -130,6 +131,17 @@
 //!   underestimates. Measured on the Cornell box against the Monte Carlo reference: without
 //!   this test the bake's RMSE was 7.5% of the lit mean (mean indirect light 12% low); with it
 //!   at 0.1, 3.0%; at 0.03, 1.9%.
+//! * **Partial visibility** (the "refined where it is partial"): a surface-to-surface
+//!   link whose tested sample pairs disagree (some see each other, some do not) is split at
+//!   its larger node while `B_s K_unoccluded`, the irradiance its visible fraction decides,
+//!   exceeds [`PARTIAL_VISIBILITY`] × `P / A`. Also a bias, not noise: the visible fraction
+//!   weights the 16 pairs alike, but the pairs that see past an occluder are usually the near
+//!   ones, of the larger form factor. Measured on the Cornell box (`examples/hier_rowsum.rs`,
+//!   every element at `B = 1`, against ray casting): without this test the row sums of `K`
+//!   were 2.1% short over all elements (the back wall's share of the floor, behind the two
+//!   boxes, 30% short); with it they are 0.4% over, and the bake's RMSE against the Monte
+//!   Carlo reference fell from 2.1% to 1.9% of the lit mean (indirect region 2.4% to 2.2%),
+//!   for 10-25% more refinement time.
 //!
 //! A self-link of a cluster becomes the four links between its two children; a link between
 //! two leaves is kept as it is. Only the shadow rays the decision needs are cast: none for a
@@ -166,14 +178,19 @@
 //! Against the Monte Carlo reference (`examples/solver_error.rs`, `penumbra compare`'s error by
 //! region, RMSE as a fraction of the mean lit irradiance):
 //!
-//! * town-25k: better than progressive in every region (indirect 2.7% against 6.0%), solve
-//!   5.4x faster; town-6k: indirect 1.1% against 3.0%.
-//! * Cornell box: all texels 2.1% against progressive's 1.9%; contact max 6.6% against 32%;
-//!   lit 2.1% against 0.6% (its mean indirect light is 2.7% low: the source-uniformity oracle
-//!   at 0.01 brings it to 1.5% at 3x the time); solve about 3x slower than progressive, whose
-//!   1024 patches suit a 36-triangle scene.
-//! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 7.2 s on the 40x40
-//!   box grid (progressive: 375 s), 22 s on town-100k (147 863 elements; progressive: over
+//! * Cornell box (256 samples per texel): all texels 1.9% against progressive's 2.2%; contact
+//!   1.7% against 4.6% (largest texel error 10.9% against 32%); but lit 1.9% against 0.8%,
+//!   penumbra 2.0% against 1.1%, indirect 2.2% against 2.1%; solve about 2x slower than
+//!   progressive (5.0 s against 2.4 s), whose 1024 patches suit a 36-triangle scene.
+//! * box-grid-20 (128 samples): all texels 8.0% against 15.7%, indirect 2.0% against 4.8%,
+//!   contact 8.7% against 18.0%; lit and penumbra within 0.2% of progressive's (5.2%, 16.7%:
+//!   both solvers share the direct light, and these errors are its texel resolution). Solve
+//!   4.5x faster than progressive (3.5 s against 15.4 s, `examples/hier_compare.rs`).
+//! * town-6k (64 samples): better in every region (indirect 1.1% against 3.3%); a 13 000
+//!   triangle town's solve 2.3x faster (1.5 s against 3.5 s). Earlier, town-25k: indirect 2.7%
+//!   against 6.0%.
+//! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 7.6 s on the 40x40
+//!   box grid (progressive: 375 s), 15 s on town-100k (147 863 elements; progressive: over
 //!   600 s).
 //! * Furnace box: `B = M/(1-rho)` within 1e-3 at every vertex.
 //! * Values at vertices, tried: gathering each element's links at its corners (the point form
@@ -186,15 +203,12 @@
 //!   falls steeply into the corner within the wall's lowest element, and linear interpolation
 //!   between its vertices cannot follow.
 //! * Row sums of `K` (`examples/hier_rowsum.rs`, every element at `B = 1`, against a ray-cast
-//!   estimate) are 0.1-3.5% low on the Cornell box at the default tolerance (1.2% over all
-//!   elements), half that at a 10x tighter one: coarse links underestimate a little, and that
-//!   is why the Cornell box's mean indirect light is a few per cent low (absorbed/emitted
-//!   0.681 against progressive's 0.695). Not the cause (each tried; none raised the row sums):
-//!   weighting a node's four samples by the area they stand for, the contour sum at every
-//!   distance instead of the far-field disk formula, the clipped contour sum for every source
-//!   straddling a sample's horizon. The deficit is on the floor, the ceiling, the back wall,
-//!   the slightly tilted right wall and the box sides; the left wall and the box tops match
-//!   to 0.1%.
+//!   estimate): 0.4% over on the Cornell box, since partially visible links are refined
+//!   (above); 2.1% short before. Tried on the way and not the cause: weighting a node's four
+//!   samples by the area they stand for, the contour sum at every distance instead of the
+//!   far-field disk formula, the clipped contour sum for every source straddling a sample's
+//!   horizon, splitting wholly hidden links too, weighting the pairs' visibility by their
+//!   point-to-disk form factor (it overcorrected the floor and undercorrected the back wall).
 //!
 //! Units: lengths in scene units; irradiance `H` and radiosity `B` in W/m² per linear RGB
 //! channel; powers in W (mean over RGB); form factors and `K` dimensionless.
