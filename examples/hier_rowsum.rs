@@ -3,7 +3,9 @@
 //! that sees a reflecting receiver): `cargo run --release --example hier_rowsum -- [scene.glb]
 //! [tol] [budget]` (the furnace box when no scene is given).
 use glam::DVec3;
+use penumbra::light::SurfacePoint;
 use penumbra::solve::hierarchical::{Hierarchy, Limits, PARTIAL_VISIBILITY, VARIATION};
+use penumbra::solve::sky::Sky;
 use penumbra::visibility::Visibility;
 use penumbra::{BakeOptions, load};
 use std::path::Path;
@@ -44,38 +46,18 @@ fn main() -> anyhow::Result<()> {
     for e in &h.elements {
         reflects[e.polygon] |= e.rho.max_element() > 0.0;
     }
-    // Ray-cast estimate per element: stratified cosine-weighted directions from the centroid.
-    let n = 32usize;
+    // Ray-cast estimate per element: the sky's stratified cosine-weighted directions from the
+    // centroid.
+    let sky = Sky::new(&b.scene, DVec3::ONE, 1024).expect("a sky");
     let mut per_poly: std::collections::BTreeMap<usize, (f64, f64, f64)> = Default::default();
     let (mut worst, mut sum_h, mut sum_r) = (Vec::new(), 0.0, 0.0);
     for (e, g) in h.elements.iter().zip(&got) {
         let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
-        let nrm = e.normal;
-        let t = if nrm.x.abs() < 0.9 {
-            DVec3::X
-        } else {
-            DVec3::Y
-        };
-        let u = nrm.cross(t).normalize();
-        let v = nrm.cross(u);
-        let origin = c + nrm * vis.epsilon() * 4.0;
-        let mut hits = 0usize;
-        for i in 0..n {
-            for j in 0..n {
-                let (a, bb) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
-                let r = a.sqrt();
-                let phi = 2.0 * std::f64::consts::PI * bb;
-                let d = u * r * phi.cos() + v * r * phi.sin() + nrm * (1.0 - a).sqrt();
-                if let Some(hit) = vis.first_hit(origin, d, 1e30)
-                    && let Some(p) = b.scene.triangles[hit.triangle].polygon
-                    && reflects[p]
-                    && b.scene.triangles[hit.triangle].normal.dot(d) < 0.0
-                {
-                    hits += 1;
-                }
-            }
-        }
-        let r = hits as f64 / (n * n) as f64;
+        let at = SurfacePoint::new(c, e.normal, e.polygon, &vis);
+        let r = sky.hit_fraction(&vis, &at, |t, d| {
+            let t = &b.scene.triangles[t];
+            t.polygon.is_some_and(|p| reflects[p]) && t.normal.dot(d) < 0.0
+        });
         let entry = per_poly.entry(e.polygon).or_default();
         entry.0 += e.area * g.x;
         entry.1 += e.area * r;

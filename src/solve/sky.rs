@@ -133,6 +133,26 @@ impl Sky {
         })
     }
 
+    /// The fraction of the rays of `at` ([`Sky::directions`], cosine-weighted) whose first hit
+    /// `accept` takes (it gets the hit triangle and the ray's direction): for example the
+    /// cosine-weighted fraction of a point's hemisphere that sees reflecting surfaces, the
+    /// independent estimate the hierarchical solver's link coefficients are tested against.
+    pub fn hit_fraction(
+        &self,
+        vis: &Visibility,
+        at: &SurfacePoint,
+        accept: impl Fn(usize, DVec3) -> bool,
+    ) -> f64 {
+        let hits = self
+            .directions(at)
+            .filter(|d| {
+                vis.first_hit(at.ray_origin, *d, 1e30)
+                    .is_some_and(|hit| accept(hit.triangle, *d))
+            })
+            .count();
+        hits as f64 / self.square.len() as f64
+    }
+
     /// Adds the sky's irradiance `pi L_sky V` (W/m²) of each of `points` to `h`; counts the
     /// points, rays and time.
     pub fn add_irradiance(&self, vis: &Visibility, points: &[SurfacePoint], h: &mut [DVec3]) {
