@@ -73,14 +73,13 @@
 //!
 //! Visibility: one shadow ray per sample pair with `cos > 0` at both ends
 //! ([`Visibility::occluded_skipping`] between the two points' ray origins, each offset off its
-//! surface like [`SurfacePoint::new`], skipping the two points' own polygons), in two stages
-//! (the "refined where it is partial"): first the pairs `(k mod 4, k mod 4)`, one per
-//! sample; when at least two are tested and all agree (all visible or all hidden), the other
-//! pairs are taken to agree too, else every pair is cast. Most links are wholly visible, so
-//! this casts about half the rays: on the 20x20 box grid 6.9 M instead of 12.2 M (measured
-//! before partially visible links were refined, below), with the same
-//! error against the Monte Carlo reference in every region (and on the Cornell box).
-//! Deterministic points, no randomness.
+//! surface like [`SurfacePoint::new`], skipping the two points' own polygons), in two stages:
+//! first the pairs `(k mod 4, k mod 4)`, one per sample; when at least two are tested and all
+//! agree (all visible or all hidden), the other pairs are taken to agree too, else every pair
+//! is cast. Most links are wholly visible, so this casts about half the rays: on the 20x20 box
+//! grid 6.9 M instead of 12.2 M (measured before partially visible links were refined, below),
+//! with the same error against the Monte Carlo reference in every region (and on the Cornell
+//! box). Deterministic points, no randomness.
 //!
 //! Pairs that carry nothing are never linked: two nodes of one plane (a planar polygon does not
 //! see itself), a source whose bounding box lies behind (or in) a surface receiver's plane, a
@@ -89,7 +88,7 @@
 //!
 //! # Refinement
 //!
-//! From the root-to-root link, a link `r ← s` is refined while either test of the oracle fails:
+//! From the root-to-root link, a link `r ← s` is refined while any test of the oracle fails:
 //!
 //! * **Power** (Hanrahan et al.'s `B F A`): the bound `B_s K̂ A_r` on the power the link
 //!   carries exceeds `hr_tolerance × P`, where `P` is the total reflected direct power (W, the
@@ -116,10 +115,10 @@
 //!   sums of `K` per element from 0.84 to 1.25 at `hr_tolerance` 1e-5; with it, within 6e-4
 //!   of 1 at 1e-4). [`VARIATION`] is 3e-3, the largest at which the furnace holds to 1e-3 at
 //!   every vertex (at 5e-3 its worst vertex is off by 1.1e-3): against 1e-3 it took about a
-//!   third less refinement time on a 13 000-triangle town (1.5 s to 1.0 s, one run each), and the error against the Monte Carlo reference is the same
-//!   in every region of the Cornell box and town-6k (within 0.0004 of the lit mean). The
-//!   source's coarseness needs no such test: the contour formula is exact
-//!   for the whole source from each receiver point. A large surface source straddling the
+//!   third less refinement time on a 13 000-triangle town (1.5 s to 1.0 s, one run each), and
+//!   the error against the Monte Carlo reference is the same in every region of the Cornell
+//!   box and town-6k (within 0.0004 of the lit mean). The source's coarseness needs no such
+//!   test: the contour formula is exact for the whole source from each receiver point. A large surface source straddling the
 //!   receiver's horizon (estimated by the disk formula, crude at a contact) is split while
 //!   `B_s K̂` exceeds the same limit.
 //! * **Source uniformity**: a link gathers `K B̄_s`, the source's *mean* radiosity, so it
@@ -189,7 +188,7 @@
 //! * town-6k (64 samples): better in every region (indirect 1.1% against 3.3%); a 13 000
 //!   triangle town's solve 2.3x faster (1.5 s against 3.5 s). Earlier, town-25k: indirect 2.7%
 //!   against 6.0%.
-//! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 7.6 s on the 40x40
+//! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 6.9 s on the 40x40
 //!   box grid (progressive: 375 s), 15 s on town-100k (147 863 elements; progressive: over
 //!   600 s).
 //! * Furnace box: `B = M/(1-rho)` within 1e-3 at every vertex.
@@ -893,7 +892,7 @@ impl Hierarchy {
         let (k, unoccluded, partial, rays) = pair_visibility(vis, sr, ss, disk);
         let pairs = (sr.len() * ss.len()) as f64;
         // The sampled cosines may all miss (four samples of a cluster): the oracle bounds the
-        // transfer with both cosines at 1 and the nodes' closest possible distance.
+        // transfer geometrically instead.
         let bound = point_bound(nr, ns);
         Transfer {
             k: k / pairs,
