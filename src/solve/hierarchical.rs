@@ -557,6 +557,7 @@ fn pair_visibility(
     let visible =
         |p: &Sample, q: &Sample| !vis.occluded_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
     let first = a.len().max(b.len());
+    let diagonal = |i: usize, j: usize| (0..first).any(|k| (k % a.len(), k % b.len()) == (i, j));
     let (mut seen, mut tested) = (0.0, 0.0);
     let (mut hits, mut cast) = (0u64, 0u64);
     for k in 0..first {
@@ -572,11 +573,13 @@ fn pair_visibility(
         }
     }
     let agree = cast >= 2 && (hits == 0 || hits == cast);
-    let rays_first = cast;
     for (i, p) in a.iter().enumerate() {
         for (j, q) in b.iter().enumerate() {
+            if diagonal(i, j) {
+                continue;
+            }
             let w = weight(p, q);
-            if w <= 0.0 || (0..first).any(|k| (k % a.len(), k % b.len()) == (i, j)) {
+            if w <= 0.0 {
                 continue;
             }
             tested += w;
@@ -593,9 +596,9 @@ fn pair_visibility(
             }
         }
     }
+    // Taken to agree, the other pairs cast no ray: `cast` counts the rays either way.
     let partial = !agree && hits > 0 && hits < cast;
-    let rays = if agree { rays_first } else { cast };
-    (seen, tested, partial, rays)
+    (seen, tested, partial, cast)
 }
 
 /// The bound on the point form factor from any point of node `r` to anything in node `s`
@@ -893,17 +896,9 @@ impl Hierarchy {
     pub fn transfer(&self, vis: &Visibility, r: u32, s: u32) -> Transfer {
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
-        // Surface to surface: the exact unoccluded form factor from each receiver sample, over
-        // the source's outline when the source lies wholly above the sample's horizon, else
-        // (a close, straddling source of few elements) per element, clipped.
-        let contour = nr.polygon != NO_POLYGON
-            && ns.polygon != NO_POLYGON
-            && sr
-                .iter()
-                .all(|a| box_above(a.p, a.n, ns) || ns.hi - ns.lo <= CONTOUR_ELEMENTS);
-        if contour {
-            let unoccluded =
-                sr.iter().map(|a| self.point_factor(a, s)).sum::<f64>() / sr.len() as f64;
+        // Surface to surface: the exact unoccluded form factor from each receiver sample.
+        if let Some((f, n)) = self.point_factors(r, s) {
+            let unoccluded = f[..n].iter().sum::<f64>() / n as f64;
             if unoccluded <= 0.0 {
                 return Transfer {
                     k: 0.0,
