@@ -1,5 +1,5 @@
 //! Bakes one glb with each solver and measures every lightmap against one Monte Carlo
-//! reference, by region (`penumbra compare`'s measure):
+//! reference, by region (`penumbra compare`'s measure, and the signed mean error, a bias):
 //! `cargo run --release --example solver_error -- scene.glb [spp] [budget] [hr_tolerance]`.
 
 use penumbra::compare::{classify, lightmap_error, mean_lit_irradiance};
@@ -73,6 +73,22 @@ fn main() -> anyhow::Result<()> {
         );
         for (r, e) in by {
             print!(" | {} rmse {:.4} max {:.3}", r.name(), e.rmse, e.max);
+        }
+        println!();
+        // The signed mean error per region (bake minus reference, channel mean, as a fraction
+        // of the lit mean): a bias shows here, while the reference's noise averages out.
+        let mut bias: std::collections::BTreeMap<&str, (f64, usize)> = Default::default();
+        for (i, r) in regions.iter().enumerate() {
+            if let Some(r) = r {
+                let d = (b.lightmap.texels[i] - refmap.mean[i]).element_sum() / 3.0;
+                let e = bias.entry(r.name()).or_default();
+                e.0 += d / scale;
+                e.1 += 1;
+            }
+        }
+        print!("  bias");
+        for (name, (sum, n)) in bias {
+            print!(" | {name} {:+.4}", sum / n as f64);
         }
         println!();
     }

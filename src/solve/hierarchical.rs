@@ -236,7 +236,7 @@ use crate::light::{NO_POLYGON, SurfacePoint};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
 use crate::visibility::Visibility;
-use glam::{DVec2, DVec3};
+use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::time::Instant;
@@ -273,6 +273,11 @@ const PARALLEL_ELEMENTS: u32 = 2048;
 
 /// Most links; past it the refinement is redone with a 4× larger tolerance (a warning).
 pub const MAX_LINKS: usize = 30_000_000;
+
+/// The Tikhonov term of the radiosity-gradient fit ([`Hierarchy::moments`]), as a fraction of
+/// the second moment's trace: it keeps the fit from amplifying noise across a nearly
+/// degenerate node, and shrinks a well-spread node's gradient by about 0.2%.
+pub const REGULARIZATION: f64 = 1e-3;
 
 /// Most Jacobi iterations when iterating to convergence (a warning when reached).
 pub const MAX_ITERATIONS: usize = 1000;
@@ -385,6 +390,57 @@ pub struct Link {
     /// visible link, whose `B_s × shade` is the irradiance its visible fraction decides; zero
     /// when the link is wholly visible or hidden, or neither end can be split.
     pub shade: f64,
+    /// Where in a surface source the receiver looks (scene units): the offset from the plain
+    /// mean of the source's samples to their mean weighted by the point-to-point kernel from
+    /// the receiver's samples. The link gathers the source's radiosity at its centre moved by
+    /// this much along the source's radiosity gradient (see [`Hierarchy::gradients`]); zero
+    /// for a cluster end.
+    pub toward: [f32; 3],
+}
+
+/// The gradient of an RGB quantity in space: per axis `x, y, z`, the change of each channel
+/// per scene unit.
+pub type Gradient = [DVec3; 3];
+
+/// The change `g · d` over the displacement `d` (scene units).
+fn along(g: &Gradient, d: DVec3) -> DVec3 {
+    g[0] * d.x + g[1] * d.y + g[2] * d.z
+}
+
+/// `a bᵀ`.
+fn outer(a: DVec3, b: DVec3) -> DMat3 {
+    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
+/// Where the receiver samples `sr` look in the source samples `ss` (of a source of area
+/// `area`): the mean of the source samples weighted by the summed point-to-point kernel
+/// `cos_r cos_s / (π d² + area / n)` from every receiver sample, minus their plain mean (scene
+/// units). Zero when no pair faces.
+fn seen_offset(sr: &[Sample], ss: &[Sample], area: f64) -> DVec3 {
+    if ss.len() < 2 {
+        return DVec3::ZERO;
+    }
+    let a = area / ss.len() as f64;
+    let (mut wsum, mut wp) = (0.0, DVec3::ZERO);
+    let plain = ss.iter().map(|q| q.p).sum::<DVec3>() / ss.len() as f64;
+    for q in ss {
+        let mut w = 0.0;
+        for p in sr {
+            let dir = q.p - p.p;
+            let d2 = dir.length_squared();
+            if !(d2 > 0.0) {
+                continue;
+            }
+            let len = d2.sqrt();
+            let (ci, cj) = (p.n.dot(dir) / len, -q.n.dot(dir) / len);
+            if ci > 0.0 && cj > 0.0 {
+                w += ci * cj / (PI * d2 + a);
+            }
+        }
+        wsum += w;
+        wp += (q.p - plain) * w;
+    }
+    if wsum > 0.0 { wp / wsum } else { DVec3::ZERO }
 }
 
 /// The source radiosities the refinement oracle reads, per node (W/m², mean over RGB).
@@ -429,8 +485,9 @@ impl Refined {
 enum Decision {
     /// Split the receiver (`true`) or the source.
     Split(bool),
-    /// Keep the link with this `K`, power factor, spread, reach and shade (see [`Link`]).
-    Keep(f64, f64, f64, f64, f64),
+    /// Keep the link with this `K`, power factor, spread, reach, shade and `toward` (see
+    /// [`Link`]).
+    Keep(f64, f64, f64, f64, f64, DVec3),
     /// The link carries nothing.
     Drop,
 }
@@ -1079,7 +1136,7 @@ impl Hierarchy {
             };
             // A zero estimate is kept (as `K = 0`) for the next pass to test again: four
             // samples of a cluster may miss what it sees.
-            return Decision::Keep(t.k, power, spread, reach, 0.0);
+            return Decision::Keep(t.k, power, spread, reach, 0.0, DVec3::ZERO);
         };
         let f = &f[..n];
         let unoccluded = f.iter().sum::<f64>() / n as f64;
@@ -1115,7 +1172,7 @@ impl Hierarchy {
             }
             if hidden && tested {
                 // Kept as `K = 0` for the next pass to test again.
-                return Decision::Keep(0.0, power, spread, reach, 0.0);
+                return Decision::Keep(0.0, power, spread, reach, 0.0, DVec3::ZERO);
             }
             return split;
         }
@@ -1132,7 +1189,12 @@ impl Hierarchy {
             return Decision::Split(larger);
         }
         let v = if tested > 0.0 { seen / tested } else { 1.0 };
-        Decision::Keep(unoccluded * v, power, spread, reach, shade)
+        let toward = if ns.kids.is_some() {
+            seen_offset(sr, ss, ns.area)
+        } else {
+            DVec3::ZERO
+        };
+        Decision::Keep(unoccluded * v, power, spread, reach, shade, toward)
     }
 
     /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
@@ -1244,7 +1306,7 @@ impl Hierarchy {
                 out.refinements += 1;
                 split(&pairs, out);
             }
-            Decision::Keep(k, power, spread, reach, shade)
+            Decision::Keep(k, power, spread, reach, shade, toward)
                 if k > 0.0 || power > 0.0 || spread > 0.0 || reach > 0.0 =>
             {
                 out.links.push(Link {
@@ -1255,6 +1317,7 @@ impl Hierarchy {
                     spread,
                     reach,
                     shade,
+                    toward: toward.as_vec3().to_array(),
                 });
             }
             Decision::Keep(..) | Decision::Drop => {}
@@ -1262,8 +1325,16 @@ impl Hierarchy {
     }
 
     /// Irradiance gathered by every node along `links` (sorted by receiver) from the node
-    /// radiosities `b` (W/m²).
+    /// radiosities `b` (W/m²), each source taken as uniform.
     pub fn gather(&self, links: &[Link], b: &[DVec3]) -> Vec<DVec3> {
+        self.gather_linear(links, b, &[])
+    }
+
+    /// [`Hierarchy::gather`] with the sources' radiosity gradients `g` (per node, empty for
+    /// none, see [`Hierarchy::gradients`]): a link gathers its source's radiosity at the
+    /// link's `toward` offset from the source's centre (kept within zero and twice the mean),
+    /// not its mean.
+    pub fn gather_linear(&self, links: &[Link], b: &[DVec3], g: &[Gradient]) -> Vec<DVec3> {
         let mut starts = Vec::new();
         for (i, l) in links.iter().enumerate() {
             if i == 0 || links[i - 1].receiver != l.receiver {
@@ -1277,7 +1348,17 @@ impl Hierarchy {
                 let group = &links[w[0]..w[1]];
                 let h = group
                     .iter()
-                    .map(|l| b[l.source as usize] * l.k)
+                    .map(|l| {
+                        let s = l.source as usize;
+                        let b = match g.get(s) {
+                            Some(g) if l.toward != [0.0; 3] => {
+                                let t = DVec3::from(l.toward.map(f64::from));
+                                (b[s] + along(g, t)).clamp(DVec3::ZERO, 2.0 * b[s])
+                            }
+                            _ => b[s],
+                        };
+                        b * l.k
+                    })
                     .sum::<DVec3>();
                 (group[0].receiver, h)
             })
@@ -1301,6 +1382,85 @@ impl Hierarchy {
             }
         }
         self.leaf.iter().map(|&n| acc[n as usize]).collect()
+    }
+
+    /// The least-squares gradient of the radiosity across every surface node (zero for leaves
+    /// and clusters): with `b` the node radiosities (from [`Hierarchy::pull`]) and `inverse`
+    /// from [`Hierarchy::moments`], `inverse × Σ A_leaf B_leaf (x_leaf - center)` per channel.
+    /// A first-order model of an uneven source: the part of a floor under a light, which the
+    /// walls see most, is brighter than the floor's mean.
+    pub fn gradients(&self, b: &[DVec3], inverse: &[DMat3]) -> Vec<Gradient> {
+        // Per node, Σ over its elements of A B (x - center), per axis (RGB each).
+        let mut s = vec![[DVec3::ZERO; 3]; self.nodes.len()];
+        for i in 0..self.nodes.len() {
+            let n = &self.nodes[i];
+            if let (Some(kids), true) = (n.kids, n.polygon != NO_POLYGON) {
+                let mut acc = [DVec3::ZERO; 3];
+                for k in kids {
+                    let (c, d) = (
+                        &self.nodes[k as usize],
+                        self.nodes[k as usize].center - n.center,
+                    );
+                    let ab = b[k as usize] * c.area;
+                    for (a, (sk, dk)) in acc.iter_mut().zip(s[k as usize].iter().zip(d.to_array()))
+                    {
+                        *a += *sk + ab * dk;
+                    }
+                }
+                s[i] = acc;
+            }
+        }
+        s.iter()
+            .zip(inverse)
+            .map(|(s, m)| {
+                // g[axis][channel] = Σ_j m[axis][j] s[j][channel].
+                let mut g = [DVec3::ZERO; 3];
+                for (axis, ga) in g.iter_mut().enumerate() {
+                    for (j, sj) in s.iter().enumerate() {
+                        *ga += *sj * m.col(j)[axis];
+                    }
+                }
+                g
+            })
+            .collect()
+    }
+
+    /// Per node, the inverse of the second moment of its elements' centroids about its centre,
+    /// area-weighted (`Σ A (x - c)(x - c)ᵀ`, scene units⁴), plus [`REGULARIZATION`] of its
+    /// trace on the diagonal (a surface node is flat, so the moment is singular along the
+    /// normal, and a strip of elements nearly so across it); zero for leaves
+    /// and clusters. The elements are taken as points, each at its radiosity: they sample a
+    /// smooth radiosity, whose gradient the fit recovers exactly where it is linear.
+    pub fn moments(&self) -> Vec<DMat3> {
+        let mut m = vec![DMat3::ZERO; self.nodes.len()];
+        for i in 0..self.nodes.len() {
+            if let Some(kids) = self.nodes[i].kids {
+                let mut acc = DMat3::ZERO;
+                for k in kids {
+                    let (c, d) = (
+                        &self.nodes[k as usize],
+                        self.nodes[k as usize].center - self.nodes[i].center,
+                    );
+                    acc += m[k as usize] + outer(d, d) * c.area;
+                }
+                m[i] = acc;
+            }
+        }
+        m.iter()
+            .zip(&self.nodes)
+            .map(|(m, n)| {
+                if n.kids.is_none() || n.polygon == NO_POLYGON {
+                    return DMat3::ZERO;
+                }
+                let tr = m.x_axis.x + m.y_axis.y + m.z_axis.z;
+                let r = *m + DMat3::IDENTITY * (REGULARIZATION * tr);
+                if tr > 0.0 && r.determinant().abs() > 0.0 {
+                    r.inverse()
+                } else {
+                    DMat3::ZERO
+                }
+            })
+            .collect()
     }
 
     /// Pull: every node's radiosity is the area-weighted mean of its elements' `b_elements`.
@@ -1437,6 +1597,7 @@ pub fn indirect(
     hs.nodes = h.nodes.len();
     hs.elements = h.elements.len();
     hs.clusters = h.clusters();
+    let moments = h.moments();
     hs.build_seconds = start.elapsed().as_secs_f64();
     let mean = |c: DVec3| c.element_sum() / 3.0;
     let els = &h.elements;
@@ -1497,7 +1658,9 @@ pub fn indirect(
             // Each pass restarts from the reflected direct light: the links changed.
             b_el.clone_from(&reflected_direct);
             loop {
-                let gathered = h.gather(&links, &h.pull(&b_el));
+                let b_nodes = h.pull(&b_el);
+                let grads = h.gradients(&b_nodes, &moments);
+                let gathered = h.gather_linear(&links, &b_nodes, &grads);
                 indirect = h.push(&gathered);
                 let next: Vec<DVec3> = els
                     .iter()

@@ -155,11 +155,15 @@ fn mean_luminance(b: &Bake) -> (f64, f64) {
     (all / n as f64, ind / n as f64)
 }
 
-/// Cornell box: the mean vertex irradiance of the hierarchical and the progressive solver agree.
+/// Cornell box: the mean vertex irradiance of the hierarchical and the progressive solver agree
+/// (the progressive solver's final gather at every vertex is within 0.2% of the Monte Carlo
+/// reference's mean in the lit region at the default budget).
 #[test]
 fn hierarchical_agrees_with_progressive_on_cornell_box() {
     let bytes = fixtures::cornell_box();
-    let p = bake(&bytes, &quick());
+    let mut progressive = quick();
+    progressive.solve.solver = Solver::Progressive;
+    let p = bake(&bytes, &progressive);
     let h = bake(&bytes, &hierarchical(quick()));
     let (ap, ip) = mean_luminance(&p);
     let (ah, ih) = mean_luminance(&h);
@@ -167,14 +171,69 @@ fn hierarchical_agrees_with_progressive_on_cornell_box() {
         ip > 0.2 * ap,
         "indirect {ip} of {ap}: the scene must have indirect light"
     );
+    eprintln!(
+        "mean H ratio {:.4}, mean indirect H ratio {:.4}",
+        ah / ap,
+        ih / ip
+    );
+    // Measured: 0.988 and 0.975; without the source radiosity gradients 0.982 and 0.961.
     assert!(
-        (ah / ap - 1.0).abs() < 0.03,
+        (ah / ap - 1.0).abs() < 0.015,
         "mean H: hierarchical {ah} vs progressive {ap}"
     );
     assert!(
-        (ih / ip - 1.0).abs() < 0.08,
+        (ih / ip - 1.0).abs() < 0.03,
         "mean indirect H: hierarchical {ih} vs progressive {ip}"
     );
+}
+
+/// The radiosity gradient of a surface node (`Hierarchy::gradients`) is exact for a radiosity
+/// that varies linearly across the polygon: on the Cornell box's largest polygon, elements
+/// given `B = a + g · x` (one gradient per channel) give its root node `g`'s component in the
+/// polygon's plane, to the fit's regularization (0.2% on a square).
+#[test]
+fn source_radiosity_gradient_is_exact_for_linear_radiosity() {
+    let b = bake(&fixtures::cornell_box(), &quick());
+    let vis = Visibility::new(&b.scene);
+    let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
+    let g = [
+        DVec3::new(0.7, 0.0, -0.2),
+        DVec3::new(0.0, 5.0, 1.5),
+        DVec3::new(-0.4, 0.0, 0.0),
+    ];
+    let centroid = |e: &penumbra::solve::hierarchical::Element| (e.p[0] + e.p[1] + e.p[2]) / 3.0;
+    let b_el: Vec<DVec3> = h
+        .elements
+        .iter()
+        .map(|e| {
+            let x = centroid(e);
+            DVec3::new(1.0 + g[0].dot(x), 2.0 + g[1].dot(x), 3.0 + g[2].dot(x))
+        })
+        .collect();
+    let grads = h.gradients(&h.pull(&b_el), &h.moments());
+    // The largest node of one polygon: a polygon's root.
+    let (i, n) = h
+        .nodes
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| n.polygon != penumbra::light::NO_POLYGON && n.kids.is_some())
+        .max_by(|a, b| a.1.area.total_cmp(&b.1.area))
+        .expect("a polygon with several elements");
+    let normal = n.normal;
+    for (c, gc) in g.iter().enumerate() {
+        let want = *gc - normal * gc.dot(normal);
+        let got = DVec3::new(grads[i][0][c], grads[i][1][c], grads[i][2][c]);
+        assert!(
+            (got - want).length() < 5e-3 * want.length() + 1e-12,
+            "channel {c}: gradient {got} against {want}"
+        );
+    }
+    // Leaves and clusters carry none.
+    for (j, n) in h.nodes.iter().enumerate() {
+        if n.kids.is_none() || n.polygon == penumbra::light::NO_POLYGON {
+            assert_eq!(grads[j], [DVec3::ZERO; 3]);
+        }
+    }
 }
 
 /// The bake's bytes do not depend on the thread count.
