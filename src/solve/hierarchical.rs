@@ -294,7 +294,7 @@ const PARALLEL_ELEMENTS: u32 = 2048;
 /// Most links; past it the refinement is redone with a 4× larger tolerance (a warning).
 pub const MAX_LINKS: usize = 30_000_000;
 
-/// The Tikhonov term of the radiosity-gradient fit ([`Hierarchy::moments`]), as a fraction of
+/// The Tikhonov term of the radiosity-gradient fit ([`Hierarchy::inverse_moments`]), as a fraction of
 /// the second moment's trace: it keeps the fit from amplifying noise across a nearly
 /// degenerate node, and shrinks a well-spread node's gradient by about 0.2%.
 pub const REGULARIZATION: f64 = 1e-3;
@@ -1407,7 +1407,7 @@ impl Hierarchy {
 
     /// The least-squares gradient of the radiosity across every surface node (zero for leaves
     /// and clusters): with `b` the node radiosities (from [`Hierarchy::pull`]) and `inverse`
-    /// from [`Hierarchy::moments`], `inverse × Σ A_leaf B_leaf (x_leaf - center)` per channel.
+    /// from [`Hierarchy::inverse_moments`], `inverse × Σ A_leaf B_leaf (x_leaf - center)` per channel.
     /// A first-order model of an uneven source: the part of a floor under a light, which the
     /// walls see most, is brighter than the floor's mean.
     pub fn gradients(&self, b: &[DVec3], inverse: &[DMat3]) -> Vec<Gradient> {
@@ -1452,7 +1452,7 @@ impl Hierarchy {
     /// normal, and a strip of elements nearly so across it); zero for leaves
     /// and clusters. The elements are taken as points, each at its radiosity: they sample a
     /// smooth radiosity, whose gradient the fit recovers exactly where it is linear.
-    pub fn moments(&self) -> Vec<DMat3> {
+    pub fn inverse_moments(&self) -> Vec<DMat3> {
         let mut m = vec![DMat3::ZERO; self.nodes.len()];
         for i in 0..self.nodes.len() {
             if let Some(kids) = self.nodes[i].kids {
@@ -1618,7 +1618,7 @@ pub fn indirect(
     hs.nodes = h.nodes.len();
     hs.elements = h.elements.len();
     hs.clusters = h.clusters();
-    let moments = h.moments();
+    let moments = h.inverse_moments();
     hs.build_seconds = start.elapsed().as_secs_f64();
     let mean = |c: DVec3| c.element_sum() / 3.0;
     let els = &h.elements;

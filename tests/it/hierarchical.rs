@@ -210,7 +210,7 @@ fn source_radiosity_gradient_is_exact_for_linear_radiosity() {
             DVec3::new(1.0 + g[0].dot(x), 2.0 + g[1].dot(x), 3.0 + g[2].dot(x))
         })
         .collect();
-    let grads = h.gradients(&h.pull(&b_el), &h.moments());
+    let grads = h.gradients(&h.pull(&b_el), &h.inverse_moments());
     // The largest node of one polygon: a polygon's root.
     let (i, n) = h
         .nodes
