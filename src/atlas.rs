@@ -512,107 +512,103 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
     };
     loop {
         let tried = info.texels_per_unit;
-        if pack_options.resolution == 0 {
-            // The sizing packing: pack onto the page at its density if the grown page is no
-            // larger, else at the density at which the charts, packed as tightly, fill it.
-            let next = {
+        let next = 'next: {
+            if pack_options.resolution == 0 {
+                // The sizing packing: pack onto the page at its density if the grown page is no
+                // larger, else at the density at which the charts, packed as tightly, fill it.
+                let next = {
+                    let meshes = output_meshes(&mut xatlas, added.len())?;
+                    let boxes = chart_boxes(&meshes);
+                    let side = info.width.max(info.height);
+                    if side <= resolution && largest_side(&boxes) <= max_chart_size as f32 - 0.5 {
+                        tried
+                    } else {
+                        let page = f64::from(resolution).powi(2);
+                        let grown = f64::from(info.width) * f64::from(info.height);
+                        let held = boxes_area(boxes.iter(), options.padding) * page / grown;
+                        match fitting_density(&boxes, tried, options.padding, held) {
+                            Some(e) => (e * ESTIMATE_MARGIN).min(tried * 0.99),
+                            None => tried * 0.9 * resolution as f32 / side as f32,
+                        }
+                    }
+                };
+                pack_options.resolution = resolution;
+                pack_options.attempts = PACK_ATTEMPTS_PER_CHART;
+                break 'next next;
+            }
+            let (shrink, estimate) = {
                 let meshes = output_meshes(&mut xatlas, added.len())?;
                 let boxes = chart_boxes(&meshes);
-                let side = info.width.max(info.height);
-                if side <= resolution && largest_side(&boxes) <= max_chart_size as f32 - 0.5 {
-                    tried
-                } else {
-                    let page = f64::from(resolution).powi(2);
-                    let grown = f64::from(info.width) * f64::from(info.height);
-                    let held = boxes_area(boxes.iter(), options.padding) * page / grown;
-                    match fitting_density(&boxes, tried, options.padding, held) {
-                        Some(e) => (e * ESTIMATE_MARGIN).min(tried * 0.99),
-                        None => tried * 0.9 * resolution as f32 / side as f32,
-                    }
+                let shrink = fixed_page_shrink(&meshes, &boxes, &info, max_chart_size);
+                if shrink.is_none() && fitting.is_none_or(|f| tried > f) {
+                    best_output = Some(collect_output(inputs, &added, &meshes, &info, false)?);
                 }
-            };
-            pack_options.resolution = resolution;
-            pack_options.attempts = PACK_ATTEMPTS_PER_CHART;
-            pack_options.texels_per_unit = next;
-            attempts += 1;
-            // SAFETY: as for the re-packing below.
-            unsafe {
-                ffi::pack_charts(handle, pack_options, None, ptr::null_mut());
-                info = PackInfo::read(handle);
-            }
-            continue;
-        }
-        let (shrink, estimate) = {
-            let meshes = output_meshes(&mut xatlas, added.len())?;
-            let boxes = chart_boxes(&meshes);
-            let shrink = fixed_page_shrink(&meshes, &boxes, &info, max_chart_size);
-            if shrink.is_none() && fitting.is_none_or(|f| tried > f) {
-                best_output = Some(collect_output(inputs, &added, &meshes, &info, false)?);
-            }
-            let estimate = match shrink {
-                Some(_) if info.atlas_count > 1 => {
-                    let full = boxes_area(boxes.iter().filter(|b| b.page == 0), options.padding);
-                    fitting_density(&boxes, tried, options.padding, full)
-                }
-                _ => None,
-            };
-            (shrink, estimate)
-        };
-        // Once a packing fit, the next density closes the bracket from the side of the last
-        // packing by at most `BRACKET`, or halves it: when the estimate was good, one more
-        // packing settles it.
-        let next = match shrink {
-            None => {
-                fitting = Some(fitting.map_or(tried, |f| f.max(tried)));
-                match failing {
-                    Some(hi) if refinements < REFINEMENTS && hi > tried * BRACKET => {
-                        refinements += 1;
-                        Some((0.5 * (tried + hi)).min(tried * BRACKET))
-                    }
-                    // Nothing overflowed yet: the density came from the sizing packing's
-                    // estimate, which packs less tightly than a proper packing (its few
-                    // placements), so try denser, up to a density the caller gave.
-                    None if refinements < REFINEMENTS
-                        && user_density.is_none_or(|c| tried * BRACKET <= c) =>
-                    {
-                        refinements += 1;
-                        Some(tried * BRACKET)
+                let estimate = match shrink {
+                    Some(_) if info.atlas_count > 1 => {
+                        let full =
+                            boxes_area(boxes.iter().filter(|b| b.page == 0), options.padding);
+                        fitting_density(&boxes, tried, options.padding, full)
                     }
                     _ => None,
-                }
-            }
-            Some(factor) => {
-                failing = Some(failing.map_or(tried, |f| f.min(tried)));
-                match fitting {
-                    None => Some(match estimate {
-                        Some(e) => {
-                            let margin = (1.0 - ESTIMATE_MARGIN) * (1 << misses.min(4)) as f32;
-                            misses += 1;
-                            (e * (1.0 - margin)).min(tried * 0.99)
+                };
+                (shrink, estimate)
+            };
+            // Once a packing fit, the next density closes the bracket from the side of the last
+            // packing by at most `BRACKET`, or halves it: when the estimate was good, one more
+            // packing settles it.
+            let next = match shrink {
+                None => {
+                    fitting = Some(fitting.map_or(tried, |f| f.max(tried)));
+                    match failing {
+                        Some(hi) if refinements < REFINEMENTS && hi > tried * BRACKET => {
+                            refinements += 1;
+                            Some((0.5 * (tried + hi)).min(tried * BRACKET))
                         }
-                        None => tried * factor,
-                    }),
-                    Some(lo) if refinements < REFINEMENTS && tried > lo * BRACKET => {
-                        refinements += 1;
-                        Some((0.5 * (lo + tried)).max(tried / BRACKET))
+                        // Nothing overflowed yet: the density came from the sizing packing's
+                        // estimate, which packs less tightly than a proper packing (its few
+                        // placements), so try denser, up to a density the caller gave.
+                        None if refinements < REFINEMENTS
+                            && user_density.is_none_or(|c| tried * BRACKET <= c) =>
+                        {
+                            refinements += 1;
+                            Some(tried * BRACKET)
+                        }
+                        _ => None,
                     }
-                    Some(_) => None,
                 }
-            }
-        };
-        let next = match (next, best_output.take()) {
-            (Some(next), best) if attempts < MAX_PACK_ATTEMPTS => {
-                best_output = best;
-                next
-            }
-            // Done: the densest packing that fit.
-            (_, Some(best)) => return Ok(best),
-            (_, None) => {
-                return Err(AtlasError::DoesNotFit {
-                    resolution,
-                    texels_per_unit: tried,
-                    attempts,
-                });
+                Some(factor) => {
+                    failing = Some(failing.map_or(tried, |f| f.min(tried)));
+                    match fitting {
+                        None => Some(match estimate {
+                            Some(e) => {
+                                let margin = (1.0 - ESTIMATE_MARGIN) * (1 << misses.min(4)) as f32;
+                                misses += 1;
+                                (e * (1.0 - margin)).min(tried * 0.99)
+                            }
+                            None => tried * factor,
+                        }),
+                        Some(lo) if refinements < REFINEMENTS && tried > lo * BRACKET => {
+                            refinements += 1;
+                            Some((0.5 * (lo + tried)).max(tried / BRACKET))
+                        }
+                        Some(_) => None,
+                    }
+                }
+            };
+            match (next, best_output.take()) {
+                (Some(next), best) if attempts < MAX_PACK_ATTEMPTS => {
+                    best_output = best;
+                    next
+                }
+                // Done: the densest packing that fit.
+                (_, Some(best)) => return Ok(best),
+                (_, None) => {
+                    return Err(AtlasError::DoesNotFit {
+                        resolution,
+                        texels_per_unit: tried,
+                        attempts,
+                    });
+                }
             }
         };
         attempts += 1;

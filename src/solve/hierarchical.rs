@@ -507,9 +507,8 @@ impl Refined {
 enum Decision {
     /// Split the receiver (`true`) or the source.
     Split(bool),
-    /// Keep the link with this `K`, power factor, spread, reach, shade and `toward` (see
-    /// [`Link`]).
-    Keep(f64, f64, f64, f64, f64, DVec3),
+    /// Keep this link.
+    Keep(Link),
     /// The link carries nothing.
     Drop,
 }
@@ -1124,6 +1123,19 @@ impl Hierarchy {
             (Some(_), Some(_)) => nr.area >= ns.area,
             (r, _) => r.is_some(),
         };
+        // The kept link `r ← s` (the oracle's factors in f32, see `Link`).
+        let keep = |k: f64, power: f64, spread: f64, reach: f64, shade: f64, toward: DVec3| {
+            Decision::Keep(Link {
+                receiver: r,
+                source: s,
+                k,
+                power: power as f32,
+                spread: spread as f32,
+                reach: reach as f32,
+                shade: shade as f32,
+                toward: toward.as_vec3().to_array(),
+            })
+        };
         let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
             *rays += 1;
             !vis.occluded_skipping(a.ray, b.ray, [a.polygon, b.polygon])
@@ -1158,7 +1170,7 @@ impl Hierarchy {
             };
             // A zero estimate is kept (as `K = 0`) for the next pass to test again: four
             // samples of a cluster may miss what it sees.
-            return Decision::Keep(t.k, power, spread, reach, 0.0, DVec3::ZERO);
+            return keep(t.k, power, spread, reach, 0.0, DVec3::ZERO);
         };
         let f = &f[..n];
         let unoccluded = f.iter().sum::<f64>() / n as f64;
@@ -1194,7 +1206,7 @@ impl Hierarchy {
             }
             if hidden && tested {
                 // Kept as `K = 0` for the next pass to test again.
-                return Decision::Keep(0.0, power, spread, reach, 0.0, DVec3::ZERO);
+                return keep(0.0, power, spread, reach, 0.0, DVec3::ZERO);
             }
             return split;
         }
@@ -1216,7 +1228,7 @@ impl Hierarchy {
         } else {
             DVec3::ZERO
         };
-        Decision::Keep(unoccluded * v, power, spread, reach, shade, toward)
+        keep(unoccluded * v, power, spread, reach, shade, toward)
     }
 
     /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
@@ -1328,19 +1340,8 @@ impl Hierarchy {
                 out.refinements += 1;
                 split(&pairs, out);
             }
-            Decision::Keep(k, power, spread, reach, shade, toward)
-                if k > 0.0 || power > 0.0 || spread > 0.0 || reach > 0.0 =>
-            {
-                out.links.push(Link {
-                    receiver: r,
-                    source: s,
-                    k,
-                    power: power as f32,
-                    spread: spread as f32,
-                    reach: reach as f32,
-                    shade: shade as f32,
-                    toward: toward.as_vec3().to_array(),
-                });
+            Decision::Keep(l) if l.k > 0.0 || l.power > 0.0 || l.spread > 0.0 || l.reach > 0.0 => {
+                out.links.push(l);
             }
             Decision::Keep(..) | Decision::Drop => {}
         }
