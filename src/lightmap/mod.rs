@@ -363,6 +363,11 @@ pub fn rasterize(
             let mut sum = vec![DVec3::ZERO; size];
             let mut count = vec![0u32; size];
             let mut claimed = vec![0u64; size];
+            // Buried or not at the texel corners of the band, found once per corner and mesh:
+            // the triangles of one chart share their corners (the point, the mesh and the
+            // answer are kept; a corner another mesh or chart reached first is tested again).
+            let cw = w + 1;
+            let mut corner: Vec<Option<(DVec3, usize, bool)>> = vec![None; cw * (y_hi - y_lo + 1)];
             for &ti in &by_band[b] {
                 let t = &tris[ti as usize];
                 let area = (t.uv[1] - t.uv[0]).perp_dot(t.uv[2] - t.uv[0]);
@@ -381,23 +386,22 @@ pub fn rasterize(
                     t.world[0] * l0 + t.world[1] * l1 + t.world[2] * l2
                 };
                 // Buried or not at the texel corners (on the triangle's plane, also beyond
-                // its edges), found once per corner: a texel whose four corners agree takes
-                // their answer for all its sub-samples; one whose corners differ (a contact
-                // line crosses it) tests every sub-sample.
+                // its edges): a texel whose four corners agree takes their answer for all its
+                // sub-samples; one whose corners differ (a contact line crosses it) tests every
+                // sub-sample.
                 let mut hint = None;
-                let cw = x1 - x0 + 2;
-                let mut corner = vec![0u8; cw * (yb + 2 - ya)];
+                let same = 1e-9 * scene.extent();
                 let mut corner_buried = |cx: usize, cy: usize| {
-                    let c = &mut corner[(cy - ya) * cw + cx - x0];
-                    if *c == 0 {
-                        let q = DVec2::new(cx as f64, cy as f64);
-                        *c = if vis.buried(world(q), poly.frame.n) {
-                            2
-                        } else {
-                            1
-                        };
+                    let p = world(DVec2::new(cx as f64, cy as f64));
+                    let c = &mut corner[(cy - y_lo) * cw + cx];
+                    match *c {
+                        Some((q, m, b)) if m == t.mesh && q.distance(p) <= same => b,
+                        _ => {
+                            let b = vis.buried(p, poly.frame.n);
+                            *c = Some((p, t.mesh, b));
+                            b
+                        }
                     }
-                    *c == 2
                 };
                 for y in ya..=yb {
                     for x in x0..=x1 {
