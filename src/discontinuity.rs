@@ -413,7 +413,7 @@ fn trace(
                 if w.skip.contains(&r) || !faces_light(scene, r, w) {
                     continue;
                 }
-                for (a, b) in clip_wedge_to_polygon(scene, r, w, tol) {
+                for (a, b) in clip_wedge_to_polygon(scene, index, r, w, tol) {
                     for (a, b, visible) in split_by_visibility(scene, vis, r, w, a, b, extent) {
                         if !visible {
                             hidden += 1;
@@ -490,6 +490,122 @@ struct PolygonIndex {
     bvh: obvhs::bvh2::Bvh2,
     boxes: Vec<Aabb>,
     center: DVec3,
+    /// Per polygon of at least [`GRID_TRIANGLES`] triangles, a grid of them in its plane.
+    grids: Vec<Option<TriangleGrid>>,
+}
+
+/// Polygons with at least this many triangles get a [`TriangleGrid`]: a ground plane cut
+/// around thousands of buildings has tens of thousands, and every wedge that reaches it would
+/// otherwise clip against each.
+const GRID_TRIANGLES: usize = 32;
+
+/// A uniform grid over a polygon's triangles, in its plane coordinates: each cell lists the
+/// triangles (indices into the polygon's list) whose bounding boxes meet it. About one cell
+/// per triangle.
+struct TriangleGrid {
+    min: DVec2,
+    cell: f64,
+    nx: usize,
+    ny: usize,
+    /// Cell `(i, j)`'s triangles are `ids[starts[j nx + i]..starts[j nx + i + 1]]`.
+    starts: Vec<u32>,
+    ids: Vec<u32>,
+}
+
+impl TriangleGrid {
+    fn new(triangles: &[[DVec2; 3]]) -> TriangleGrid {
+        let boxes: Vec<(DVec2, DVec2)> = triangles
+            .iter()
+            .map(|t| (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
+            .collect();
+        let min = boxes.iter().fold(DVec2::INFINITY, |m, b| m.min(b.0));
+        let max = boxes.iter().fold(DVec2::NEG_INFINITY, |m, b| m.max(b.1));
+        let size = (max - min).max(DVec2::splat(1e-300));
+        let cell = (size.x * size.y / triangles.len() as f64)
+            .sqrt()
+            .max(size.x.max(size.y) / 1024.0);
+        let nx = ((size.x / cell).ceil() as usize).clamp(1, 1024);
+        let ny = ((size.y / cell).ceil() as usize).clamp(1, 1024);
+        let mut grid = TriangleGrid {
+            min,
+            cell,
+            nx,
+            ny,
+            starts: vec![0; nx * ny + 1],
+            ids: Vec::new(),
+        };
+        let range = |g: &TriangleGrid, (lo, hi): (DVec2, DVec2)| (g.at(lo), g.at(hi));
+        // Count, then fill (compressed rows).
+        for b in &boxes {
+            let ((i0, j0), (i1, j1)) = range(&grid, *b);
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    grid.starts[j * nx + i + 1] += 1;
+                }
+            }
+        }
+        for k in 0..nx * ny {
+            grid.starts[k + 1] += grid.starts[k];
+        }
+        let mut next = grid.starts.clone();
+        grid.ids = vec![0; grid.starts[nx * ny] as usize];
+        for (t, b) in boxes.iter().enumerate() {
+            let ((i0, j0), (i1, j1)) = range(&grid, *b);
+            for j in j0..=j1 {
+                for i in i0..=i1 {
+                    let slot = &mut next[j * nx + i];
+                    grid.ids[*slot as usize] = t as u32;
+                    *slot += 1;
+                }
+            }
+        }
+        grid
+    }
+
+    /// The cell holding plane point `p` (clamped into the grid).
+    fn at(&self, p: DVec2) -> (usize, usize) {
+        let c = ((p - self.min) / self.cell).floor();
+        let clamp = |v: f64, n: usize| {
+            if v.is_nan() || v < 0.0 {
+                0
+            } else {
+                (v as usize).min(n - 1)
+            }
+        };
+        (clamp(c.x, self.nx), clamp(c.y, self.ny))
+    }
+
+    /// The triangles (sorted, each once) whose boxes come within `margin` of the segment
+    /// `p-q`: every triangle the segment passes within `margin` of is among them.
+    fn near_segment(&self, p: DVec2, q: DVec2, margin: f64) -> Vec<u32> {
+        let mut out = Vec::new();
+        let (lo, hi) = (p.min(q) - margin, p.max(q) + margin);
+        let (i0, _) = self.at(lo);
+        let (i1, _) = self.at(hi);
+        let dx = q.x - p.x;
+        for i in i0..=i1 {
+            // The segment's y range over this column's x range (widened by `margin`).
+            let xa = (self.min.x + i as f64 * self.cell - margin).max(lo.x);
+            let xb = (self.min.x + (i + 1) as f64 * self.cell + margin).min(hi.x);
+            let (ya, yb) = if dx.abs() > 1e-300 {
+                let y = |x: f64| p.y + (q.y - p.y) * ((x - p.x) / dx).clamp(0.0, 1.0);
+                (y(xa).min(y(xb)), y(xa).max(y(xb)))
+            } else {
+                (p.y.min(q.y), p.y.max(q.y))
+            };
+            let (_, j0) = self.at(DVec2::new(xa, ya - margin));
+            let (_, j1) = self.at(DVec2::new(xb, yb + margin));
+            for j in j0..=j1 {
+                let k = j * self.nx + i;
+                out.extend_from_slice(
+                    &self.ids[self.starts[k] as usize..self.starts[k + 1] as usize],
+                );
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
 }
 
 impl PolygonIndex {
@@ -519,7 +635,20 @@ impl PolygonIndex {
                 &mut std::time::Duration::default(),
             )
         };
-        PolygonIndex { bvh, boxes, center }
+        let grids = scene
+            .polygons
+            .par_iter()
+            .map(|p| {
+                (p.triangles_plane.len() >= GRID_TRIANGLES)
+                    .then(|| TriangleGrid::new(&p.triangles_plane))
+            })
+            .collect();
+        PolygonIndex {
+            bvh,
+            boxes,
+            center,
+            grids,
+        }
     }
 
     /// Polygons whose boxes meet the box of `points`, sorted.
@@ -623,7 +752,7 @@ fn contacts(scene: &Scene, index: &PolygonIndex, r: usize, tol: f64) -> Vec<(DVe
             // outline (a contact along the outline adds nothing).
             let a = a - frame.n * frame.n.dot(a - frame.origin);
             let b = b - frame.n * frame.n.dot(b - frame.origin);
-            for (p, q) in clip_segment_to_polygon(scene, r, a, b, &[], tol) {
+            for (p, q) in clip_segment_to_polygon(scene, index, r, a, b, &[], tol) {
                 if !on_outline(
                     poly,
                     frame.plane_from_world(p),
@@ -654,6 +783,7 @@ fn on_outline(poly: &crate::scene::Polygon, a: DVec2, b: DVec2, tol: f64) -> boo
 /// extra half-spaces; returns the pieces, merged where they touch.
 fn clip_segment_to_polygon(
     scene: &Scene,
+    index: &PolygonIndex,
     r: usize,
     a: DVec3,
     b: DVec3,
@@ -689,8 +819,23 @@ fn clip_segment_to_polygon(
         return Vec::new();
     }
     let mut intervals = Vec::new();
-    for &t in &poly.triangles {
-        let p = scene.triangles[t].p;
+    // The triangles the clipped segment can reach: all, or those its grid cells list (a
+    // triangle farther than `tol` from the segment yields no interval either way).
+    let near = index.grids[r].as_ref().map(|g| {
+        let f = &poly.frame;
+        let (p, q) = (
+            f.plane_from_world(a + u * lo0),
+            f.plane_from_world(a + u * hi0),
+        );
+        g.near_segment(p, q, tol)
+    });
+    let all = 0..poly.triangles.len() as u32;
+    let reached: Box<dyn Iterator<Item = u32>> = match &near {
+        Some(near) => Box::new(near.iter().copied()),
+        None => Box::new(all),
+    };
+    for k in reached {
+        let p = scene.triangles[poly.triangles[k as usize]].p;
         let (mut lo, mut hi) = (lo0, hi0);
         let centroid = (p[0] + p[1] + p[2]) / 3.0;
         for e in 0..3 {
@@ -1023,7 +1168,13 @@ fn faces_light(scene: &Scene, r: usize, w: &Wedge) -> bool {
 }
 
 /// The wedge's intersection with receiver `r`, as 3D segments inside the polygon.
-fn clip_wedge_to_polygon(scene: &Scene, r: usize, w: &Wedge, tol: f64) -> Vec<(DVec3, DVec3)> {
+fn clip_wedge_to_polygon(
+    scene: &Scene,
+    index: &PolygonIndex,
+    r: usize,
+    w: &Wedge,
+    tol: f64,
+) -> Vec<(DVec3, DVec3)> {
     let f = &scene.polygons[r].frame;
     // Line of the two planes.
     let dir = w.normal.cross(f.n);
@@ -1039,7 +1190,7 @@ fn clip_wedge_to_polygon(scene: &Scene, r: usize, w: &Wedge, tol: f64) -> Vec<(D
     let reach = scene.extent() * 4.0 + (point - f.origin).length();
     let a = point - dir * reach;
     let b = point + dir * reach;
-    clip_segment_to_polygon(scene, r, a, b, &w.half_spaces, tol)
+    clip_segment_to_polygon(scene, index, r, a, b, &w.half_spaces, tol)
 }
 
 /// Splits a wedge piece by whether its generator is visible from the receiver and from the
