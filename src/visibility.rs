@@ -215,7 +215,7 @@ impl Visibility {
         }
         // Buried when more than half of all `BURIED_RAYS + 1` rays meet a back face: stop as
         // soon as the count decides it either way (same answer as casting them all).
-        let need = (BURIED_RAYS + 1) / 2 + 1;
+        let need = BURIED_RAYS.div_ceil(2) + 1;
         let mut backs = 1;
         for k in 0..BURIED_RAYS {
             if backs >= need || backs + (BURIED_RAYS - k) < need {
