@@ -410,7 +410,10 @@ fn trace(
                 return (out, hidden, 1);
             }
             for r in index.query(&w.hull) {
-                if w.skip.contains(&r) || !faces_light(scene, r, w) {
+                if w.skip.contains(&r)
+                    || !index.plane_meets(r, w.origin, w.normal)
+                    || !faces_light(scene, r, w)
+                {
                     continue;
                 }
                 for (a, b) in clip_wedge_to_polygon(scene, index, r, w, tol) {
@@ -649,6 +652,15 @@ impl PolygonIndex {
             center,
             grids,
         }
+    }
+
+    /// True when the plane through `origin` with unit `normal` meets polygon `r`'s (padded)
+    /// bounding box: a wedge whose plane misses it cannot cross the polygon.
+    fn plane_meets(&self, r: usize, origin: DVec3, normal: DVec3) -> bool {
+        let b = &self.boxes[r];
+        let (lo, hi) = (b.min.as_dvec3(), b.max.as_dvec3());
+        let (c, h) = ((lo + hi) * 0.5 + self.center, (hi - lo) * 0.5);
+        normal.dot(c - origin).abs() <= normal.abs().dot(h)
     }
 
     /// Polygons whose boxes meet the box of `points`, sorted.
