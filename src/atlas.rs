@@ -314,6 +314,19 @@ pub struct Atlas {
 /// xatlas-rs, and [`AtlasOptions`] for how the pages are sized (with a fixed resolution it lowers
 /// the texel density until all charts fit on one page; with a fixed density it adds pages).
 pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, AtlasError> {
+    pack_estimating(inputs, options, &mut |_| {})
+}
+
+/// [`pack`], calling `estimate` once, as early as it is known, with the density the packing
+/// starts from (texels per unit of the inputs): the caller's density with pages, else the
+/// density the sizing packing estimates fills the fixed page (the final density is within a
+/// few percent of it, after some seconds more of packing on large scenes). Not called when
+/// packing fails before that.
+pub fn pack_estimating(
+    inputs: &[AtlasInput<'_>],
+    options: &AtlasOptions,
+    estimate: &mut dyn FnMut(f32),
+) -> Result<Atlas, AtlasError> {
     let sizing = Sizing::from_options(options)?;
     let stats = check_inputs(inputs)?;
     if stats.triangles == 0 || stats.area <= 0.0 {
@@ -339,6 +352,7 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
             page_size,
         } => {
             check_density(stats.area, texels_per_unit)?;
+            estimate(texels_per_unit);
             let size = page_size.saturating_sub(options.padding + 1);
             if size < 1 {
                 return Err(AtlasError::InvalidOptions {
@@ -534,6 +548,7 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
                 };
                 pack_options.resolution = resolution;
                 pack_options.attempts = PACK_ATTEMPTS_PER_CHART;
+                estimate(next);
                 break 'next next;
             }
             let (shrink, estimate) = {

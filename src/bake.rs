@@ -213,48 +213,78 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     let vis = stage(&mut t.visibility, "visibility", progress, || {
         Visibility::new(&scene)
     });
-    // The atlas depends on the scene only: it runs before the mesh and the solve, so a request
-    // that cannot be packed fails before them. The discontinuity stage's wedges do not depend
-    // on it (only how many pieces the element budget keeps, which `mesh_scene` applies): they
-    // are traced meanwhile, on the core xatlas's single-threaded packing leaves idle (a failed
-    // atlas is reported once they are done).
-    let (atlas, traced) = rayon::join(
-        || {
-            stage(&mut t.atlas, "atlas", progress, || {
-                scene_atlas(gltf, &scene, options)
-            })
-        },
-        || {
-            (options.mesher == Mesher::Discontinuity).then(|| {
-                stage(&mut t.discontinuity, "discontinuity", progress, || {
-                    discontinuity::segments(&scene, &vis, &dm_options(options, usize::MAX))
-                })
-            })
-        },
-    );
-    let atlas = atlas?;
-    let (segments, meshes) = mesh_scene(
-        &scene,
-        &vis,
-        options,
-        atlas.texels_per_unit as f64,
-        traced,
-        &mut stats,
-        progress,
-    );
-    if meshes.iter().all(|m| m.triangles.is_empty()) {
-        return Err(Error::EmptyScene {
-            path: gltf.path.clone(),
+    // The atlas depends on the scene only, and only the lightmap needs it: xatlas packs on a
+    // thread of its own (single-threaded) while the other stages run. The default element
+    // budget follows the atlas's texel density, so the mesh waits for the atlas's first
+    // estimate of it (`atlas::pack_estimating`: its sizing packing, a fraction of the atlas's
+    // time) and not for its final packing. The discontinuity stage's wedges do not depend on
+    // the budget (only how many pieces it keeps, which `mesh_scene` applies): they are traced
+    // meanwhile.
+    let (work, (atlas, atlas_seconds)) = std::thread::scope(|s| {
+        let (sender, estimate) = std::sync::mpsc::channel();
+        let (scene, vis) = (&scene, &vis);
+        let packing = s.spawn(move || {
+            let start = std::time::Instant::now();
+            let atlas = scene_atlas(gltf, scene, options, &mut |t| {
+                // Once the bake stopped waiting for the estimate, nobody hears it: no matter.
+                let _ = sender.send(t);
+            });
+            (atlas, start.elapsed().as_secs_f64())
         });
-    }
-    let t = &mut stats.timings_s;
-    let solution = stage(&mut t.solve, "solve", progress, || {
-        solve::radiosity(&scene, &vis, &meshes, &options.solve, progress)
+        // The stages up to the solve; `None` when the atlas failed before its estimate.
+        let mut work = || {
+            let t = &mut stats.timings_s;
+            let traced = (options.mesher == Mesher::Discontinuity).then(|| {
+                stage(&mut t.discontinuity, "discontinuity", progress, || {
+                    discontinuity::segments(scene, vis, &dm_options(options, usize::MAX))
+                })
+            });
+            let texels_per_unit = estimate.recv().ok()?;
+            let (segments, meshes) = mesh_scene(
+                scene,
+                vis,
+                options,
+                texels_per_unit,
+                traced,
+                &mut stats,
+                progress,
+            );
+            if meshes.iter().all(|m| m.triangles.is_empty()) {
+                return Some(Err(Error::EmptyScene {
+                    path: gltf.path.clone(),
+                }));
+            }
+            let t = &mut stats.timings_s;
+            let solution = stage(&mut t.solve, "solve", progress, || {
+                solve::radiosity(scene, vis, &meshes, &options.solve, progress)
+            });
+            Some(Ok((segments, meshes, solution)))
+        };
+        let work = work();
+        // The progress shows the atlas only if the bake waits for it.
+        let waits = !packing.is_finished();
+        if waits {
+            progress("atlas", 0, 1);
+        }
+        let packed = match packing.join() {
+            Ok(packed) => packed,
+            Err(panic) => std::panic::resume_unwind(panic),
+        };
+        if waits {
+            progress("atlas", 1, 1);
+        }
+        (work, packed)
     });
+    stats.timings_s.atlas += atlas_seconds;
+    // A failed atlas is reported first (it may have failed after its estimate, with the mesh
+    // and the solve done for nothing: a page too small for the charts, found while packing).
+    let atlas = atlas?;
+    let (segments, meshes, solution) = work.expect("the atlas estimates before it succeeds")?;
     let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
     for (i, m) in meshes.iter().enumerate() {
         mesh_of_polygon[m.polygon] = i;
     }
+    let t = &mut stats.timings_s;
     let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
         let mut map = lightmap::rasterize(
             &scene,
@@ -403,7 +433,11 @@ const MAX_CUT_PIECES: usize = 1_000_000;
 /// Charts and packs every instance. xatlas works in f32 and drops triangles whose area is
 /// below `f32::EPSILON`, and its density estimate clamps small scenes; so the positions it sees
 /// are centred and scaled to a total area of [`ATLAS_AREA`], and the densities scaled to match.
-fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::AtlasError> {
+fn pack_atlas(
+    scene: &Scene,
+    options: &BakeOptions,
+    estimate: &mut dyn FnMut(f64),
+) -> Result<Atlas, atlas::AtlasError> {
     let area: f64 = scene.triangles.iter().map(|t| t.area()).sum();
     let scale = if area > 0.0 {
         (ATLAS_AREA / area).sqrt()
@@ -436,7 +470,7 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::Atla
             },
         })
         .collect();
-    let mut atlas = atlas::pack(
+    let mut atlas = atlas::pack_estimating(
         &inputs,
         &AtlasOptions {
             texels_per_unit: options.texels_per_unit.map(|t| (t as f64 / scale) as f32),
@@ -444,6 +478,7 @@ fn pack_atlas(scene: &Scene, options: &BakeOptions) -> Result<Atlas, atlas::Atla
             padding: options.padding,
             page_size: options.page_size,
         },
+        &mut |t| estimate(t as f64 * scale),
     )
     .map_err(|error| {
         // Densities in errors back to the scene's units.
@@ -507,7 +542,9 @@ pub struct Budget {
 }
 
 /// The element budget: `requested` (`--budget`) if given, else the larger of one element per
-/// [`TEXELS_PER_ELEMENT`] lightmap texels the surfaces cover at `texels_per_unit` and
+/// [`TEXELS_PER_ELEMENT`] lightmap texels the surfaces cover at `texels_per_unit` (the bake
+/// passes the atlas's first estimate of its density, so that the mesh need not wait for the
+/// final packing: within a few percent of the final density) and
 /// [`ELEMENTS_PER_TRIANGLE`] per input triangle, within [`DEFAULT_BUDGET`]. Either way at least
 /// the input's own triangle count: the mesh can hardly have fewer elements than the geometry.
 pub fn element_budget(scene: &Scene, requested: Option<usize>, texels_per_unit: f64) -> Budget {
@@ -616,8 +653,13 @@ fn mesh_scene(
 }
 
 /// The scene's lightmap atlas, its errors naming the glTF file and item.
-fn scene_atlas(gltf: &Gltf, scene: &Scene, options: &BakeOptions) -> Result<Atlas> {
-    pack_atlas(scene, options).map_err(|error| match error {
+fn scene_atlas(
+    gltf: &Gltf,
+    scene: &Scene,
+    options: &BakeOptions,
+    estimate: &mut dyn FnMut(f64),
+) -> Result<Atlas> {
+    pack_atlas(scene, options, estimate).map_err(|error| match error {
         // The atlas numbers its inputs as the scene's instances: name the glTF item instead.
         atlas::AtlasError::InvalidInput { mesh, reason }
         | atlas::AtlasError::AddMesh { mesh, reason } => Error::BadItem {
@@ -636,7 +678,7 @@ fn scene_atlas(gltf: &Gltf, scene: &Scene, options: &BakeOptions) -> Result<Atla
 }
 
 /// Loads the scene and runs the discontinuity and mesh stages only (for debug views), with the
-/// bake's element budget (the default one needs the atlas's texel density).
+/// bake's element budget (the default one needs the atlas's estimate of its texel density).
 pub fn meshes(
     gltf: &Gltf,
     options: &BakeOptions,
@@ -644,10 +686,10 @@ pub fn meshes(
     options.check()?;
     let (scene, _) = scene_for(gltf, options)?;
     let vis = Visibility::new(&scene);
-    let texels_per_unit = match options.budget {
-        Some(_) => 0.0,
-        None => scene_atlas(gltf, &scene, options)?.texels_per_unit as f64,
-    };
+    let mut texels_per_unit = 0.0;
+    if options.budget.is_none() {
+        scene_atlas(gltf, &scene, options, &mut |t| texels_per_unit = t)?;
+    }
     let (segments, meshes) = mesh_scene(
         &scene,
         &vis,

@@ -211,8 +211,9 @@ struct BakeArgs {
     #[arg(long, value_enum, default_value_t = Mesher::Discontinuity)]
     mesher: Mesher,
     /// Target number of mesh elements (triangles) over the whole scene, at least the input's
-    /// triangle count [default: one element per 32 lightmap texels or 1.5 per input triangle,
-    /// whichever is more, within 20000..250000; --stats reports it].
+    /// triangle count [default: one element per 32 lightmap texels (at the atlas's first
+    /// estimate of its density) or 1.5 per input triangle, whichever is more, within
+    /// 20000..250000; --stats reports it].
     #[arg(long)]
     budget: Option<usize>,
     /// Discontinuity meshing: drop wedge pieces where their light's unoccluded irradiance is
@@ -313,7 +314,8 @@ struct BakeArgs {
     /// Write run statistics (stage times, counts) as JSON.
     #[arg(long, value_name = "FILE")]
     stats: Option<PathBuf>,
-    /// Worker threads [default: all cores]. The output does not depend on it.
+    /// Worker threads [default: all cores]; the atlas packs on one more, alongside them. The
+    /// output does not depend on it.
     #[arg(long)]
     threads: Option<usize>,
     /// No progress bars or warnings on stderr.

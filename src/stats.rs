@@ -7,9 +7,9 @@ use std::time::Instant;
 /// Progress callback: `(stage, done, total)`. Called from worker threads.
 pub type Progress<'a> = dyn Fn(&str, u64, u64) + Sync + 'a;
 
-/// Wall time of each stage, seconds, in pipeline order. The atlas and the discontinuity stage
-/// run at the same time (xatlas packs on one thread), so the stages can add up to more than
-/// `total`.
+/// Wall time of each stage, seconds, in pipeline order. The atlas packs on a thread of its own
+/// while the discontinuity, mesh and solve stages run (xatlas packs on one core), so the
+/// stages can add up to more than `total`.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Timings {
     pub load: f64,
