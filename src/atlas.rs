@@ -147,6 +147,11 @@ const PACK_ATTEMPTS_PER_CHART: i32 = 4096;
 /// finally packed on the ladder's rungs (both sides).
 const SIZING_PACK_ATTEMPTS: i32 = 256;
 
+/// A packing that overflowed with no chart wider or taller than this (texels) has every chart
+/// at the smallest bit image xatlas makes: lowering the density further cannot help, so the
+/// search stops ([`AtlasError::DoesNotFit`]) instead of halving on to [`MAX_PACK_ATTEMPTS`].
+const MIN_CHART_SIDE: f32 = 2.0;
+
 /// What can go wrong in [`pack`].
 #[derive(Debug, thiserror::Error)]
 pub enum AtlasError {
@@ -165,11 +170,12 @@ pub enum AtlasError {
     /// There is no triangle to chart: no input, or every input mesh is empty or degenerate.
     #[error("no triangles to chart (every input mesh is empty or degenerate)")]
     Empty,
-    /// With a fixed resolution, the charts do not fit on one page even after shrinking the texel
-    /// density `attempts` times.
+    /// With a fixed resolution, the charts do not fit on one page at any density: `attempts`
+    /// packings, the last at `texels_per_unit`, showed it (their padding alone overflows the
+    /// page, or every chart was at its smallest).
     #[error(
         "charts do not fit on one {resolution}x{resolution} page, even at {texels_per_unit} \
-         texels per unit after {attempts} attempts"
+         texels per unit after {attempts} packing(s): raise --resolution or lower --padding"
     )]
     DoesNotFit {
         resolution: u32,
@@ -533,6 +539,16 @@ pub fn pack_estimating(
                 let next = {
                     let meshes = output_meshes(&mut xatlas, added.len())?;
                     let boxes = chart_boxes(&meshes);
+                    // Every chart's bit image is at least `1 + padding` texels a side at any
+                    // density: when those alone overflow the page, no density fits.
+                    let least = boxes.len() as f64 * f64::from(options.padding + 1).powi(2);
+                    if least > f64::from(resolution).powi(2) {
+                        return Err(AtlasError::DoesNotFit {
+                            resolution,
+                            texels_per_unit: tried,
+                            attempts,
+                        });
+                    }
                     let side = info.width.max(info.height);
                     if side <= resolution && largest_side(&boxes) <= max_chart_size as f32 - 0.5 {
                         tried
@@ -551,9 +567,12 @@ pub fn pack_estimating(
                 estimate(next);
                 break 'next next;
             }
-            let (shrink, estimate) = {
+            let (shrink, estimate, smallest) = {
                 let meshes = output_meshes(&mut xatlas, added.len())?;
                 let boxes = chart_boxes(&meshes);
+                // Every chart at the smallest size xatlas rasterizes: a lower density cannot
+                // make the charts take less room (their padding does not shrink).
+                let smallest = largest_side(&boxes) <= MIN_CHART_SIDE;
                 let shrink = fixed_page_shrink(&meshes, &boxes, &info, max_chart_size);
                 if shrink.is_none() && fitting.is_none_or(|f| tried > f) {
                     best_output = Some(collect_output(inputs, &added, &meshes, &info, false)?);
@@ -566,7 +585,7 @@ pub fn pack_estimating(
                     }
                     _ => None,
                 };
-                (shrink, estimate)
+                (shrink, estimate, smallest)
             };
             // Once a packing fit, the next density closes the bracket from the side of the last
             // packing by at most `BRACKET`, or halves it: when the estimate was good, one more
@@ -594,6 +613,7 @@ pub fn pack_estimating(
                 Some(factor) => {
                     failing = Some(failing.map_or(tried, |f| f.min(tried)));
                     match fitting {
+                        None if smallest => None,
                         None => Some(match estimate {
                             Some(e) => {
                                 let margin = (1.0 - ESTIMATE_MARGIN) * (1 << misses.min(4)) as f32;
@@ -1672,6 +1692,31 @@ mod tests {
         // The same charts with a large page: one page.
         let one = pack(&inputs, &options(Some(64.0), None, 2)).unwrap();
         assert_eq!(one.pages, 1);
+    }
+
+    /// Charts that cannot fit a page at any density fail fast: at once when their padding
+    /// alone overflows it, else once every chart is at its smallest (not after halving the
+    /// density [`MAX_PACK_ATTEMPTS`] times).
+    #[test]
+    fn charts_that_fit_at_no_density_fail_within_a_few_packings() {
+        // `n` separate 1 x 1 quads on a 32² page with 2 texels of padding: each takes at least
+        // 3² texels² (200: 1 800, more than the page's 1 024), and at its smallest 4² (80:
+        // 1 280, also more, though 80 x 3² = 720 is not).
+        for (n, most) in [(200, 1), (80, 12)] {
+            let meshes: Vec<TestMesh> = (0..n)
+                .map(|i| quad(3.0 * (i % 20) as f32, 3.0 * (i / 20) as f32, 0.0, 1.0, 1.0))
+                .collect();
+            let err = pack(&inputs(&meshes), &options(None, Some(32), 2)).unwrap_err();
+            println!("{n} quads: {err}");
+            match err {
+                AtlasError::DoesNotFit {
+                    resolution: 32,
+                    attempts,
+                    ..
+                } => assert!(attempts <= most, "{attempts} packings for {n} quads"),
+                err => panic!("{err}"),
+            }
+        }
     }
 
     #[test]

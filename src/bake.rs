@@ -220,18 +220,24 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     // time) and not for its final packing. The discontinuity stage's wedges do not depend on
     // the budget (only how many pieces it keeps, which `mesh_scene` applies): they are traced
     // meanwhile.
+    let failed = std::sync::atomic::AtomicBool::new(false);
     let (work, (atlas, atlas_seconds)) = std::thread::scope(|s| {
         let (sender, estimate) = std::sync::mpsc::channel();
-        let (scene, vis) = (&scene, &vis);
+        let (scene, vis, failed_atlas) = (&scene, &vis, &failed);
         let packing = s.spawn(move || {
             let start = std::time::Instant::now();
             let atlas = scene_atlas(gltf, scene, options, &mut |t| {
                 // Once the bake stopped waiting for the estimate, nobody hears it: no matter.
                 let _ = sender.send(t);
             });
+            if atlas.is_err() {
+                failed_atlas.store(true, std::sync::atomic::Ordering::Relaxed);
+            }
             (atlas, start.elapsed().as_secs_f64())
         });
-        // The stages up to the solve; `None` when the atlas failed before its estimate.
+        let failed = || failed.load(std::sync::atomic::Ordering::Relaxed);
+        // The stages up to the solve; `None` when the atlas failed before its estimate, or
+        // before the mesh or the solve started (its error is reported, not theirs).
         let mut work = || {
             let t = &mut stats.timings_s;
             let traced = (options.mesher == Mesher::Discontinuity).then(|| {
@@ -239,7 +245,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
                     discontinuity::segments(scene, vis, &dm_options(options, usize::MAX))
                 })
             });
-            let texels_per_unit = estimate.recv().ok()?;
+            let texels_per_unit = estimate.recv().ok().filter(|_| !failed())?;
             let (segments, meshes) = mesh_scene(
                 scene,
                 vis,
@@ -253,6 +259,9 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
                 return Some(Err(Error::EmptyScene {
                     path: gltf.path.clone(),
                 }));
+            }
+            if failed() {
+                return None;
             }
             let t = &mut stats.timings_s;
             let solution = stage(&mut t.solve, "solve", progress, || {
@@ -276,8 +285,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         (work, packed)
     });
     stats.timings_s.atlas += atlas_seconds;
-    // A failed atlas is reported first (it may have failed after its estimate, with the mesh
-    // and the solve done for nothing: a page too small for the charts, found while packing).
+    // A failed atlas is reported first (it may have failed after its estimate, during the
+    // solve: a page too small for the charts, found while packing).
     let atlas = atlas?;
     let (segments, meshes, solution) = work.expect("the atlas estimates before it succeeds")?;
     let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
