@@ -638,12 +638,15 @@ fn facing(a: &Sample, b: &Sample) -> f64 {
 /// one per sample of the larger end, go first; when they all agree (at least two of them),
 /// the rest are taken to agree too and cast no ray, else every pair is cast. Returns the
 /// weight seen, the weight tested, whether the tested pairs disagree, and the rays cast.
-/// Deterministic: the same pairs in the same order every time.
+/// Deterministic: the same pairs in the same order every time. With `stop_if_partial` (the
+/// caller splits a partially visible link), it returns as soon as the first pairs disagree,
+/// with the weights of those pairs only.
 fn pair_visibility(
     vis: &Visibility,
     a: &[Sample],
     b: &[Sample],
     weight: impl Fn(&Sample, &Sample) -> f64,
+    stop_if_partial: bool,
 ) -> (f64, f64, bool, u64) {
     let visible =
         |p: &Sample, q: &Sample| !vis.occluded_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
@@ -664,6 +667,9 @@ fn pair_visibility(
         }
     }
     let agree = cast >= 2 && (hits == 0 || hits == cast);
+    if stop_if_partial && hits > 0 && hits < cast {
+        return (seen, tested, true, cast);
+    }
     for (i, p) in a.iter().enumerate() {
         for (j, q) in b.iter().enumerate() {
             if diagonal(i, j) {
@@ -999,7 +1005,7 @@ impl Hierarchy {
                     bound: 0.0,
                 };
             }
-            let (seen, tested, partial, rays) = pair_visibility(vis, sr, ss, facing);
+            let (seen, tested, partial, rays) = pair_visibility(vis, sr, ss, facing, false);
             let v = if tested > 0.0 { seen / tested } else { 1.0 };
             return Transfer {
                 k: unoccluded * v,
@@ -1022,7 +1028,7 @@ impl Hierarchy {
             }
             ns.area * ci * cj / (PI * d2 + ns.area)
         };
-        let (k, unoccluded, partial, rays) = pair_visibility(vis, sr, ss, disk);
+        let (k, unoccluded, partial, rays) = pair_visibility(vis, sr, ss, disk, false);
         let pairs = (sr.len() * ss.len()) as f64;
         // The sampled cosines may all miss (four samples of a cluster): the oracle bounds the
         // transfer geometrically instead.
@@ -1210,18 +1216,21 @@ impl Hierarchy {
             }
             return split;
         }
-        let (seen, tested, partial, cast) = pair_visibility(vis, sr, ss, facing);
-        *rays += cast;
         // Partially visible: the visible fraction of 16 pairs stands for the whole link, and
         // the parts that see each other are usually the near ones, of the larger form factor.
+        // Such a link is split when `B_s K_unoccluded` is over the limit: then the first pairs
+        // that disagree settle it, and the other pairs need no ray.
+        let splits_if_partial = can_split && b_s * unoccluded > limits.visibility;
+        let (seen, tested, partial, cast) = pair_visibility(vis, sr, ss, facing, splits_if_partial);
+        *rays += cast;
+        if partial && splits_if_partial {
+            return Decision::Split(larger);
+        }
         let shade = if partial && can_split {
             unoccluded
         } else {
             0.0
         };
-        if b_s * shade > limits.visibility {
-            return Decision::Split(larger);
-        }
         let v = if tested > 0.0 { seen / tested } else { 1.0 };
         let toward = if ns.kids.is_some() {
             seen_offset(sr, ss, ns.area)
