@@ -11,8 +11,10 @@
 //! * **Punctual lights**: the hard shadow boundaries of silhouette edges (central projection for
 //!   point and spot lights, parallel projection for directional lights).
 //!
-//! Each wedge is intersected with the receivers its bounding box reaches, clipped to the wedge and
-//! to the receiver's triangles, and only the pieces whose generator is really visible from the
+//! Each wedge is intersected with the receivers its bounding box reaches (those whose bounding
+//! box its plane crosses), clipped to the wedge and to the receiver's triangles (a large
+//! receiver's, such as a ground plane cut around thousands of buildings, found through a grid
+//! of them: [`TriangleGrid`]), and only the pieces whose generator is really visible from the
 //! receiver and from the emitter are kept (shadow rays at sample points, transitions bisected to
 //! 1e-6 of the scene extent). Pieces are ranked by significance, the share of the receiver's
 //! unoccluded irradiance that the wedge's emitter carries at the piece; pieces under the

@@ -198,7 +198,8 @@ impl Visibility {
     /// from `p`, lifted off its surface by [`Visibility::epsilon`], a ray along `n` and
     /// [`BURIED_RAYS`] rays at 60 degrees from it, evenly around `n`; the point is buried when
     /// the ray along `n` and most of all the rays (more than half) meet a back face first. One
-    /// ray settles most points (it escapes, or meets a front face). The point under a thin,
+    /// ray settles most points (it escapes, or meets a front face), and the slanted rays stop
+    /// once their count decides (a buried point takes 5 rays, not 9). The point under a thin,
     /// one-sided overhang (a table top seen from below) is not buried: its slanted rays pass
     /// the overhang's edge. The rays are turned off the axes by odd angles (the first one by
     /// 1.5 degrees), so that in axis-aligned scenes they do not run exactly along an edge

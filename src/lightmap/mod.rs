@@ -287,7 +287,8 @@ impl<'a> Locator<'a> {
 /// not covered: a texel's value is the mean of its visible sub-samples, and a texel with none
 /// is filled by the dilation from its visible neighbours, so that bilinear filtering along a
 /// contact line reads the light beside the box, not the dark under it. The test runs at the
-/// texel corners (about one ray query per texel); only a texel whose corners disagree (a
+/// texel corners, each tested once for all the triangles of its chart in a band of rows
+/// (about one test per texel); only a texel whose corners disagree (a
 /// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
 /// that touches none of its corners is missed (its sub-samples count as visible).
 pub fn rasterize(
