@@ -237,7 +237,9 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         });
         let failed = || failed.load(std::sync::atomic::Ordering::Relaxed);
         // The stages up to the solve; `None` when the atlas failed before its estimate, or
-        // before the mesh or the solve started (its error is reported, not theirs).
+        // before the mesh or the solve started (its error is reported, not theirs). The
+        // estimate's sender lives in the atlas thread, so `recv` returns once the atlas sent
+        // it or ended.
         let mut work = || {
             let t = &mut stats.timings_s;
             let traced = (options.mesher == Mesher::Discontinuity).then(|| {
@@ -245,7 +247,14 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
                     discontinuity::segments(scene, vis, &dm_options(options, usize::MAX))
                 })
             });
-            let texels_per_unit = estimate.recv().ok().filter(|_| !failed())?;
+            // A budget given needs no density: the mesh need not wait for the estimate.
+            let texels_per_unit = match options.budget {
+                Some(_) => 0.0,
+                None => estimate.recv().ok()?,
+            };
+            if failed() {
+                return None;
+            }
             let (segments, meshes) = mesh_scene(
                 scene,
                 vis,
