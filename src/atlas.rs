@@ -148,9 +148,10 @@ const PACK_ATTEMPTS_PER_CHART: i32 = 4096;
 const SIZING_PACK_ATTEMPTS: i32 = 256;
 
 /// A packing that overflowed with no chart wider or taller than this (texels) has every chart
-/// at the smallest bit image xatlas makes: lowering the density further cannot help, so the
-/// search stops ([`AtlasError::DoesNotFit`]) instead of halving on to [`MAX_PACK_ATTEMPTS`].
-const MIN_CHART_SIDE: f32 = 2.0;
+/// at the smallest bit image xatlas makes (it rounds a chart's extent up to whole texels, at
+/// least one): lowering the density further cannot help, so the search stops
+/// ([`AtlasError::DoesNotFit`]) instead of halving on to [`MAX_PACK_ATTEMPTS`].
+const MIN_CHART_SIDE: f32 = 1.0;
 
 /// What can go wrong in [`pack`].
 #[derive(Debug, thiserror::Error)]
@@ -170,12 +171,12 @@ pub enum AtlasError {
     /// There is no triangle to chart: no input, or every input mesh is empty or degenerate.
     #[error("no triangles to chart (every input mesh is empty or degenerate)")]
     Empty,
-    /// With a fixed resolution, the charts do not fit on one page at any density: `attempts`
-    /// packings, the last at `texels_per_unit`, showed it (their padding alone overflows the
-    /// page, or every chart was at its smallest).
+    /// With a fixed resolution, the charts did not fit on one page: their padding alone
+    /// overflows it, or every chart was at its smallest, or 40 packings (`attempts`, the last
+    /// at `texels_per_unit`) found no density that fits.
     #[error(
         "charts do not fit on one {resolution}x{resolution} page, even at {texels_per_unit} \
-         texels per unit after {attempts} packing(s): raise --resolution or lower --padding"
+         texels per unit after {attempts} packing(s): raise the resolution or lower the padding"
     )]
     DoesNotFit {
         resolution: u32,
@@ -358,7 +359,6 @@ pub fn pack_estimating(
             page_size,
         } => {
             check_density(stats.area, texels_per_unit)?;
-            estimate(texels_per_unit);
             let size = page_size.saturating_sub(options.padding + 1);
             if size < 1 {
                 return Err(AtlasError::InvalidOptions {
@@ -369,6 +369,7 @@ pub fn pack_estimating(
                     ),
                 });
             }
+            estimate(texels_per_unit);
             size
         }
     };
@@ -1717,6 +1718,13 @@ mod tests {
                 err => panic!("{err}"),
             }
         }
+        // 50 of them take 4² texels² each at their smallest (800 of the page's 1 024): they
+        // fit, though not with 2-texel-wide charts (5² each, 1 250).
+        let meshes: Vec<TestMesh> = (0..50)
+            .map(|i| quad(3.0 * (i % 20) as f32, 3.0 * (i / 20) as f32, 0.0, 1.0, 1.0))
+            .collect();
+        let atlas = pack(&inputs(&meshes), &options(None, Some(32), 2)).unwrap();
+        println!("50 quads: {} texels per unit", atlas.texels_per_unit);
     }
 
     #[test]

@@ -226,13 +226,16 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         let (scene, vis, failed_atlas) = (&scene, &vis, &failed);
         let packing = s.spawn(move || {
             let start = std::time::Instant::now();
-            let atlas = scene_atlas(gltf, scene, options, &mut |t| {
-                // Once the bake stopped waiting for the estimate, nobody hears it: no matter.
-                let _ = sender.send(t);
-            });
-            if atlas.is_err() {
+            let atlas = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+                scene_atlas(gltf, scene, options, &mut |t| {
+                    // Once the bake stopped waiting for the estimate, nobody hears it.
+                    let _ = sender.send(t);
+                })
+            }));
+            if !matches!(atlas, Ok(Ok(_))) {
                 failed_atlas.store(true, std::sync::atomic::Ordering::Relaxed);
             }
+            let atlas = atlas.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
             (atlas, start.elapsed().as_secs_f64())
         });
         let failed = || failed.load(std::sync::atomic::Ordering::Relaxed);
@@ -294,8 +297,10 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         (work, packed)
     });
     stats.timings_s.atlas += atlas_seconds;
-    // A failed atlas is reported first (it may have failed after its estimate, during the
-    // solve: a page too small for the charts, found while packing).
+    // A failed atlas is reported first. One that fails after its estimate (a page too small
+    // for the charts, or a chart too large for `--page-size`, found while packing) is
+    // reported before the mesh or the solve when it fails before they start, else once the
+    // solve is done (the solve is not interrupted).
     let atlas = atlas?;
     let (segments, meshes, solution) = work.expect("the atlas estimates before it succeeds")?;
     let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
@@ -496,7 +501,8 @@ fn pack_atlas(
             padding: options.padding,
             page_size: options.page_size,
         },
-        &mut |t| estimate(t as f64 * scale),
+        // Rounded to f32 as the atlas's final density is (the budget follows it).
+        &mut |t| estimate((t as f64 * scale) as f32 as f64),
     )
     .map_err(|error| {
         // Densities in errors back to the scene's units.

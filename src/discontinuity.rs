@@ -504,6 +504,10 @@ struct PolygonIndex {
 /// otherwise clip against each.
 const GRID_TRIANGLES: usize = 32;
 
+/// A [`TriangleGrid`] holds at most this many cell entries per triangle (its memory and the
+/// cells a query visits stay linear in the triangles).
+const GRID_ENTRIES_PER_TRIANGLE: usize = 16;
+
 /// A uniform grid over a polygon's triangles, in its plane coordinates: each cell lists the
 /// triangles (indices into the polygon's list) whose bounding boxes meet it. About one cell
 /// per triangle.
@@ -518,7 +522,10 @@ struct TriangleGrid {
 }
 
 impl TriangleGrid {
-    fn new(triangles: &[[DVec2; 3]]) -> TriangleGrid {
+    /// The grid, or `None` when the triangles' boxes would fill more than
+    /// [`GRID_ENTRIES_PER_TRIANGLE`] cells each on average (long slivers across the polygon):
+    /// then every triangle is tested, as without a grid.
+    fn new(triangles: &[[DVec2; 3]]) -> Option<TriangleGrid> {
         let boxes: Vec<(DVec2, DVec2)> = triangles
             .iter()
             .map(|t| (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
@@ -540,6 +547,16 @@ impl TriangleGrid {
             ids: Vec::new(),
         };
         let range = |g: &TriangleGrid, (lo, hi): (DVec2, DVec2)| (g.at(lo), g.at(hi));
+        let entries: usize = boxes
+            .iter()
+            .map(|b| {
+                let ((i0, j0), (i1, j1)) = range(&grid, *b);
+                (i1 - i0 + 1) * (j1 - j0 + 1)
+            })
+            .sum();
+        if entries > GRID_ENTRIES_PER_TRIANGLE * triangles.len() {
+            return None;
+        }
         // Count, then fill (compressed rows).
         for b in &boxes {
             let ((i0, j0), (i1, j1)) = range(&grid, *b);
@@ -564,7 +581,7 @@ impl TriangleGrid {
                 }
             }
         }
-        grid
+        Some(grid)
     }
 
     /// The cell holding plane point `p` (clamped into the grid).
@@ -646,6 +663,7 @@ impl PolygonIndex {
             .map(|p| {
                 (p.triangles_plane.len() >= GRID_TRIANGLES)
                     .then(|| TriangleGrid::new(&p.triangles_plane))
+                    .flatten()
             })
             .collect();
         PolygonIndex {
@@ -1361,5 +1379,56 @@ fn unoccluded_irradiance(scene: &Scene, light: Light, p: DVec3, n: DVec3) -> f64
             std::f64::consts::PI * f * luminance(scene.materials[poly.material].radiance)
         }
         Light::Punctual(l) => punctual_unoccluded(&scene.lights[l], p, n).map_or(0.0, luminance),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The grid's segment query finds every triangle the segment crosses or passes within
+    /// the margin of (checked by brute force on random triangles and segments, including
+    /// segments that start or end outside the grid and axis-parallel ones).
+    #[test]
+    fn triangle_grid_finds_every_triangle_near_a_segment() {
+        let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+        let mut rand = move || {
+            seed ^= seed << 13;
+            seed ^= seed >> 7;
+            seed ^= seed << 17;
+            (seed >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let point = |r: &mut dyn FnMut() -> f64| DVec2::new(10.0 * r(), 10.0 * r());
+        let triangles: Vec<[DVec2; 3]> = (0..400)
+            .map(|_| {
+                let c = point(&mut rand);
+                let s = 0.05 + rand() * if rand() < 0.1 { 4.0 } else { 0.5 };
+                [0, 1, 2].map(|_| c + DVec2::new(rand() - 0.5, rand() - 0.5) * s)
+            })
+            .collect();
+        let grid = TriangleGrid::new(&triangles).expect("a grid");
+        let margin = 1e-6;
+        for k in 0..300 {
+            let (mut p, mut q) = (point(&mut rand) * 1.4 - 2.0, point(&mut rand) * 1.4 - 2.0);
+            if k % 10 == 0 {
+                q.x = p.x;
+            } else if k % 10 == 1 {
+                q.y = p.y;
+            } else if k % 10 == 2 {
+                (p, q) = (p, p);
+            }
+            let near = grid.near_segment(p, q, margin);
+            assert!(near.windows(2).all(|w| w[0] < w[1]), "sorted, each once");
+            for (t, tri) in triangles.iter().enumerate() {
+                let crosses = (0..=400).any(|i| {
+                    let x = p + (q - p) * (i as f64 / 400.0);
+                    crate::scene::point_in_triangle(x, tri)
+                });
+                assert!(
+                    !crosses || near.contains(&(t as u32)),
+                    "segment {k} {p} -> {q} crosses triangle {t} {tri:?}, not found"
+                );
+            }
+        }
     }
 }

@@ -367,8 +367,16 @@ pub fn rasterize(
             // Buried or not at the texel corners of the band, found once per corner and mesh:
             // the triangles of one chart share their corners (the point, the mesh and the
             // answer are kept; a corner another mesh or chart reached first is tested again).
+            // Two triangles of a chart reach a corner at the same point up to rounding, and
+            // the first one's answer stands for both (the same answer but where a ray grazes
+            // an edge). Allocated only for a band with triangles.
             let cw = w + 1;
-            let mut corner: Vec<Option<(DVec3, usize, bool)>> = vec![None; cw * (y_hi - y_lo + 1)];
+            let rows = if by_band[b].is_empty() {
+                0
+            } else {
+                y_hi - y_lo + 1
+            };
+            let mut corner: Vec<Option<(DVec3, usize, bool)>> = vec![None; cw * rows];
             for &ti in &by_band[b] {
                 let t = &tris[ti as usize];
                 let area = (t.uv[1] - t.uv[0]).perp_dot(t.uv[2] - t.uv[0]);
