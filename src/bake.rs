@@ -220,10 +220,10 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     // time) and not for its final packing. The discontinuity stage's wedges do not depend on
     // the budget (only how many pieces it keeps, which `mesh_scene` applies): they are traced
     // meanwhile.
-    let failed = std::sync::atomic::AtomicBool::new(false);
+    let atlas_failed = std::sync::atomic::AtomicBool::new(false);
     let (work, (atlas, atlas_seconds)) = std::thread::scope(|s| {
         let (sender, estimate) = std::sync::mpsc::channel();
-        let (scene, vis, failed_atlas) = (&scene, &vis, &failed);
+        let (scene, vis, atlas_failed) = (&scene, &vis, &atlas_failed);
         let packing = s.spawn(move || {
             let start = std::time::Instant::now();
             let atlas = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -233,12 +233,12 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
                 })
             }));
             if !matches!(atlas, Ok(Ok(_))) {
-                failed_atlas.store(true, std::sync::atomic::Ordering::Relaxed);
+                atlas_failed.store(true, std::sync::atomic::Ordering::Relaxed);
             }
             let atlas = atlas.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
             (atlas, start.elapsed().as_secs_f64())
         });
-        let failed = || failed.load(std::sync::atomic::Ordering::Relaxed);
+        let failed = || atlas_failed.load(std::sync::atomic::Ordering::Relaxed);
         // The stages up to the solve; `None` when the atlas failed before its estimate, or
         // before the mesh or the solve started (its error is reported, not theirs). The
         // estimate's sender lives in the atlas thread, so `recv` returns once the atlas sent

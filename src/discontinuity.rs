@@ -14,13 +14,13 @@
 //! Each wedge is intersected with the receivers its bounding box reaches (those whose bounding
 //! box its plane crosses), clipped to the wedge and to the receiver's triangles (a large
 //! receiver's, such as a ground plane cut around thousands of buildings, found through a grid
-//! of them: [`TriangleGrid`]), and only the pieces whose generator is really visible from the
+//! of them: [`BoxGrid`]), and only the pieces whose generator is really visible from the
 //! receiver and from the emitter are kept (shadow rays at sample points, transitions bisected to
 //! 1e-6 of the scene extent). Pieces are ranked by significance, the share of the receiver's
 //! unoccluded irradiance that the wedge's emitter carries at the piece; pieces under the
 //! threshold are dropped, and the weakest go first when the element budget would be exceeded.
 
-use crate::geometry::point_polygon_form_factor;
+use crate::geometry::{BoxGrid, point_polygon_form_factor};
 use crate::light::{luminance, punctual_unoccluded};
 use crate::scene::{LightKind, Scene};
 use crate::visibility::Visibility;
@@ -496,138 +496,40 @@ struct PolygonIndex {
     boxes: Vec<Aabb>,
     center: DVec3,
     /// Per polygon of at least [`GRID_TRIANGLES`] triangles, a grid of them in its plane.
-    grids: Vec<Option<TriangleGrid>>,
+    grids: Vec<Option<BoxGrid>>,
 }
 
-/// Polygons with at least this many triangles get a [`TriangleGrid`]: a ground plane cut
+/// Polygons with at least this many triangles get a grid of them ([`triangle_grid`]): a ground plane cut
 /// around thousands of buildings has tens of thousands, and every wedge that reaches it would
 /// otherwise clip against each.
 const GRID_TRIANGLES: usize = 32;
 
-/// A [`TriangleGrid`] holds at most this many cell entries per triangle (its memory and the
+/// A polygon's triangle grid holds at most this many cell entries per triangle (its memory and the
 /// cells a query visits stay linear in the triangles).
 const GRID_ENTRIES_PER_TRIANGLE: usize = 16;
 
-/// A uniform grid over a polygon's triangles, in its plane coordinates: each cell lists the
-/// triangles (indices into the polygon's list) whose bounding boxes meet it. About one cell
-/// per triangle.
-struct TriangleGrid {
-    min: DVec2,
-    cell: f64,
-    nx: usize,
-    ny: usize,
-    /// Cell `(i, j)`'s triangles are `ids[starts[j nx + i]..starts[j nx + i + 1]]`.
-    starts: Vec<u32>,
-    ids: Vec<u32>,
-}
-
-impl TriangleGrid {
-    /// The grid, or `None` when the triangles' boxes would fill more than
-    /// [`GRID_ENTRIES_PER_TRIANGLE`] cells each on average (long slivers across the polygon):
-    /// then every triangle is tested, as without a grid.
-    fn new(triangles: &[[DVec2; 3]]) -> Option<TriangleGrid> {
-        let boxes: Vec<(DVec2, DVec2)> = triangles
-            .iter()
-            .map(|t| (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
-            .collect();
-        let min = boxes.iter().fold(DVec2::INFINITY, |m, b| m.min(b.0));
-        let max = boxes.iter().fold(DVec2::NEG_INFINITY, |m, b| m.max(b.1));
-        let size = (max - min).max(DVec2::splat(1e-300));
-        let cell = (size.x * size.y / triangles.len() as f64)
-            .sqrt()
-            .max(size.x.max(size.y) / 1024.0);
-        let nx = ((size.x / cell).ceil() as usize).clamp(1, 1024);
-        let ny = ((size.y / cell).ceil() as usize).clamp(1, 1024);
-        let mut grid = TriangleGrid {
-            min,
-            cell,
-            nx,
-            ny,
-            starts: vec![0; nx * ny + 1],
-            ids: Vec::new(),
-        };
-        let range = |g: &TriangleGrid, (lo, hi): (DVec2, DVec2)| (g.at(lo), g.at(hi));
-        let entries: usize = boxes
-            .iter()
-            .map(|b| {
-                let ((i0, j0), (i1, j1)) = range(&grid, *b);
-                (i1 - i0 + 1) * (j1 - j0 + 1)
-            })
-            .sum();
-        if entries > GRID_ENTRIES_PER_TRIANGLE * triangles.len() {
-            return None;
-        }
-        // Count, then fill (compressed rows).
-        for b in &boxes {
-            let ((i0, j0), (i1, j1)) = range(&grid, *b);
-            for j in j0..=j1 {
-                for i in i0..=i1 {
-                    grid.starts[j * nx + i + 1] += 1;
-                }
-            }
-        }
-        for k in 0..nx * ny {
-            grid.starts[k + 1] += grid.starts[k];
-        }
-        let mut next = grid.starts.clone();
-        grid.ids = vec![0; grid.starts[nx * ny] as usize];
-        for (t, b) in boxes.iter().enumerate() {
-            let ((i0, j0), (i1, j1)) = range(&grid, *b);
-            for j in j0..=j1 {
-                for i in i0..=i1 {
-                    let slot = &mut next[j * nx + i];
-                    grid.ids[*slot as usize] = t as u32;
-                    *slot += 1;
-                }
-            }
-        }
-        Some(grid)
-    }
-
-    /// The cell holding plane point `p` (clamped into the grid).
-    fn at(&self, p: DVec2) -> (usize, usize) {
-        let c = ((p - self.min) / self.cell).floor();
-        let clamp = |v: f64, n: usize| {
-            if v.is_nan() || v < 0.0 {
-                0
-            } else {
-                (v as usize).min(n - 1)
-            }
-        };
-        (clamp(c.x, self.nx), clamp(c.y, self.ny))
-    }
-
-    /// The triangles (sorted, each once) whose boxes come within `margin` of the segment
-    /// `p-q`: every triangle the segment passes within `margin` of is among them.
-    fn near_segment(&self, p: DVec2, q: DVec2, margin: f64) -> Vec<u32> {
-        let mut out = Vec::new();
-        let (lo, hi) = (p.min(q) - margin, p.max(q) + margin);
-        let (i0, _) = self.at(lo);
-        let (i1, _) = self.at(hi);
-        let dx = q.x - p.x;
-        for i in i0..=i1 {
-            // The segment's y range over this column's x range (widened by `margin`).
-            let xa = (self.min.x + i as f64 * self.cell - margin).max(lo.x);
-            let xb = (self.min.x + (i + 1) as f64 * self.cell + margin).min(hi.x);
-            let (ya, yb) = if dx.abs() > 1e-300 {
-                let y = |x: f64| p.y + (q.y - p.y) * ((x - p.x) / dx).clamp(0.0, 1.0);
-                (y(xa).min(y(xb)), y(xa).max(y(xb)))
-            } else {
-                (p.y.min(q.y), p.y.max(q.y))
-            };
-            let (_, j0) = self.at(DVec2::new(xa, ya - margin));
-            let (_, j1) = self.at(DVec2::new(xb, yb + margin));
-            for j in j0..=j1 {
-                let k = j * self.nx + i;
-                out.extend_from_slice(
-                    &self.ids[self.starts[k] as usize..self.starts[k + 1] as usize],
-                );
-            }
-        }
-        out.sort_unstable();
-        out.dedup();
-        out
-    }
+/// The grid of a polygon's triangles in its plane ([`BoxGrid`], cells about square, about one
+/// per triangle), or `None` when their boxes would fill more than
+/// [`GRID_ENTRIES_PER_TRIANGLE`] cells each on average (long slivers across the polygon):
+/// then every triangle is tested, as without a grid.
+fn triangle_grid(triangles: &[[DVec2; 3]]) -> Option<BoxGrid> {
+    let boxes: Vec<(DVec2, DVec2)> = triangles
+        .iter()
+        .map(|t| (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
+        .collect();
+    let min = boxes.iter().fold(DVec2::INFINITY, |m, b| m.min(b.0));
+    let max = boxes.iter().fold(DVec2::NEG_INFINITY, |m, b| m.max(b.1));
+    let size = (max - min).max(DVec2::splat(1e-300));
+    let cell = (size.x * size.y / triangles.len() as f64)
+        .sqrt()
+        .max(size.x.max(size.y) / 1024.0);
+    let dims = (
+        ((size.x / cell).ceil() as usize).clamp(1, 1024),
+        ((size.y / cell).ceil() as usize).clamp(1, 1024),
+    );
+    let cell = DVec2::splat(cell);
+    (BoxGrid::entries(min, cell, dims, &boxes) <= GRID_ENTRIES_PER_TRIANGLE * triangles.len())
+        .then(|| BoxGrid::new(min, cell, dims, &boxes))
 }
 
 impl PolygonIndex {
@@ -662,7 +564,7 @@ impl PolygonIndex {
             .par_iter()
             .map(|p| {
                 (p.triangles_plane.len() >= GRID_TRIANGLES)
-                    .then(|| TriangleGrid::new(&p.triangles_plane))
+                    .then(|| triangle_grid(&p.triangles_plane))
                     .flatten()
             })
             .collect();
@@ -1406,7 +1308,7 @@ mod tests {
                 [0, 1, 2].map(|_| c + DVec2::new(rand() - 0.5, rand() - 0.5) * s)
             })
             .collect();
-        let grid = TriangleGrid::new(&triangles).expect("a grid");
+        let grid = triangle_grid(&triangles).expect("a grid");
         let margin = 1e-6;
         for k in 0..300 {
             let (mut p, mut q) = (point(&mut rand) * 1.4 - 2.0, point(&mut rand) * 1.4 - 2.0);

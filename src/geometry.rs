@@ -429,6 +429,131 @@ pub fn barycentric_3d(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
     [1.0 - v - w, v, w]
 }
 
+// ---------------------------------------------------------------------------------------------
+// A grid of buckets
+
+/// A uniform grid of buckets over a 2D box (plane coordinates): cell `(x, y)` lists, in
+/// increasing order, the items whose bounding boxes meet it. Point location in a mesh and
+/// the triangles a segment passes near use it.
+pub struct BoxGrid {
+    min: DVec2,
+    cell: DVec2,
+    dims: (usize, usize),
+    /// Cell `(x, y)`'s items are `ids[starts[y nx + x]..starts[y nx + x + 1]]`.
+    starts: Vec<u32>,
+    ids: Vec<u32>,
+}
+
+impl BoxGrid {
+    /// The grid of `dims` cells of size `cell` from `min`, over the items' `boxes` (min,
+    /// max). Points outside it fall in its border cells.
+    pub fn new(min: DVec2, cell: DVec2, dims: (usize, usize), boxes: &[(DVec2, DVec2)]) -> Self {
+        let mut grid = BoxGrid {
+            min,
+            cell,
+            dims,
+            starts: vec![0; dims.0 * dims.1 + 1],
+            ids: Vec::new(),
+        };
+        // Count, then fill (compressed rows), in item order.
+        for b in boxes {
+            for k in grid.cells(*b) {
+                grid.starts[k + 1] += 1;
+            }
+        }
+        for k in 0..dims.0 * dims.1 {
+            grid.starts[k + 1] += grid.starts[k];
+        }
+        let mut next = grid.starts.clone();
+        grid.ids = vec![0; grid.starts[dims.0 * dims.1] as usize];
+        for (item, b) in boxes.iter().enumerate() {
+            for k in grid.cells(*b) {
+                grid.ids[next[k] as usize] = item as u32;
+                next[k] += 1;
+            }
+        }
+        grid
+    }
+
+    /// How many cell entries [`BoxGrid::new`] would make (the cells each box meets, summed).
+    pub fn entries(
+        min: DVec2,
+        cell: DVec2,
+        dims: (usize, usize),
+        boxes: &[(DVec2, DVec2)],
+    ) -> usize {
+        let probe = BoxGrid {
+            min,
+            cell,
+            dims,
+            starts: Vec::new(),
+            ids: Vec::new(),
+        };
+        boxes.iter().map(|b| probe.cells(*b).count()).sum()
+    }
+
+    /// The index of every cell the box `(lo, hi)` meets.
+    fn cells(&self, (lo, hi): (DVec2, DVec2)) -> impl Iterator<Item = usize> + use<> {
+        let ((x0, y0), (x1, y1)) = (self.cell_of(lo), self.cell_of(hi));
+        let nx = self.dims.0;
+        (y0..=y1).flat_map(move |y| (x0..=x1).map(move |x| y * nx + x))
+    }
+
+    /// The grid's `(columns, rows)`.
+    pub fn dims(&self) -> (usize, usize) {
+        self.dims
+    }
+
+    /// The cell holding point `p`, clamped into the grid (NaN: the first cell).
+    pub fn cell_of(&self, p: DVec2) -> (usize, usize) {
+        let c = ((p - self.min) / self.cell).floor();
+        let clamp = |v: f64, n: usize| {
+            if v.is_nan() || v < 0.0 {
+                0
+            } else {
+                (v as usize).min(n - 1)
+            }
+        };
+        (clamp(c.x, self.dims.0), clamp(c.y, self.dims.1))
+    }
+
+    /// The items of cell `(x, y)`, in increasing order.
+    pub fn bucket(&self, x: usize, y: usize) -> &[u32] {
+        let k = y * self.dims.0 + x;
+        &self.ids[self.starts[k] as usize..self.starts[k + 1] as usize]
+    }
+
+    /// The items (sorted, each once) whose boxes come within `margin` of the segment `p-q`:
+    /// every item the segment passes within `margin` of is among them. Visits only the cells
+    /// along the segment, column by column.
+    pub fn near_segment(&self, p: DVec2, q: DVec2, margin: f64) -> Vec<u32> {
+        let mut out = Vec::new();
+        let (lo, hi) = (p.min(q) - margin, p.max(q) + margin);
+        let (x0, _) = self.cell_of(lo);
+        let (x1, _) = self.cell_of(hi);
+        let dx = q.x - p.x;
+        for x in x0..=x1 {
+            // The segment's y range over this column's x range (widened by `margin`).
+            let xa = (self.min.x + x as f64 * self.cell.x - margin).max(lo.x);
+            let xb = (self.min.x + (x + 1) as f64 * self.cell.x + margin).min(hi.x);
+            let (ya, yb) = if dx.abs() > 1e-300 {
+                let y = |t: f64| p.y + (q.y - p.y) * ((t - p.x) / dx).clamp(0.0, 1.0);
+                (y(xa).min(y(xb)), y(xa).max(y(xb)))
+            } else {
+                (p.y.min(q.y), p.y.max(q.y))
+            };
+            let (_, y0) = self.cell_of(DVec2::new(xa, ya - margin));
+            let (_, y1) = self.cell_of(DVec2::new(xb, yb + margin));
+            for y in y0..=y1 {
+                out.extend_from_slice(self.bucket(x, y));
+            }
+        }
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

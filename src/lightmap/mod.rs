@@ -8,7 +8,7 @@
 //! lightmap of as many pages of the same size, stored one after the other.
 
 use crate::atlas::Atlas;
-use crate::geometry::barycentric_2d;
+use crate::geometry::{BoxGrid, barycentric_2d};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
 use crate::visibility::Visibility;
@@ -154,10 +154,7 @@ impl Encoding {
 pub struct Locator<'a> {
     mesh: &'a ReceiverMesh,
     values: &'a [DVec3],
-    min: DVec2,
-    cell: DVec2,
-    dims: (usize, usize),
-    buckets: Vec<Vec<u32>>,
+    grid: BoxGrid,
 }
 
 impl<'a> Locator<'a> {
@@ -170,37 +167,19 @@ impl<'a> Locator<'a> {
         }
         let n = (mesh.triangles.len() as f64).sqrt().ceil().max(1.0) as usize;
         let size = (max - min).max(DVec2::splat(1e-300));
-        let dims = (n, n);
-        let cell = size / DVec2::new(n as f64, n as f64);
-        let mut buckets = vec![Vec::new(); n * n];
-        for (k, t) in mesh.triangles.iter().enumerate() {
-            let p = t.map(|i| mesh.vertices[i as usize]);
-            let lo = p[0].min(p[1]).min(p[2]);
-            let hi = p[0].max(p[1]).max(p[2]);
-            let (x0, y0) = Self::cell_of(min, cell, dims, lo);
-            let (x1, y1) = Self::cell_of(min, cell, dims, hi);
-            for y in y0..=y1 {
-                for x in x0..=x1 {
-                    buckets[y * n + x].push(k as u32);
-                }
-            }
-        }
+        let boxes: Vec<(DVec2, DVec2)> = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let p = t.map(|i| mesh.vertices[i as usize]);
+                (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
+            })
+            .collect();
         Locator {
             mesh,
             values,
-            min,
-            cell,
-            dims,
-            buckets,
+            grid: BoxGrid::new(min, size / n as f64, (n, n), &boxes),
         }
-    }
-
-    fn cell_of(min: DVec2, cell: DVec2, dims: (usize, usize), q: DVec2) -> (usize, usize) {
-        let c = ((q - min) / cell).floor();
-        (
-            (c.x.max(0.0) as usize).min(dims.0 - 1),
-            (c.y.max(0.0) as usize).min(dims.1 - 1),
-        )
     }
 
     fn barycentric(&self, k: u32, q: DVec2) -> [f64; 3] {
@@ -229,7 +208,7 @@ impl<'a> Locator<'a> {
                 return self.interpolate(*t, l);
             }
         }
-        let (x, y) = Self::cell_of(self.min, self.cell, self.dims, q);
+        let (x, y) = self.grid.cell_of(q);
         // (distance outside in barycentric units, triangle, barycentrics) of the best candidate.
         type Best = Option<(f64, u32, [f64; 3])>;
         let mut best: Best = None;
@@ -251,8 +230,8 @@ impl<'a> Locator<'a> {
         };
         // The point's cell, then its neighbours, then (rarely: points just outside the mesh,
         // from rounding at the polygon's edge) everything.
-        let (nx, ny) = self.dims;
-        let cell = |cx: usize, cy: usize| self.buckets[cy * nx + cx].iter().copied();
+        let (nx, ny) = self.grid.dims();
+        let cell = |cx: usize, cy: usize| self.grid.bucket(cx, cy).iter().copied();
         if !search(&mut best, &mut cell(x, y)) {
             let mut neighbours = (y.saturating_sub(1)..=(y + 1).min(ny - 1)).flat_map(|cy| {
                 (x.saturating_sub(1)..=(x + 1).min(nx - 1)).flat_map(move |cx| cell(cx, cy))
