@@ -763,13 +763,10 @@ fn clip_segment_to_polygon(
         );
         g.near_segment(p, q, tol)
     });
-    let all = 0..poly.triangles.len() as u32;
-    let reached: Box<dyn Iterator<Item = u32>> = match &near {
-        Some(near) => Box::new(near.iter().copied()),
-        None => Box::new(all),
-    };
-    for k in reached {
-        let p = scene.triangles[poly.triangles[k as usize]].p;
+    let reached = near.as_ref().map_or(poly.triangles.len(), Vec::len);
+    for i in 0..reached {
+        let k = near.as_ref().map_or(i, |near| near[i] as usize);
+        let p = scene.triangles[poly.triangles[k]].p;
         let (mut lo, mut hi) = (lo0, hi0);
         let centroid = (p[0] + p[1] + p[2]) / 3.0;
         for e in 0..3 {
