@@ -1,5 +1,5 @@
 //! Shared geometry: form factors by the contour integral, polygon clipping, convex pieces,
-//! areas and barycentric coordinates.
+//! areas, barycentric coordinates, and a bucket grid of 2D boxes.
 //!
 //! Depends on nothing else in the crate (glam and std only). Everything is f64; lengths in
 //! scene units, areas in scene units², form factors dimensionless. Polygons are corner lists,
