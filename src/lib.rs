@@ -48,7 +48,7 @@ pub mod write;
 // Shared physics, used by several stages (depend on nothing but `scene`'s plain data).
 
 /// Form factors by Lambert's contour formula, polygon clipping, convex pieces, areas,
-/// barycentrics.
+/// barycentrics, a bucket grid of 2D boxes.
 pub mod geometry;
 
 /// Receiving points, area emitters, the punctual light model, luminance.
