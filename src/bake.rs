@@ -550,8 +550,9 @@ const ATLAS_AREA: f64 = 1000.0;
 /// costs time for nothing.
 pub const TEXELS_PER_ELEMENT: f64 = 32.0;
 
-/// The default element budget is at least this many elements per input triangle, so that the
-/// light has elements of its own beyond the geometry's.
+/// The default element budget is at least this many elements per input triangle, and per
+/// element of the geometry's own coarsest meshing ([`mesh::geometry_floor`]), so that the light
+/// has elements of its own beyond the geometry's.
 pub const ELEMENTS_PER_TRIANGLE: f64 = 1.5;
 
 /// Bounds of the default element budget (elements).
@@ -561,34 +562,58 @@ pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 20_000..=250_000;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Budget {
     pub elements: usize,
-    /// `--budget`, `lightmap texels`, `input triangles`, `minimum` or `maximum`.
+    /// `--budget`, `lightmap texels`, `input triangles`, `geometry`, `minimum` or `maximum`.
     pub from: &'static str,
 }
 
-/// The element budget: `requested` (`--budget`) if given, else the larger of one element per
-/// [`TEXELS_PER_ELEMENT`] lightmap texels the surfaces cover at `texels_per_unit` (the bake
-/// passes the atlas's first estimate of its density, so that the mesh need not wait for the
-/// final packing: within a few percent of the final density) and
-/// [`ELEMENTS_PER_TRIANGLE`] per input triangle, within [`DEFAULT_BUDGET`]. Either way at least
-/// the input's own triangle count: the mesh can hardly have fewer elements than the geometry.
-pub fn element_budget(scene: &Scene, requested: Option<usize>, texels_per_unit: f64) -> Budget {
+/// The element budget: `requested` (`--budget`) if given, else the largest of
+///
+/// * one element per [`TEXELS_PER_ELEMENT`] lightmap texels the surfaces cover at
+///   `texels_per_unit` (the bake passes the atlas's first estimate of its density, so that the
+///   mesh need not wait for the final packing: within a few percent of the final density),
+/// * [`ELEMENTS_PER_TRIANGLE`] per input triangle,
+/// * [`ELEMENTS_PER_TRIANGLE`] per element the geometry itself takes, `geometry_floor(b)` at
+///   the larger of the first two, `b` ([`mesh::geometry_floor`]; called only for a default
+///   budget): thin boards and walls with doors are refined for their angles, and on a house
+///   interior this took more than 1.5 elements per input triangle, which left the
+///   discontinuities no share of the budget at all,
+///
+/// within [`DEFAULT_BUDGET`]. Either way at least the input's own triangle count: the mesh can
+/// hardly have fewer elements than the geometry.
+pub fn element_budget(
+    scene: &Scene,
+    requested: Option<usize>,
+    texels_per_unit: f64,
+    geometry_floor: impl FnOnce(usize) -> usize,
+) -> Budget {
     let triangles = scene.triangles.len();
+    let within = |b: f64, from| {
+        let b = b.min(1e9) as usize;
+        if b < *DEFAULT_BUDGET.start() {
+            (*DEFAULT_BUDGET.start(), "minimum")
+        } else if b > *DEFAULT_BUDGET.end() {
+            (*DEFAULT_BUDGET.end(), "maximum")
+        } else {
+            (b, from)
+        }
+    };
     let (elements, from) = match requested {
         Some(b) => (b, "--budget"),
         None => {
             let area: f64 = scene.polygons.iter().map(|p| p.area).sum();
             let texels = area * texels_per_unit * texels_per_unit / TEXELS_PER_ELEMENT;
             let per_triangle = triangles as f64 * ELEMENTS_PER_TRIANGLE;
-            let (b, from) = if texels >= per_triangle {
-                (texels, "lightmap texels")
-            } else {
-                (per_triangle, "input triangles")
-            };
-            let b = b.min(1e9) as usize;
-            if b < *DEFAULT_BUDGET.start() {
-                (*DEFAULT_BUDGET.start(), "minimum")
-            } else if b > *DEFAULT_BUDGET.end() {
-                (*DEFAULT_BUDGET.end(), "maximum")
+            let (b, from) = within(
+                texels.max(per_triangle),
+                if texels >= per_triangle {
+                    "lightmap texels"
+                } else {
+                    "input triangles"
+                },
+            );
+            let geometry = geometry_floor(b.max(triangles)) as f64 * ELEMENTS_PER_TRIANGLE;
+            if geometry > b as f64 {
+                within(geometry, "geometry")
             } else {
                 (b, from)
             }
@@ -626,7 +651,22 @@ fn mesh_scene(
     stats: &mut Stats,
     progress: &Progress<'_>,
 ) -> (Vec<Vec<Segment>>, Vec<ReceiverMesh>) {
-    let budget = element_budget(scene, options.budget, texels_per_unit);
+    let t = &mut stats.timings_s;
+    // The discontinuity stage's lines, with no limit on the pieces (the budget applies below).
+    let mut traced = match options.mesher {
+        Mesher::Discontinuity => Some(traced.unwrap_or_else(|| {
+            stage(&mut t.discontinuity, "discontinuity", progress, || {
+                discontinuity::segments(scene, vis, &dm_options(options, usize::MAX))
+            })
+        })),
+        _ => None,
+    };
+    let budget = stage(&mut t.mesh, "mesh", progress, || {
+        element_budget(scene, options.budget, texels_per_unit, |b| {
+            let segments = traced.as_ref().map_or(&[][..], |(s, _)| s.as_slice());
+            mesh::geometry_floor(scene, segments, b)
+        })
+    });
     stats.budget = budget.elements;
     stats.budget_from = budget.from.into();
     let budget = budget.elements;
@@ -639,15 +679,8 @@ fn mesh_scene(
             (Vec::new(), meshes)
         }
         Mesher::Discontinuity => {
-            let (segments, mut dm_stats) = match traced {
-                Some((mut segments, mut dm_stats)) => {
-                    discontinuity::keep_most_significant(&mut segments, budget, &mut dm_stats);
-                    (segments, dm_stats)
-                }
-                None => stage(&mut t.discontinuity, "discontinuity", progress, || {
-                    discontinuity::segments(scene, vis, &dm_options(options, budget))
-                }),
-            };
+            let (mut segments, mut dm_stats) = traced.take().unwrap_or_default();
+            discontinuity::keep_most_significant(&mut segments, budget, &mut dm_stats);
             // The budget left after the lines refines where the direct light varies most.
             let direct = crate::solve::Direct::with_options(scene, vis, &options.solve);
             let evaluate = |meshes: &[ReceiverMesh]| {
@@ -849,4 +882,60 @@ pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake, encoding: Encoding) -> Result<Vec
         encoding,
     };
     write::build(gltf, &bake.scene, &bake.atlas, &image)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::{Instance, Material};
+    use glam::DVec3;
+
+    /// A 1 x 1 square of two triangles.
+    fn square() -> Scene {
+        let mut scene = Scene::default();
+        scene.materials.push(Material {
+            name: "m".into(),
+            rho: DVec3::splat(0.5),
+            radiance: DVec3::ZERO,
+        });
+        let corners = vec![
+            DVec3::new(0.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, 0.0),
+            DVec3::new(1.0, 0.0, -1.0),
+            DVec3::new(0.0, 0.0, -1.0),
+        ];
+        scene.add_instance(Instance::new(corners, vec![0, 1, 2, 0, 2, 3]), 0);
+        scene
+    }
+
+    #[test]
+    fn the_default_budget_leaves_room_above_what_the_geometry_takes() {
+        let scene = square();
+        // 30 000 elements from the lightmap: 32 texels each over the unit square.
+        let texels_per_unit = (30_000.0 * TEXELS_PER_ELEMENT).sqrt();
+        let budget = |floor: usize| {
+            let mut asked = None;
+            let b = element_budget(&scene, None, texels_per_unit, |b| {
+                asked = Some(b);
+                floor
+            });
+            assert_eq!(
+                asked.map(|a| a.abs_diff(30_000) <= 1),
+                Some(true),
+                "{asked:?}"
+            );
+            (b.elements.abs_diff(30_000) <= 1, b.elements, b.from)
+        };
+        assert_eq!(budget(1_000), (true, budget(1_000).1, "lightmap texels"));
+        assert_eq!(budget(40_000), (false, 60_000, "geometry"));
+        assert_eq!(budget(200_000), (false, 250_000, "maximum"));
+        // A budget given is the budget: the geometry is not meshed for it.
+        let given = element_budget(&scene, Some(5_000), texels_per_unit, |_| {
+            panic!("meshed the geometry for a given budget")
+        });
+        assert_eq!((given.elements, given.from), (5_000, "--budget"));
+        // Never below the minimum, whatever the geometry.
+        let small = element_budget(&scene, None, 1.0, |_| 10);
+        assert_eq!((small.elements, small.from), (20_000, "minimum"));
+    }
 }

@@ -212,8 +212,8 @@ struct BakeArgs {
     mesher: Mesher,
     /// Target number of mesh elements (triangles) over the whole scene, at least the input's
     /// triangle count [default: one element per 32 lightmap texels (at the atlas's first
-    /// estimate of its density) or 1.5 per input triangle, whichever is more, within
-    /// 20000..250000; --stats reports it].
+    /// estimate of its density), 1.5 per input triangle or 1.5 per element of the geometry's
+    /// own coarsest meshing, whichever is most, within 20000..250000; --stats reports it].
     #[arg(long)]
     budget: Option<usize>,
     /// Discontinuity meshing: drop wedge pieces where their light's unoccluded irradiance is

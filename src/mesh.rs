@@ -736,9 +736,7 @@ pub fn discontinuity(
             .total_cmp(&segments[p][i].significance)
             .then((p, i).cmp(&(q, j)))
     });
-    let snap = 10.0 * crate::discontinuity::TOLERANCE * scene.extent();
-    // Half the side of an average element at the budget.
-    let clearance = 0.5 * element_area(scene, budget).sqrt();
+    let (snap, clearance) = line_spacing(scene, budget);
     // The strongest `keep` wedge pieces and every D0 line, per polygon.
     let select = |keep: usize| -> Vec<Vec<Segment>> {
         let mut kept: Vec<Vec<bool>> = segments
@@ -793,7 +791,7 @@ pub fn discontinuity(
         // search for the most pieces that fit, interpolating (the count grows about linearly
         // in the pieces kept) or bisecting between the most known to fit and the fewest known
         // not to.
-        let none = floor(0);
+        let none = geometry_floor(scene, segments, budget);
         let share = none + ((budget.saturating_sub(none)) as f64 * DM_SHARE) as usize;
         let (mut fits, mut fails) = ((0, none), (ranked.len(), all));
         for _ in 0..BUDGET_PASSES {
@@ -855,6 +853,48 @@ pub fn discontinuity(
             crowded: t.crowded + i.crowded,
         });
     (meshes, total, ranked.len() - keep)
+}
+
+/// The snapping distance and the clearance between lines ([`Lines`]) of the discontinuity
+/// mesher at `budget` (scene units): the discontinuity stage's tolerance, and half the side of
+/// an average element.
+fn line_spacing(scene: &Scene, budget: usize) -> (f64, f64) {
+    let snap = 10.0 * crate::discontinuity::TOLERANCE * scene.extent();
+    (snap, 0.5 * element_area(scene, budget).sqrt())
+}
+
+/// The elements the geometry itself takes at `budget`: the count of the coarsest meshing the
+/// budget search uses (area cap [`COARSEST`] times area/budget), with the D0 (contact) lines of
+/// `segments` and no wedge piece (pass no segments for the uniform and adaptive meshers). It is
+/// usually below the input's triangle count (a box's faces are one polygon each), but not where
+/// the angle bound refines thin or notched polygons (boards, walls with doors): the default
+/// element budget leaves room above it (`bake::element_budget`), and the discontinuity mesher
+/// gives its wedges a share of what is left above it ([`DM_SHARE`]).
+pub fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
+    let (snap, clearance) = line_spacing(scene, budget);
+    let d0: Vec<Vec<Segment>> = segments
+        .iter()
+        .map(|segs| {
+            segs.iter()
+                .filter(|s| s.kind == Kind::D0)
+                .cloned()
+                .collect()
+        })
+        .collect();
+    let coarsest = element_area(scene, budget) * COARSEST;
+    element_count(&mesh_at(scene, coarsest, &|i, area, cap| {
+        // As the mesher that asks meshes: the uniform mesher with no lines at all.
+        let lines = match d0.get(i) {
+            Some(segments) => Lines {
+                segments,
+                snap,
+                clearance,
+                points: &[],
+            },
+            None => Lines::default(),
+        };
+        triangulate_with(i, &scene.polygons[i], lines, area, cap).0
+    }))
 }
 
 /// Triangulates a polygon's outline plus the given interior points, with no refinement (the
@@ -1088,6 +1128,35 @@ mod tests {
             "{n} triangles for a budget of 500"
         );
         assert!(m.triangles.iter().all(|t| tri_area(m, t) > 0.0));
+    }
+
+    /// A 40 x 1 board on a 100 x 100 ground: the board is larger than the coarsest element (64
+    /// times 10 040 / 20 000 = 32) and far too thin for good angles, so its coarsest meshing
+    /// takes many more elements than its two triangles, which the floor counts.
+    #[test]
+    fn the_geometry_floor_counts_the_angle_refinement_of_a_thin_board() {
+        let p = |x: f64, z: f64| DVec3::new(x, 0.0, -z);
+        let q = |x: f64, y: f64| DVec3::new(x, y, -50.0);
+        let mut scene = floor_scene(
+            vec![p(-50., -50.), p(50., -50.), p(50., 50.), p(-50., 50.)],
+            vec![0, 1, 2, 0, 2, 3],
+        );
+        scene.add_instance(
+            Instance::new(
+                vec![q(0., 0.), q(40., 0.), q(40., 1.), q(0., 1.)],
+                vec![0, 1, 2, 0, 2, 3],
+            ),
+            0,
+        );
+        let floor = geometry_floor(&scene, &[], 20_000);
+        let coarsest = mesh_at(
+            &scene,
+            element_area(&scene, 20_000) * COARSEST,
+            &|i, a, c| triangulate(i, &scene.polygons[i], a, c),
+        );
+        assert_eq!(floor, element_count(&coarsest));
+        let board = coarsest.iter().find(|m| m.polygon == 1).expect("board");
+        assert!(board.triangles.len() >= 10, "{}", board.triangles.len());
     }
 
     #[test]

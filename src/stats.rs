@@ -41,7 +41,7 @@ pub struct Stats {
     /// `instances` and `triangles`), and how the output writes them (`separate` or `shared`).
     pub double_sided: DoubleSidedStats,
     /// The element budget the meshers aimed at, and what chose it (`--budget`, `lightmap texels`,
-    /// `input triangles`, `minimum` or `maximum`; see `bake::element_budget`).
+    /// `input triangles`, `geometry`, `minimum` or `maximum`; see `bake::element_budget`).
     pub budget: usize,
     pub budget_from: String,
     pub elements: usize,
