@@ -28,7 +28,7 @@
 //! in tests; compare ratios measured in one run (the machine may be shared and noisy).
 
 use glam::{DVec3, Vec3A};
-use obvhs::{BvhBuildParams, bvh2::Bvh2, cwbvh::CwBvh, ray::Ray, ray::RayHit, triangle::Triangle};
+use obvhs::{bvh2::Bvh2, cwbvh::CwBvh, ray::Ray, ray::RayHit, triangle::Triangle};
 use penumbra::fixtures;
 use penumbra::scene::Scene;
 use penumbra::visibility::{self, Query, RayCounts, RecordedRay, Visibility};
@@ -295,7 +295,7 @@ fn plain_bvh2(scene: &Scene) -> (DVec3, Plain<Bvh2>) {
     let (center, tris, polygons) = scene_triangles(scene);
     let bvh = obvhs::bvh2::builder::build_bvh2_from_tris(
         &tris,
-        BvhBuildParams::medium_build(),
+        visibility::BVH_BUILD,
         &mut Duration::default(),
     );
     let (tris, polygons) = reorder(&bvh.primitive_indices, &tris, &polygons);
@@ -313,7 +313,7 @@ fn plain_cwbvh(scene: &Scene) -> Plain<CwBvh> {
     let (_, tris, polygons) = scene_triangles(scene);
     let bvh = obvhs::cwbvh::builder::build_cwbvh_from_tris(
         &tris,
-        BvhBuildParams::medium_build(),
+        visibility::BVH_BUILD,
         &mut Duration::default(),
     );
     let (tris, polygons) = reorder(&bvh.primitive_indices, &tris, &polygons);

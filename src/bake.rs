@@ -210,20 +210,17 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             }
         })?;
     }
-    let vis = stage(&mut t.visibility, "visibility", progress, || {
-        Visibility::new(&scene)
-    });
     // The atlas depends on the scene only, and only the lightmap needs it: xatlas packs on a
-    // thread of its own (single-threaded) while the other stages run. The default element
-    // budget follows the atlas's texel density, so the mesh waits for the atlas's first
-    // estimate of it (`atlas::pack_estimating`: its sizing packing, a fraction of the atlas's
-    // time) and not for its final packing. The discontinuity stage's wedges do not depend on
-    // the budget (only how many pieces it keeps, which `mesh_scene` applies): they are traced
-    // meanwhile.
+    // thread of its own (single-threaded) while the other stages run, from the ray caster's
+    // BVH on. The default element budget follows the atlas's texel density, so the mesh waits
+    // for the atlas's first estimate of it (`atlas::pack_estimating`: its sizing packing, a
+    // fraction of the atlas's time) and not for its final packing. The discontinuity stage's
+    // wedges do not depend on the budget (only how many pieces it keeps, which `mesh_scene`
+    // applies): they are traced meanwhile.
     let atlas_failed = std::sync::atomic::AtomicBool::new(false);
-    let (work, (atlas, atlas_seconds)) = std::thread::scope(|s| {
+    let (vis, work, (atlas, atlas_seconds)) = std::thread::scope(|s| {
         let (sender, estimate) = std::sync::mpsc::channel();
-        let (scene, vis, atlas_failed) = (&scene, &vis, &atlas_failed);
+        let (scene, atlas_failed) = (&scene, &atlas_failed);
         let packing = s.spawn(move || {
             let start = std::time::Instant::now();
             let atlas = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -238,12 +235,19 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             let atlas = atlas.unwrap_or_else(|panic| std::panic::resume_unwind(panic));
             (atlas, start.elapsed().as_secs_f64())
         });
+        let vis = stage(
+            &mut stats.timings_s.visibility,
+            "visibility",
+            progress,
+            || Visibility::new(scene),
+        );
         let failed = || atlas_failed.load(std::sync::atomic::Ordering::Relaxed);
         // The stages up to the solve; `None` when the atlas failed before its estimate, or
         // before the mesh or the solve started (its error is reported, not theirs). The
         // estimate's sender lives in the atlas thread, so `recv` returns once the atlas sent
         // it or ended.
         let mut work = || {
+            let vis = &vis;
             let t = &mut stats.timings_s;
             let traced = (options.mesher == Mesher::Discontinuity).then(|| {
                 stage(&mut t.discontinuity, "discontinuity", progress, || {
@@ -294,7 +298,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         if waits {
             progress("atlas", 1, 1);
         }
-        (work, packed)
+        (vis, work, packed)
     });
     stats.timings_s.atlas += atlas_seconds;
     // A failed atlas is reported first. One that fails after its estimate (a page too small
