@@ -1251,7 +1251,8 @@ impl Hierarchy {
         let root = self.root();
         let mut out = Refined::default();
         self.refine_into(vis, b, limits, root, root, &mut out);
-        out.links.sort_by_key(|l| (l.receiver, l.source));
+        // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
+        out.links.sort_unstable_by_key(|l| (l.receiver, l.source));
         (out.links, out.refinements, out.rays)
     }
 
@@ -1287,10 +1288,13 @@ impl Hierarchy {
             })
             .collect();
         let mut out = Refined::default();
+        out.links
+            .reserve_exact(parts.iter().map(|p| p.links.len()).sum());
         for part in parts {
             out.append(part);
         }
-        out.links.sort_by_key(|l| (l.receiver, l.source));
+        // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
+        out.links.sort_unstable_by_key(|l| (l.receiver, l.source));
         (out.links, out.refinements, out.rays)
     }
 
