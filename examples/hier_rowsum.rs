@@ -1,7 +1,9 @@
 //! Debug: row sums of the hierarchical links with B = 1 on every element, against a ray-cast
 //! estimate of the same quantity (the cosine-weighted fraction of each element's hemisphere
 //! that sees a reflecting receiver): `cargo run --release --example hier_rowsum -- [scene.glb]
-//! [tol] [budget]` (the furnace box when no scene is given).
+//! [tol] [budget]` (the furnace box when no scene is given). With `BAKE_LINKS=1` in the
+//! environment, the links are those a bake keeps instead (refined with the bake's own
+//! radiosities at the bake's limits), so a shortfall of the bake's coarser links shows.
 use glam::DVec3;
 use penumbra::light::SurfacePoint;
 use penumbra::solve::hierarchical::{Hierarchy, Limits, PARTIAL_VISIBILITY, VARIATION};
@@ -26,20 +28,45 @@ fn main() -> anyhow::Result<()> {
         resolution: Some(128),
         ..Default::default()
     };
-    o.solve.bounces = Some(0);
+    if std::env::var("BAKE_LINKS").is_err() {
+        o.solve.bounces = Some(0);
+    }
     let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
     let vis = Visibility::new(&b.scene);
     let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).unwrap();
     let ones = vec![DVec3::ONE; h.elements.len()];
     let bn = h.pull(&ones);
     let total: f64 = h.elements.iter().map(|e| e.area).sum();
-    let limits = Limits {
-        power: tol * total,
-        variation: VARIATION,
-        source: 1.0,
-        visibility: PARTIAL_VISIBILITY,
+    let links = if std::env::var("BAKE_LINKS").is_ok() {
+        // The links a bake keeps: refined first with the reflected direct light, then again
+        // with the full radiosity (the bake's own vertex irradiance), at the bake's limits.
+        let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).unwrap();
+        let reflected: Vec<DVec3> = h.elements.iter().map(|e| e.rho * e.direct).collect();
+        let radiosity: Vec<DVec3> = full.elements.iter().map(|e| e.rho * e.direct).collect();
+        let initial: f64 = h
+            .elements
+            .iter()
+            .zip(&reflected)
+            .map(|(e, b)| e.area * b.element_sum() / 3.0)
+            .sum();
+        let limits = Limits {
+            power: tol * initial,
+            variation: VARIATION * initial / total,
+            source: penumbra::solve::hierarchical::SOURCE_VARIATION * initial / total,
+            visibility: PARTIAL_VISIBILITY * initial / total,
+        };
+        let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
+        let (links, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
+        links
+    } else {
+        let limits = Limits {
+            power: tol * total,
+            variation: VARIATION,
+            source: 1.0,
+            visibility: PARTIAL_VISIBILITY,
+        };
+        h.link(&vis, &h.sources(&ones), limits).0
     };
-    let (links, _, _) = h.link(&vis, &h.sources(&ones), limits);
     let got = h.push(&h.gather(&links, &bn));
     // Reflecting receivers: the polygons of the hierarchy with reflectance.
     let mut reflects = vec![false; b.scene.polygons.len()];
