@@ -2,11 +2,14 @@
 //! estimate of the same quantity (the cosine-weighted fraction of each element's hemisphere
 //! that sees a reflecting receiver): `cargo run --release --example hier_rowsum -- [scene.glb]
 //! [tol] [budget]` (the furnace box when no scene is given). With `BAKE_LINKS=1` in the
-//! environment, the links are those a bake keeps instead (refined with the bake's own
-//! radiosities at the bake's limits), so a shortfall of the bake's coarser links shows.
+//! environment, the links are about those a bake keeps instead (refined with the reflected
+//! direct light, then with the bake's radiosities averaged per element, at the bake's limits),
+//! so a shortfall of the bake's coarser links shows.
 use glam::DVec3;
 use penumbra::light::SurfacePoint;
-use penumbra::solve::hierarchical::{Hierarchy, Limits, PARTIAL_VISIBILITY, VARIATION};
+use penumbra::solve::hierarchical::{
+    Hierarchy, Limits, PARTIAL_VISIBILITY, SOURCE_VARIATION, VARIATION,
+};
 use penumbra::solve::sky::Sky;
 use penumbra::visibility::Visibility;
 use penumbra::{BakeOptions, load};
@@ -30,6 +33,8 @@ fn main() -> anyhow::Result<()> {
     };
     if std::env::var("BAKE_LINKS").is_err() {
         o.solve.bounces = Some(0);
+    } else {
+        o.solve.hr_tolerance = tol;
     }
     let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
     let vis = Visibility::new(&b.scene);
@@ -52,7 +57,7 @@ fn main() -> anyhow::Result<()> {
         let limits = Limits {
             power: tol * initial,
             variation: VARIATION * initial / total,
-            source: penumbra::solve::hierarchical::SOURCE_VARIATION * initial / total,
+            source: SOURCE_VARIATION * initial / total,
             visibility: PARTIAL_VISIBILITY * initial / total,
         };
         let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);

@@ -148,11 +148,22 @@
 //!   for 10-25% more refinement time. A link whose `B_s K_unoccluded` is over the limit is
 //!   split as soon as its first pairs (one per sample) disagree, without the other pairs' rays
 //!   (10-12% fewer rays on box-grid-20 and town-6k, the same links).
+//! * **Hidden, in doubt**: a link that the power, variation or source test would split but
+//!   whose sixteen sample pairs are all hidden may still see past the occluder between them
+//!   (a box's face and the wall behind the box). It is split like a partially visible link
+//!   while `B_s K_unoccluded` exceeds the same limit, else kept as `K = 0`. It used to be
+//!   dropped, and that was the Cornell box's remaining bias: the row sums of the links a bake
+//!   keeps were 0.63% short of ray casting (now 0.22% over, `examples/hier_rowsum.rs` with
+//!   `BAKE_LINKS=1`), which after the bounces made the indirect light 1.2% lower than the
+//!   progressive solver's. Against the Monte Carlo reference (256 samples, 512² page) the lit
+//!   region's RMSE went from 0.85% to 0.15% of the lit mean, all texels 1.15% to 0.78%; on
+//!   interior-20 the absorbed power rose by 4%, the light that crossed doorways between
+//!   rooms. It costs 12-41% more rays on the ladder (box-grid-40 to interior-20).
 //!
 //! A self-link of a cluster becomes the four links between its two children; a link between
 //! two leaves is kept as it is. Only the shadow rays the decision needs are cast: none for a
 //! link the geometric bound splits, and for a surface-to-surface link that will be split, rays
-//! only until the first visible pair (a wholly hidden pair is dropped, not split).
+//! only until the first visible pair (a wholly hidden pair is split only when in doubt, above).
 //!
 //! `B_s` for the oracle: [`REFINE_PASSES`] passes. The first refines from the root with the
 //! reflected direct light; the solution then gives every node its full radiosity (a node in
@@ -199,11 +210,13 @@
 //! Against the Monte Carlo reference (`examples/solver_error.rs`, `penumbra compare`'s error by
 //! region, RMSE as a fraction of the mean lit irradiance):
 //!
-//! * Cornell box (256 samples per texel, 512² page, 2x2 sub-samples): all texels 1.15%
-//!   against progressive's 2.06%; contact 1.9% against 5.8% (largest texel error 17.7% against
-//!   38.7%); indirect 1.0% against 2.2%; but lit 0.96% against 0.79%, penumbra 1.52% against
-//!   1.47%, umbra 1.0% against 0.5%; solve about 2x slower than progressive (5.2 s against
-//!   2.1 s), whose 1024 patches suit a 36-triangle scene.
+//! * Cornell box (256 samples per texel, 512² page, 2x2 sub-samples, 19 150 elements): no
+//!   worse than progressive in any region since hidden links in doubt are split (above): all
+//!   texels 0.79% against progressive's 2.06%; lit 0.56% against 0.79%; penumbra 0.81%
+//!   against 1.47%; umbra 0.49% against 0.48%; contact 1.9% against 5.8% (largest texel error
+//!   16.9% against 38.7%); indirect 0.60% against 2.16%. Before that: all 1.15%, lit 0.96%,
+//!   penumbra 1.52%, umbra 1.0%. Solve about 2x slower than progressive (4.2 s against 2.0 s),
+//!   whose 1024 patches suit a 36-triangle scene.
 //! * box-grid-20 (128 samples): all texels 8.0% against 15.7%, indirect 2.0% against 4.8%,
 //!   contact 8.7% against 18.0%; lit and penumbra within 0.2% of progressive's (5.2%, 16.7%:
 //!   both solvers share the direct light, and these errors are its texel resolution). Solve
@@ -233,11 +246,12 @@
 //!   are right (0.4% over). [`SOURCE_VARIATION`] at 0.01 instead of 0.03 took the bias to
 //!   1.15%, at 0.003 to 1.0% (for 2x the solve time); partial visibility at 0.1% and the
 //!   variation limit at 3e-4 changed nothing, nor the power tolerance (1e-4 to 1e-5). Hence
-//!   the sources' radiosity gradients (above), which halved it. What is left (0.7%): the row
-//!   sums of the links the bake keeps are short, 0.830 against a ray-cast 0.837 (those of
-//!   links refined at `B = 1` everywhere are not), so coarse links from dim sources, which
-//!   the oracle leaves coarse, under-estimate; likely the partial-visibility bias, which is
-//!   refined only for bright sources.
+//!   the sources' radiosity gradients (above), which halved it. What was left (0.7%): the row
+//!   sums of the links the bake keeps were short, 0.832 against a ray-cast 0.837 (those of
+//!   links refined at `B = 1` everywhere were not). Refining them further made it worse
+//!   (0.826 at a 100x tighter power tolerance), which pointed at links dropped rather than
+//!   links too coarse: the wholly hidden ones (above). Split when in doubt, the sums are
+//!   0.839 and the lit region's bias 0.38% (progressive: 0.17%).
 //! * Concave corners below one element: a box's wall under the sky, 0.05 m above the ground,
 //!   reads 0.67 of `pi L` against the reference's 0.44-0.53 (`tests/it/sky.rs`): the light
 //!   falls steeply into the corner within the wall's lowest element, and linear interpolation
@@ -247,7 +261,8 @@
 //!   (above); 2.1% short before. Tried on the way and not the cause: weighting a node's four
 //!   samples by the area they stand for, the contour sum at every distance instead of the
 //!   far-field disk formula, the clipped contour sum for every source straddling a sample's
-//!   horizon, splitting wholly hidden links too, weighting the pairs' visibility by their
+//!   horizon, splitting wholly hidden links too (at `B = 1`, where they are few; in a bake,
+//!   with dim sources, they were the cause, above), weighting the pairs' visibility by their
 //!   point-to-disk form factor (it overcorrected the floor and undercorrected the back wall).
 //!
 //! Units: lengths in scene units; irradiance `H` and radiosity `B` in W/m² per linear RGB
@@ -411,8 +426,9 @@ pub struct Link {
     /// of it); zero when the source has no children.
     pub reach: f32,
     /// The oracle's visibility factor (dimensionless): the unoccluded `K` of a partially
-    /// visible link, whose `B_s × shade` is the irradiance its visible fraction decides; zero
-    /// when the link is wholly visible or hidden, or neither end can be split.
+    /// visible link (or of a wholly hidden one that another test would split), whose
+    /// `B_s × shade` is the irradiance its visible fraction decides; zero when the link is
+    /// wholly visible, or neither end can be split.
     pub shade: f32,
     /// Where in a surface source the receiver looks (scene units): the offset from the plain
     /// mean of the source's samples to their mean weighted by the point-to-point kernel from
@@ -1198,8 +1214,7 @@ impl Hierarchy {
         // else the source (it is uneven).
         let split = Decision::Split(vary || (heavy && larger));
         if vary || heavy || uneven {
-            // Split unless wholly hidden: the bound (the unoccluded transfer) stands while any
-            // pair sees the other end.
+            // Split, with the bound (the unoccluded transfer), when any pair sees the other end.
             let (mut tested, mut hidden) = (false, true);
             'pairs: for a in sr {
                 for b in ss {
@@ -1212,10 +1227,13 @@ impl Hierarchy {
                     }
                 }
             }
-            if hidden && tested {
-                // Every facing pair was tested and is hidden: a later pass, whatever its
-                // radiosities, would cast the same rays to the same end. Nothing to keep.
-                return Decision::Drop;
+            // Wholly hidden to its samples, the link may still see past the occluder between
+            // them: like a partially visible one, it is split while `B_s K_unoccluded` (what
+            // its visibility decides) is over the limit, else kept as `K = 0` with only
+            // `shade` (the same rays would answer again; a later pass with brighter sources may
+            // split it).
+            if hidden && tested && b_s * unoccluded <= limits.visibility {
+                return keep(0.0, 0.0, 0.0, 0.0, unoccluded, DVec3::ZERO);
             }
             return split;
         }
