@@ -705,8 +705,9 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 ///
 /// Discontinuities take the budget first: when every wedge piece does not fit even with the
 /// coarsest refinement, the weakest pieces (lowest significance; D0 lines are always kept)
-/// are dropped until the coarsest meshing costs at most [`DM_SHARE`] of the budget, so that
-/// the rest still refines the surfaces between the lines.
+/// are dropped until the coarsest meshing costs at most [`DM_SHARE`] of what the meshing
+/// without them ([`geometry_floor`]; `known_floor` when the caller already counted it at
+/// this budget) leaves of the budget, so that the rest still refines the surfaces between the lines.
 ///
 /// With `refine` (the direct light at the vertices of a set of meshes), [`LIGHT_SHARE`] of what
 /// the coarsest meshing with the lines leaves of the budget is kept back, and goes where the light
@@ -717,6 +718,7 @@ pub fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],
     budget: usize,
+    known_floor: Option<usize>,
     refine: Option<&Evaluate<'_>>,
 ) -> (Vec<ReceiverMesh>, Inserted, usize) {
     // Wedge pieces, strongest first (ties by polygon and position: a total, fixed order).
@@ -791,7 +793,7 @@ pub fn discontinuity(
         // search for the most pieces that fit, interpolating (the count grows about linearly
         // in the pieces kept) or bisecting between the most known to fit and the fewest known
         // not to.
-        let none = geometry_floor(scene, segments, budget);
+        let none = known_floor.unwrap_or_else(|| geometry_floor(scene, segments, budget));
         let share = none + ((budget.saturating_sub(none)) as f64 * DM_SHARE) as usize;
         let (mut fits, mut fails) = ((0, none), (ranked.len(), all));
         for _ in 0..BUDGET_PASSES {
@@ -1157,6 +1159,22 @@ mod tests {
         assert_eq!(floor, element_count(&coarsest));
         let board = coarsest.iter().find(|m| m.polygon == 1).expect("board");
         assert!(board.triangles.len() >= 10, "{}", board.triangles.len());
+        // The discontinuity mesher's floor keeps the ground's contact lines (a line across
+        // it, in its plane coordinates) and leaves out every wedge piece.
+        let segment = |kind, y: f64| Segment {
+            a: DVec2::new(-40.0, y),
+            b: DVec2::new(40.0, y),
+            kind,
+            event: 0,
+            significance: 1.0,
+        };
+        let count = |segs: Vec<Segment>| geometry_floor(&scene, &[segs, Vec::new()], 20_000);
+        let d0 = count(vec![segment(Kind::D0, 0.5)]);
+        assert!(d0 > count(Vec::new()), "{d0}");
+        assert_eq!(
+            count(vec![segment(Kind::D0, 0.5), segment(Kind::Ve, 10.0)]),
+            d0
+        );
     }
 
     #[test]

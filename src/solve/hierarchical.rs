@@ -309,7 +309,8 @@ pub const FAR_FIELD: f64 = 6.0;
 /// parallel (below, in turn: a parallel task per small pair costs more than it saves).
 const PARALLEL_ELEMENTS: u32 = 2048;
 
-/// Most links; past it the refinement is redone with a 4× larger tolerance (a warning).
+/// Most links held; past it the refinement is redone with a 4× larger tolerance (a warning).
+/// The links of zero `K` a pass keeps for the next one count; the last pass keeps none.
 pub const MAX_LINKS: usize = 30_000_000;
 
 /// The Tikhonov term of the radiosity-gradient fit ([`Hierarchy::inverse_moments`]), as a fraction of
@@ -1272,6 +1273,11 @@ impl Hierarchy {
         self.refine_into(vis, b, limits, root, root, &mut out);
         // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
         out.links.sort_unstable_by_key(|l| (l.receiver, l.source));
+        debug_assert!(
+            out.links
+                .windows(2)
+                .all(|w| { (w[0].receiver, w[0].source) < (w[1].receiver, w[1].source) })
+        );
         (out.links, out.refinements, out.rays)
     }
 
@@ -1319,6 +1325,11 @@ impl Hierarchy {
         }
         // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
         out.links.sort_unstable_by_key(|l| (l.receiver, l.source));
+        debug_assert!(
+            out.links
+                .windows(2)
+                .all(|w| { (w[0].receiver, w[0].source) < (w[1].receiver, w[1].source) })
+        );
         (out.links, out.refinements, out.rays)
     }
 
