@@ -158,7 +158,8 @@
 //!   progressive solver's. Against the Monte Carlo reference (256 samples, 512² page) the lit
 //!   region's RMSE went from 0.85% to 0.15% of the lit mean, all texels 1.15% to 0.78%; on
 //!   interior-20 the absorbed power rose by 4%, the light that crossed doorways between
-//!   rooms. It costs 12-41% more rays on the ladder (box-grid-40 to interior-20).
+//!   rooms. It costs more rays: 12% on box-grid-40, 21-34% on the towns, 41% on interior-20
+//!   (same mesh).
 //!
 //! A self-link of a cluster becomes the four links between its two children; a link between
 //! two leaves is kept as it is. Only the shadow rays the decision needs are cast: none for a
@@ -220,14 +221,16 @@
 //! * box-grid-20 (128 samples): all texels 8.0% against 15.7%, indirect 2.0% against 4.8%,
 //!   contact 8.7% against 18.0%; lit and penumbra within 0.2% of progressive's (5.2%, 16.7%:
 //!   both solvers share the direct light, and these errors are its texel resolution). Solve
-//!   4.2-5.1x faster than progressive in four runs (3.0 s against 14.0 s, 3.5 s against
-//!   17.7 s, 2.5 s against 10.4 s, 3.1 s against 14.4 s, `examples/hier_compare.rs`).
+//!   4.2-5.1x faster than progressive in five runs (3.0 s against 14.0 s, 3.5 s against
+//!   17.7 s, 2.5 s against 10.4 s, 3.1 s against 14.4 s, `examples/hier_compare.rs`; with
+//!   hidden links split in doubt, 2.6 s against 13.3 s).
 //! * town-6k (64 samples): better in every region (indirect 1.1% against 3.3%); a 13 000
-//!   triangle town's solve 1.8-2.5x faster (1.4-1.6 s against 2.8-3.7 s). Earlier, town-25k:
+//!   triangle town's solve 1.7-2.5x faster (1.4-1.7 s against 2.8-3.7 s; 1.7x with hidden
+//!   links split in doubt). Earlier, town-25k:
 //!   indirect 2.7% against 6.0%.
-//! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 6.6-7.4 s on the
-//!   40x40 box grid (progressive: 375 s), 15 s on town-100k (147 863 elements; progressive:
-//!   over 600 s).
+//! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
+//!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
+//!   progressive: over 600 s).
 //! * Furnace box: `B = M/(1-rho)` within 1e-3 at every vertex.
 //! * Values at vertices, tried: gathering each element's links at its corners (the point form
 //!   factor at the corner times the link's visible fraction, instead of the element's mean)
