@@ -7,9 +7,7 @@
 //! so a shortfall of the bake's coarser links shows.
 use glam::DVec3;
 use penumbra::light::SurfacePoint;
-use penumbra::solve::hierarchical::{
-    Hierarchy, Limits, PARTIAL_VISIBILITY, SOURCE_VARIATION, VARIATION,
-};
+use penumbra::solve::hierarchical::{Hierarchy, Limits, PARTIAL_VISIBILITY, VARIATION};
 use penumbra::solve::sky::Sky;
 use penumbra::visibility::Visibility;
 use penumbra::{BakeOptions, load};
@@ -46,20 +44,9 @@ fn main() -> anyhow::Result<()> {
         // The links a bake keeps: refined first with the reflected direct light, then again
         // with the full radiosity (the bake's own vertex irradiance), at the bake's limits.
         let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).unwrap();
-        let reflected: Vec<DVec3> = h.elements.iter().map(|e| e.rho * e.direct).collect();
-        let radiosity: Vec<DVec3> = full.elements.iter().map(|e| e.rho * e.direct).collect();
-        let initial: f64 = h
-            .elements
-            .iter()
-            .zip(&reflected)
-            .map(|(e, b)| e.area * b.element_sum() / 3.0)
-            .sum();
-        let limits = Limits {
-            power: tol * initial,
-            variation: VARIATION * initial / total,
-            source: SOURCE_VARIATION * initial / total,
-            visibility: PARTIAL_VISIBILITY * initial / total,
-        };
+        let (reflected, initial) = h.reflected_direct();
+        let (radiosity, _) = full.reflected_direct();
+        let limits = Limits::of_bake(tol, initial, total);
         let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
         let (links, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
         links

@@ -507,6 +507,22 @@ pub struct Limits {
     pub visibility: f64,
 }
 
+impl Limits {
+    /// The limits a bake refines with: one link may carry `tolerance` of the reflected direct
+    /// power `initial` (W), and the variation, source and visibility limits are
+    /// [`VARIATION`], [`SOURCE_VARIATION`] and [`PARTIAL_VISIBILITY`] times the mean
+    /// reflected direct radiosity `initial / area` (`area`: all elements', scene units²).
+    pub fn of_bake(tolerance: f64, initial: f64, area: f64) -> Limits {
+        let mean = initial / area;
+        Limits {
+            power: tolerance * initial,
+            variation: VARIATION * mean,
+            source: SOURCE_VARIATION * mean,
+            visibility: PARTIAL_VISIBILITY * mean,
+        }
+    }
+}
+
 /// The output of refining links: the links kept, the links split, the shadow rays cast.
 #[derive(Debug, Default)]
 struct Refined {
@@ -516,6 +532,18 @@ struct Refined {
 }
 
 impl Refined {
+    /// The links sorted by receiver, then source, the refinements and the rays.
+    fn sorted(mut self) -> (Vec<Link>, u64, u64) {
+        // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
+        self.links.sort_unstable_by_key(|l| (l.receiver, l.source));
+        debug_assert!(
+            self.links
+                .windows(2)
+                .all(|w| (w[0].receiver, w[0].source) < (w[1].receiver, w[1].source))
+        );
+        (self.links, self.refinements, self.rays)
+    }
+
     /// Adds `other` after what `self` holds.
     fn append(&mut self, other: Refined) {
         self.links.extend(other.links);
@@ -1274,14 +1302,7 @@ impl Hierarchy {
         let root = self.root();
         let mut out = Refined::default();
         self.refine_into(vis, b, limits, root, root, &mut out);
-        // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
-        out.links.sort_unstable_by_key(|l| (l.receiver, l.source));
-        debug_assert!(
-            out.links
-                .windows(2)
-                .all(|w| { (w[0].receiver, w[0].source) < (w[1].receiver, w[1].source) })
-        );
-        (out.links, out.refinements, out.rays)
+        out.sorted()
     }
 
     /// Refines existing `links` with new source radiosities `b` (W/m², scalar): a link the
@@ -1326,14 +1347,7 @@ impl Hierarchy {
         for part in parts {
             out.append(part);
         }
-        // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
-        out.links.sort_unstable_by_key(|l| (l.receiver, l.source));
-        debug_assert!(
-            out.links
-                .windows(2)
-                .all(|w| { (w[0].receiver, w[0].source) < (w[1].receiver, w[1].source) })
-        );
-        (out.links, out.refinements, out.rays)
+        out.sorted()
     }
 
     /// Refines the link `r ← s` into `out`: the pairs a split makes are refined in parallel
@@ -1581,6 +1595,19 @@ impl Hierarchy {
         }
     }
 
+    /// Every element's reflected direct radiosity `rho H_direct` (W/m²), and the power it
+    /// carries (W, mean over RGB): what the indirect solve starts from.
+    pub fn reflected_direct(&self) -> (Vec<DVec3>, f64) {
+        let b: Vec<DVec3> = self.elements.iter().map(|e| e.rho * e.direct).collect();
+        let power = self
+            .elements
+            .iter()
+            .zip(&b)
+            .map(|(e, b)| e.area * b.element_sum() / 3.0)
+            .sum();
+        (b, power)
+    }
+
     /// Number of cluster nodes (spanning several polygons).
     pub fn clusters(&self) -> usize {
         self.nodes
@@ -1677,12 +1704,7 @@ pub fn indirect(
     hs.build_seconds = start.elapsed().as_secs_f64();
     let mean = |c: DVec3| c.element_sum() / 3.0;
     let els = &h.elements;
-    let reflected_direct: Vec<DVec3> = els.iter().map(|e| e.rho * e.direct).collect();
-    let initial: f64 = els
-        .iter()
-        .zip(&reflected_direct)
-        .map(|(e, b)| e.area * mean(*b))
-        .sum();
+    let (reflected_direct, initial) = h.reflected_direct();
     stats.direct_power = els.iter().map(|e| e.area * mean(e.direct)).sum();
     let mut indirect = vec![DVec3::ZERO; els.len()];
     let mut b_el = reflected_direct.clone();
@@ -1690,9 +1712,6 @@ pub fn indirect(
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
         let total_area: f64 = els.iter().map(|e| e.area).sum();
-        let variation = VARIATION * initial / total_area;
-        let source_variation = SOURCE_VARIATION * initial / total_area;
-        let visibility = PARTIAL_VISIBILITY * initial / total_area;
         let mut previous: Option<Vec<Link>> = None;
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
@@ -1700,12 +1719,7 @@ pub fn indirect(
             let last = pass + 1 == REFINE_PASSES;
             let sources = h.sources(&b_el);
             let links = loop {
-                let limits = Limits {
-                    power: tolerance * initial,
-                    variation,
-                    source: source_variation,
-                    visibility,
-                };
+                let limits = Limits::of_bake(tolerance, initial, total_area);
                 let (links, refinements, rays) = match &previous {
                     Some(p) => h.relink(vis, p, &sources, limits, last),
                     None => h.link(vis, &sources, limits),

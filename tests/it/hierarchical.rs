@@ -5,9 +5,7 @@ use glam::DVec3;
 use penumbra::fixtures::{self, GlbBuilder, Material, horizontal_rect};
 use penumbra::light::{SurfacePoint, luminance};
 use penumbra::solve::Solver;
-use penumbra::solve::hierarchical::{
-    Hierarchy, Limits, Link, PARTIAL_VISIBILITY, SOURCE_VARIATION, VARIATION,
-};
+use penumbra::solve::hierarchical::{Hierarchy, Limits, Link, PARTIAL_VISIBILITY, VARIATION};
 use penumbra::solve::sky::Sky;
 use penumbra::visibility::Visibility;
 use penumbra::{Bake, BakeOptions};
@@ -303,22 +301,10 @@ fn the_links_a_bake_keeps_match_ray_casting() {
     let vis = Visibility::new(&b.scene);
     let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
     let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).expect("full");
-    let radiosity: Vec<DVec3> = full.elements.iter().map(|e| e.rho * e.direct).collect();
-    let reflected: Vec<DVec3> = h.elements.iter().map(|e| e.rho * e.direct).collect();
+    let (radiosity, _) = full.reflected_direct();
+    let (reflected, power) = h.reflected_direct();
     let total: f64 = h.elements.iter().map(|e| e.area).sum();
-    let power: f64 = h
-        .elements
-        .iter()
-        .zip(&reflected)
-        .map(|(e, r)| e.area * r.element_sum() / 3.0)
-        .sum();
-    let mean = power / total;
-    let limits = Limits {
-        power: o.solve.hr_tolerance * power,
-        variation: VARIATION * mean,
-        source: SOURCE_VARIATION * mean,
-        visibility: PARTIAL_VISIBILITY * mean,
-    };
+    let limits = Limits::of_bake(o.solve.hr_tolerance, power, total);
     let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
     let (kept, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
     let (got, reference) = (row_sum(&h, &kept), ray_cast_row_sum(&b, &h, &vis));
