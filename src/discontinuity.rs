@@ -20,7 +20,7 @@
 //! unoccluded irradiance that the wedge's emitter carries at the piece; pieces under the
 //! threshold are dropped, and the weakest go first when the element budget would be exceeded.
 
-use crate::geometry::{BoxGrid, point_polygon_form_factor};
+use crate::geometry::{BoxGrid, point_polygon_form_factor, triangle_bounds};
 use crate::light::{luminance, punctual_unoccluded};
 use crate::scene::{LightKind, Scene};
 use crate::visibility::Visibility;
@@ -499,9 +499,9 @@ struct PolygonIndex {
     grids: Vec<Option<BoxGrid>>,
 }
 
-/// Polygons with at least this many triangles get a grid of them ([`triangle_grid`]): a ground plane cut
-/// around thousands of buildings has tens of thousands, and every wedge that reaches it would
-/// otherwise clip against each.
+/// Polygons with at least this many triangles get a grid of them ([`grid_of_triangles`]): a
+/// ground plane cut around thousands of buildings has tens of thousands, and every wedge that
+/// reaches it would otherwise clip against each.
 const GRID_TRIANGLES: usize = 32;
 
 /// A polygon's triangle grid holds at most this many cell entries per triangle (its memory and the
@@ -512,11 +512,8 @@ const GRID_ENTRIES_PER_TRIANGLE: usize = 16;
 /// per triangle), or `None` when their boxes would fill more than
 /// [`GRID_ENTRIES_PER_TRIANGLE`] cells each on average (long slivers across the polygon):
 /// then every triangle is tested, as without a grid.
-fn triangle_grid(triangles: &[[DVec2; 3]]) -> Option<BoxGrid> {
-    let boxes: Vec<(DVec2, DVec2)> = triangles
-        .iter()
-        .map(|t| (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2])))
-        .collect();
+fn grid_of_triangles(triangles: &[[DVec2; 3]]) -> Option<BoxGrid> {
+    let boxes: Vec<(DVec2, DVec2)> = triangles.iter().map(triangle_bounds).collect();
     let min = boxes.iter().fold(DVec2::INFINITY, |m, b| m.min(b.0));
     let max = boxes.iter().fold(DVec2::NEG_INFINITY, |m, b| m.max(b.1));
     let size = (max - min).max(DVec2::splat(1e-300));
@@ -564,7 +561,7 @@ impl PolygonIndex {
             .par_iter()
             .map(|p| {
                 (p.triangles_plane.len() >= GRID_TRIANGLES)
-                    .then(|| triangle_grid(&p.triangles_plane))
+                    .then(|| grid_of_triangles(&p.triangles_plane))
                     .flatten()
             })
             .collect();
@@ -1289,7 +1286,7 @@ mod tests {
     /// the margin of (checked by brute force on random triangles and segments, including
     /// segments that start or end outside the grid and axis-parallel ones).
     #[test]
-    fn triangle_grid_finds_every_triangle_near_a_segment() {
+    fn grid_of_triangles_finds_every_triangle_near_a_segment() {
         let mut seed = 0x9e37_79b9_7f4a_7c15u64;
         let mut rand = move || {
             seed ^= seed << 13;
@@ -1305,7 +1302,7 @@ mod tests {
                 [0, 1, 2].map(|_| c + DVec2::new(rand() - 0.5, rand() - 0.5) * s)
             })
             .collect();
-        let grid = triangle_grid(&triangles).expect("a grid");
+        let grid = grid_of_triangles(&triangles).expect("a grid");
         let margin = 1e-6;
         for k in 0..300 {
             let (mut p, mut q) = (point(&mut rand) * 1.4 - 2.0, point(&mut rand) * 1.4 - 2.0);

@@ -432,6 +432,11 @@ pub fn barycentric_3d(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
 // ---------------------------------------------------------------------------------------------
 // A grid of buckets
 
+/// The bounding box `(min, max)` of a 2D triangle.
+pub fn triangle_bounds(t: &[DVec2; 3]) -> (DVec2, DVec2) {
+    (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
+}
+
 /// A uniform grid of buckets over a 2D box (plane coordinates): cell `(x, y)` lists, in
 /// increasing order, the items whose bounding boxes meet it. Point location in a mesh and
 /// the triangles a segment passes near use it.

@@ -8,7 +8,7 @@
 //! lightmap of as many pages of the same size, stored one after the other.
 
 use crate::atlas::Atlas;
-use crate::geometry::{BoxGrid, barycentric_2d};
+use crate::geometry::{BoxGrid, barycentric_2d, triangle_bounds};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
 use crate::visibility::Visibility;
@@ -170,10 +170,7 @@ impl<'a> Locator<'a> {
         let boxes: Vec<(DVec2, DVec2)> = mesh
             .triangles
             .iter()
-            .map(|t| {
-                let p = t.map(|i| mesh.vertices[i as usize]);
-                (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
-            })
+            .map(|t| triangle_bounds(&t.map(|i| mesh.vertices[i as usize])))
             .collect();
         Locator {
             mesh,
@@ -362,8 +359,7 @@ pub fn rasterize(
                 if area == 0.0 || !area.is_finite() {
                     continue;
                 }
-                let lo = t.uv[0].min(t.uv[1]).min(t.uv[2]);
-                let hi = t.uv[0].max(t.uv[1]).max(t.uv[2]);
+                let (lo, hi) = triangle_bounds(&t.uv);
                 let x0 = lo.x.floor().max(0.0) as usize;
                 let x1 = (hi.x.floor().max(0.0) as usize).min(w - 1);
                 let ya = (lo.y.floor().max(0.0) as usize).max(y_lo);
