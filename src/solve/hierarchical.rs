@@ -118,11 +118,14 @@
 //!   `A` the total area). The receiver is split. Without this test a coarse receiver's `K`
 //!   is pushed unchanged to elements whose true `K` differs (measured on the furnace box: row
 //!   sums of `K` per element from 0.84 to 1.25 at `hr_tolerance` 1e-5; with it, within 6e-4
-//!   of 1 at 1e-4). [`VARIATION`] is 3e-3, the largest at which the furnace holds to 1e-3 at
-//!   every vertex (at 5e-3 its worst vertex is off by 1.1e-3): against 1e-3 it took about a
-//!   third less refinement time on a 13 000-triangle town (1.5 s to 1.0 s, one run each), and
-//!   the error against the Monte Carlo reference is the same in every region of the Cornell
-//!   box and town-6k (within 0.0004 of the lit mean). The source's coarseness needs no such
+//!   of 1 at 1e-4). [`VARIATION`] is 2e-3, the largest at which the furnace holds to 1e-3 at
+//!   every vertex with the vertex values below (9.1e-4; at 3e-3, 1.5e-3 at the box's edges,
+//!   which the mean of the elements around a vertex used to hide: 1e-3 was the limit's old
+//!   rule); against 3e-3 it costs 7-13% more rays on box-grid-20 and a 13 000-triangle town.
+//!   A receiver whose bounding box reaches behind a surface source's plane (a floor node
+//!   past the corner of a box, across the plane of the box's side face) is split too while
+//!   `B_s` times the geometric bound on its form factor ([`point_bound`]) is over the limit:
+//!   only its part in front sees the source, and its samples may all lie behind. The source's coarseness needs no such
 //!   test: the contour formula is exact for the whole source from each receiver point. A large surface source straddling the
 //!   receiver's horizon (estimated by the disk formula, crude at a contact) is split while
 //!   `B_s K̂` exceeds the same limit.
@@ -201,10 +204,31 @@
 //!
 //! # Values at the vertices
 //!
-//! The indirect irradiance at a vertex is the area-weighted mean of the indirect irradiance of
-//! the elements of its own mesh that use it. A vertex split along a contact (one copy per
-//! side) is used only by the elements of its side, so the sides stay separate. The direct light
-//! stays the exact vertex value.
+//! The solve gives each element its mean indirect irradiance; the lightmap interpolates values
+//! at the vertices linearly. The value at a vertex is that of the linear function fitted (area-
+//! weighted least squares) to the elements of its own mesh that use it, an element's mean of a
+//! linear function being its value at the centroid; where those elements' centroids leave the
+//! gradient undetermined (two triangles at a polygon's corner, whose centroids lie along the
+//! edge), the elements that share a vertex with them are fitted instead. The value is kept
+//! within the elements' values widened by their spread on each side, and at least zero. Then
+//! one correction step: each vertex moves by the area-weighted mean of its elements' residuals
+//! (element mean minus the mean of its three vertex values), so that the interpolated light
+//! keeps each element's mean where the light peaks, which a linear fit through element means
+//! flattens. A vertex split along a contact (one copy per side) is used only by the elements
+//! of its side, so the sides stay separate. The direct light stays the exact vertex value.
+//!
+//! The mean of the elements around each vertex, used before, stands for a point a third of an
+//! element inside the mesh at its edges, so at a concave corner (a floor beside a box, where
+//! the light falls into the corner) it read the light of the element's middle. Measured on the
+//! Cornell box against the Monte Carlo reference (1024 samples, `penumbra compare`'s 256² page,
+//! 15 554 elements; RMSE as a fraction of the lit mean, all texels / lit / penumbra / umbra /
+//! contact / indirect): the mean, 0.89 / 0.65 / 0.72 / 0.50 / 1.60 / 0.73%; the fit over the
+//! elements using the vertex, 0.74 / 0.62 / 0.70 / 0.47 / 1.14 / 0.65%; with the sources' side
+//! respected (`Hierarchy::point_factor`) and [`VARIATION`] at 2e-3, 0.72 / 0.61 / 0.69 / 0.39 /
+//! 1.04 / 0.69%; with the wider fit at corners, 0.71 / 0.61 / 0.69 / 0.39 / 0.99 / 0.68%; with
+//! the correction step, 0.66 / 0.59 / 0.69 / 0.45 / 0.92 / 0.56% (the umbra's elements are
+//! about 1.4% too bright, and the step shows them as they are). At 1 986 elements, the last
+//! two: all texels 3.20% to 2.73%, indirect 2.63% to 1.48%, umbra 0.94% to 0.60%.
 //!
 //! # Status (measured on 2 shared cores, default options)
 //!
@@ -294,7 +318,7 @@ const CONTOUR_ELEMENTS: u32 = 16;
 /// The refinement oracle's bound on how much one link's irradiance may vary across its
 /// receiver's sample points, as a fraction of the mean reflected direct radiosity `P / A`
 /// (dimensionless; see the module doc).
-pub const VARIATION: f64 = 3e-3;
+pub const VARIATION: f64 = 2e-3;
 
 /// The refinement oracle's bound on the irradiance a source's non-uniformity may misplace, as a
 /// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
@@ -1134,7 +1158,8 @@ impl Hierarchy {
         Some((f, sr.len().min(4)))
     }
 
-    /// The unoccluded form factor from the sample `a` to the surface node `s`: past
+    /// The unoccluded form factor from the sample `a` to the surface node `s` (zero when `a`
+    /// lies behind the node's plane: a surface radiates from its front only): past
     /// [`FAR_FIELD`] bounding radii, the disk formula `A cos_a cos_s / (π d² + A)` about the
     /// node's centre (its error falls as `(radius / d)²`, under 3% there); nearer, Lambert's
     /// contour formula over the node's outline when the node lies above the sample's horizon,
@@ -1142,6 +1167,13 @@ impl Hierarchy {
     fn point_factor(&self, a: &Sample, s: u32) -> f64 {
         let ns = &self.nodes[s as usize];
         let dir = ns.center - a.p;
+        // The contour formula is blind to the side: it would give a sample behind the source's
+        // plane the form factor of its back (a floor element past a box's corner got 0.16 from
+        // the box's side face, where ray casting finds 0, and the boxes' shadowed floor was
+        // 0.8% too bright in the row sums).
+        if ns.normal.dot(dir) >= 0.0 {
+            return 0.0;
+        }
         let d2 = dir.length_squared();
         if d2 > (FAR_FIELD * ns.radius).powi(2) {
             let len = d2.sqrt();
@@ -1229,14 +1261,32 @@ impl Hierarchy {
             return keep(t.k, power, spread, reach, 0.0, DVec3::ZERO);
         };
         let f = &f[..n];
+        // A receiver across the source's plane: only its part in front sees the source, and
+        // its samples may all lie behind (a floor node reaching past a box's corner): split
+        // it while the bound on what its front part may receive is over the variation limit.
+        let across = if nr.kids.is_some() && across_plane(nr, ns) {
+            point_bound(nr, ns)
+        } else {
+            0.0
+        };
+        if b_s * across > variation {
+            return Decision::Split(true);
+        }
         let unoccluded = f.iter().sum::<f64>() / n as f64;
         if unoccluded <= 0.0 {
+            if across > 0.0 {
+                return keep(0.0, 0.0, across, 0.0, 0.0, DVec3::ZERO);
+            }
             return Decision::Drop;
         }
         let (lo, hi) = f.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
             (lo.min(x), hi.max(x))
         });
-        let spread = if nr.kids.is_some() { hi - lo } else { 0.0 };
+        let spread = if nr.kids.is_some() {
+            (hi - lo).max(across)
+        } else {
+            0.0
+        };
         let power = if can_split { unoccluded * nr.area } else { 0.0 };
         let reach = if ns.kids.is_some() { hi } else { 0.0 };
         let vary = b_s * spread > variation;
@@ -1641,6 +1691,19 @@ fn enclosed(scene: &Scene, vis: &Visibility, p: &[DVec3; 3], n: DVec3, polygon: 
 }
 
 /// True when the bounding box of `n` lies above (or touches) the horizon of `(p, normal)`.
+/// True when node `r`'s bounding box has corners on both sides of the plane of the surface
+/// node `s`.
+fn across_plane(r: &Node, s: &Node) -> bool {
+    let tol = 1e-9 * (r.radius + s.radius + r.center.distance(s.center));
+    let (mut front, mut back) = (false, false);
+    for q in box_corners(r.min, r.max) {
+        let h = s.normal.dot(q - s.center);
+        front |= h > tol;
+        back |= h < -tol;
+    }
+    front && back
+}
+
 fn box_above(p: DVec3, normal: DVec3, n: &Node) -> bool {
     let tol = 1e-9 * (n.radius + n.center.distance(p));
     box_corners(n.min, n.max)
@@ -1675,6 +1738,141 @@ fn node_samples(n: &Node, elements: &[Element], vis: &Visibility) -> Vec<Sample>
         })
         .collect()
 }
+
+/// The indirect irradiance at every vertex of mesh `m` from its elements' `(triangle, area,
+/// indirect irradiance)` (`None` at a vertex no element uses): the value at the vertex of the
+/// linear function fitted, by area-weighted least squares, to the elements around it (an
+/// element's mean of a linear function is its value at the centroid), kept within their values
+/// widened by their spread on each side, and at least zero. The elements around a vertex are
+/// those that use it, or, when their centroids leave the gradient's direction undetermined
+/// (two triangles at a polygon's corner or edge, whose centroids lie along the edge), those
+/// that share a vertex with them. See the module doc.
+fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<DVec3>> {
+    let nv = m.vertices.len();
+    // Vertex -> its elements (indices into `items`), compressed rows.
+    let mut start = vec![0u32; nv + 1];
+    for &(t, _, _) in items {
+        for &v in &m.triangles[t as usize] {
+            start[v as usize + 1] += 1;
+        }
+    }
+    for v in 0..nv {
+        start[v + 1] += start[v];
+    }
+    let mut fill = start.clone();
+    let mut ring = vec![0u32; start[nv] as usize];
+    for (i, &(t, _, _)) in items.iter().enumerate() {
+        for &v in &m.triangles[t as usize] {
+            ring[fill[v as usize] as usize] = i as u32;
+            fill[v as usize] += 1;
+        }
+    }
+    let ring = |v: u32| &ring[start[v as usize] as usize..start[v as usize + 1] as usize];
+    let centroid = |i: u32| {
+        let [a, b, c] = m.triangles[items[i as usize].0 as usize].map(|v| m.vertices[v as usize]);
+        (a + b + c) / 3.0
+    };
+    // The fit over the elements `set` at `at`, and how well their centroids determine the
+    // gradient (the second moment's smaller eigenvalue over its larger).
+    let fit = |set: &[u32], at: DVec2| {
+        let (mut w, mut c, mut mean) = (0.0, DVec2::ZERO, DVec3::ZERO);
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for &i in set {
+            let (_, a, h) = items[i as usize];
+            (lo, hi) = (lo.min(h), hi.max(h));
+            w += a;
+            c += centroid(i) * a;
+            mean += h * a;
+        }
+        (c, mean) = (c / w, mean / w);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        let (mut bx, mut by) = (DVec3::ZERO, DVec3::ZERO);
+        for &i in set {
+            let (_, a, h) = items[i as usize];
+            let d = centroid(i) - c;
+            (sxx, sxy, syy) = (
+                sxx + a * d.x * d.x,
+                sxy + a * d.x * d.y,
+                syy + a * d.y * d.y,
+            );
+            bx += (h - mean) * (a * d.x);
+            by += (h - mean) * (a * d.y);
+        }
+        let (trace, det) = (sxx + syy, sxx * syy - sxy * sxy);
+        let gap = (trace * trace - 4.0 * det).max(0.0).sqrt();
+        let spread_ok = if trace > 0.0 {
+            (trace - gap) / (trace + gap)
+        } else {
+            0.0
+        };
+        // With the fit's Tikhonov term.
+        let reg = REGULARIZATION * trace;
+        let (sxx, syy) = (sxx + reg, syy + reg);
+        let det = sxx * syy - sxy * sxy;
+        if !(det > 0.0) {
+            return (mean, 0.0);
+        }
+        let d = at - c;
+        let value =
+            mean + (bx * syy - by * sxy) * (d.x / det) + (by * sxx - bx * sxy) * (d.y / det);
+        let spread = hi - lo;
+        (
+            value.clamp(lo - spread, hi + spread).max(DVec3::ZERO),
+            spread_ok,
+        )
+    };
+    let mut stamp = vec![u32::MAX; items.len()];
+    let mut wide = Vec::new();
+    let values = (0..nv as u32)
+        .map(|v| {
+            let near = ring(v);
+            if near.is_empty() {
+                return None;
+            }
+            let at = m.vertices[v as usize];
+            let (value, spread_ok) = fit(near, at);
+            if spread_ok >= WELL_SPREAD {
+                return Some(value);
+            }
+            wide.clear();
+            for &i in near {
+                for &u in &m.triangles[items[i as usize].0 as usize] {
+                    for &j in ring(u) {
+                        if stamp[j as usize] != v {
+                            stamp[j as usize] = v;
+                            wide.push(j);
+                        }
+                    }
+                }
+            }
+            Some(fit(&wide, at).0)
+        })
+        .collect::<Vec<_>>();
+    // One correction step towards vertex values whose linear interpolation has each element's
+    // mean: every vertex moves by the area-weighted mean of its elements' residuals.
+    let residual: Vec<DVec3> = items
+        .iter()
+        .map(|&(t, _, h)| {
+            let corners = m.triangles[t as usize].map(|v| values[v as usize].unwrap_or_default());
+            h - (corners[0] + corners[1] + corners[2]) / 3.0
+        })
+        .collect();
+    (0..nv as u32)
+        .map(|v| {
+            let near = ring(v);
+            let (s, w) = near.iter().fold((DVec3::ZERO, 0.0), |(s, w), &i| {
+                let a = items[i as usize].1;
+                (s + residual[i as usize] * a, w + a)
+            });
+            values[v as usize].map(|x| (x + s / w).max(DVec3::ZERO))
+        })
+        .collect()
+}
+
+/// The least ratio of the smaller to the larger eigenvalue of the second moment of the
+/// centroids around a vertex at which they determine the gradient for its value (see
+/// `vertex_indirect`; dimensionless).
+const WELL_SPREAD: f64 = 0.1;
 
 /// The indirect light at every vertex of `meshes`, added to their direct light `direct_h`, by
 /// hierarchical radiosity. Fills the powers, `unshot_fraction`, `hierarchical` and `warnings`
@@ -1804,7 +2002,7 @@ pub fn indirect(
         .map(|(e, hi)| e.area * mean((DVec3::ONE - e.rho) * (e.direct + *hi)))
         .sum();
     stats.unshot_fraction = if initial > 0.0 { left / initial } else { 0.0 };
-    // Vertex values: area-weighted mean of the elements using each vertex copy.
+    // Vertex values: a linear fit over the elements using each vertex copy.
     let mut per_mesh: Vec<Vec<(u32, f64, DVec3)>> = vec![Vec::new(); meshes.len()];
     for (e, hi) in els.iter().zip(&indirect) {
         per_mesh[e.mesh].push((e.triangle as u32, e.area, *hi));
@@ -1814,17 +2012,10 @@ pub fn indirect(
         .zip(direct_h)
         .zip(&per_mesh)
         .map(|((m, dh), items)| {
-            let mut sum = vec![DVec3::ZERO; m.vertices.len()];
-            let mut weight = vec![0.0; m.vertices.len()];
-            for &(t, a, hi) in items {
-                for &v in &m.triangles[t as usize] {
-                    sum[v as usize] += hi * a;
-                    weight[v as usize] += a;
-                }
-            }
+            let h = vertex_indirect(m, items);
             dh.iter()
-                .zip(sum.iter().zip(&weight))
-                .map(|(&d, (&s, &w))| if w > 0.0 { d + s / w } else { d })
+                .zip(&h)
+                .map(|(&d, hi)| d + hi.unwrap_or(DVec3::ZERO))
                 .collect()
         })
         .collect();
@@ -1900,5 +2091,97 @@ mod tests {
         }
         // A hemisphere about +x: every face but the one facing -x may face along it.
         assert!((projected_bound(&n, DVec3::X, (1.0, 0.0)) - 5.0).abs() < 1e-12);
+    }
+
+    /// A 1 x 0.5 rectangle in 4 x 2 squares, two triangles each, and its elements' means of
+    /// `field` (by the centroid rule: exact for a linear field).
+    fn grid_mesh(field: impl Fn(DVec2) -> DVec3) -> (ReceiverMesh, Vec<(u32, f64, DVec3)>) {
+        let (nx, ny) = (4u32, 2u32);
+        let vertices: Vec<DVec2> = (0..=ny)
+            .flat_map(|j| (0..=nx).map(move |i| DVec2::new(i as f64 * 0.25, j as f64 * 0.25)))
+            .collect();
+        let id = |i: u32, j: u32| j * (nx + 1) + i;
+        let triangles: Vec<[u32; 3]> = (0..ny)
+            .flat_map(|j| (0..nx).map(move |i| (i, j)))
+            .flat_map(|(i, j)| {
+                let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+                [[a, b, c], [a, c, d]]
+            })
+            .collect();
+        let mesh = ReceiverMesh {
+            polygon: 0,
+            vertices,
+            triangles,
+            constraints: Vec::new(),
+        };
+        let items = mesh
+            .triangles
+            .iter()
+            .enumerate()
+            .map(|(t, tri)| {
+                let [a, b, c] = tri.map(|v| mesh.vertices[v as usize]);
+                (t as u32, 0.03125, field((a + b + c) / 3.0))
+            })
+            .collect();
+        (mesh, items)
+    }
+
+    /// A mesh's vertex values reproduce a linear irradiance from its elements' means at every
+    /// vertex, at the mesh's edges and corners too, where the mean of the elements around a
+    /// vertex stands for a point inside them (a third of an element in).
+    #[test]
+    fn vertex_values_reproduce_a_linear_irradiance_up_to_the_edges() {
+        let field = |p: DVec2| DVec3::new(1.0 + 2.0 * p.x, 3.0 - p.y, 0.5 + p.x + p.y);
+        let (mesh, items) = grid_mesh(field);
+        let got = vertex_indirect(&mesh, &items);
+        for (v, h) in got.iter().enumerate() {
+            let want = field(mesh.vertices[v]);
+            let h = h.expect("every vertex is used");
+            // The Tikhonov term shrinks the gradient by about 0.1%.
+            assert!(
+                (h - want).abs().max_element() < 2e-3,
+                "vertex {v}: {h} {want}"
+            );
+        }
+        assert_eq!(got.len(), 15);
+    }
+
+    /// Interpolated linearly between the vertices (as the lightmap shows them), the vertex
+    /// values keep each element's mean irradiance better than the mean of the elements around
+    /// each vertex, which flattens a peak and lifts the edges (RMS of the elements' interpolated
+    /// means against theirs, measured: 0.043 against 0.120 of the peak).
+    #[test]
+    fn vertex_values_keep_the_elements_mean_irradiance_under_a_peak() {
+        let field = |p: DVec2| {
+            DVec3::splat((1.0 - 4.0 * (p - DVec2::new(0.5, 0.25)).length_squared()).max(0.0))
+        };
+        let (mesh, items) = grid_mesh(field);
+        let rms = |values: &[DVec3]| {
+            let sq: f64 = items
+                .iter()
+                .map(|&(t, _, h)| {
+                    let c = mesh.triangles[t as usize].map(|v| values[v as usize].x);
+                    ((c[0] + c[1] + c[2]) / 3.0 - h.x).powi(2)
+                })
+                .sum();
+            (sq / items.len() as f64).sqrt()
+        };
+        let fitted: Vec<DVec3> = vertex_indirect(&mesh, &items)
+            .into_iter()
+            .flatten()
+            .collect();
+        let mut sum = vec![(DVec3::ZERO, 0.0); mesh.vertices.len()];
+        for &(t, a, h) in &items {
+            for v in mesh.triangles[t as usize] {
+                sum[v as usize].0 += h * a;
+                sum[v as usize].1 += a;
+            }
+        }
+        let averaged: Vec<DVec3> = sum.iter().map(|(s, w)| *s / *w).collect();
+        let (fitted, averaged) = (rms(&fitted), rms(&averaged));
+        assert!(
+            fitted < 0.5 * averaged,
+            "fitted {fitted}, averaged {averaged}"
+        );
     }
 }

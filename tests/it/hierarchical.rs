@@ -5,7 +5,9 @@ use glam::DVec3;
 use penumbra::fixtures::{self, GlbBuilder, Material, horizontal_rect};
 use penumbra::light::{SurfacePoint, luminance};
 use penumbra::solve::Solver;
-use penumbra::solve::hierarchical::{Hierarchy, Limits, Link, PARTIAL_VISIBILITY, VARIATION};
+use penumbra::solve::hierarchical::{
+    Element, Hierarchy, Limits, Link, PARTIAL_VISIBILITY, VARIATION,
+};
 use penumbra::solve::sky::Sky;
 use penumbra::visibility::Visibility;
 use penumbra::{Bake, BakeOptions};
@@ -270,9 +272,9 @@ fn hierarchical_row_sums_match_ray_casting_past_occluders() {
             source: 1.0,
             visibility,
         };
-        row_sum(&h, &h.link(&vis, &h.sources(&ones), limits).0)
+        row_sum(&h, &h.link(&vis, &h.sources(&ones), limits).0, |_| true)
     };
-    let reference = ray_cast_row_sum(&b, &h, &vis);
+    let reference = ray_cast_row_sum(&b, &h, &vis, |_| true);
     let refined = uniform(PARTIAL_VISIBILITY);
     let unrefined = uniform(f64::INFINITY);
     eprintln!("row sums: refined {refined:.4}, unrefined {unrefined:.4}, ray-cast {reference:.4}");
@@ -292,7 +294,12 @@ fn hierarchical_row_sums_match_ray_casting_past_occluders() {
 /// and a coarse link whose sixteen sample pairs are all hidden may still see past the occluder
 /// between them. Those used to be dropped: the sums came out 0.63% short (and the indirect
 /// light 1.2% below the progressive solver's, the lit region 0.75% of the lit mean too dark
-/// against the Monte Carlo reference); split like partially visible links, they are 0.23% over.
+/// against the Monte Carlo reference); split like partially visible links, they were 0.22%
+/// over. That excess was the back of the boxes' faces: the contour formula is blind to the
+/// side, so a floor element past a box's corner, behind the plane of its side face, was given
+/// that face's form factor (0.16 for one element, where ray casting finds 0), and the floor in
+/// the boxes' shadow was 0.8% over. With the sources' side respected (and floor nodes across a
+/// face's plane split), the sums are 0.07% over and the shadowed floor's 0.3%.
 #[test]
 fn the_links_a_bake_keeps_match_ray_casting() {
     let mut o = quick();
@@ -307,38 +314,54 @@ fn the_links_a_bake_keeps_match_ray_casting() {
     let limits = Limits::of_bake(o.solve.hr_tolerance, power, total);
     let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
     let (kept, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
-    let (got, reference) = (row_sum(&h, &kept), ray_cast_row_sum(&b, &h, &vis));
+    let all = |_: &Element| true;
+    let (got, reference) = (row_sum(&h, &kept, all), ray_cast_row_sum(&b, &h, &vis, all));
     eprintln!("row sums of the bake's links {got:.4}, ray-cast {reference:.4}");
     assert!(
-        (got / reference - 1.0).abs() < 0.004,
+        (got / reference - 1.0).abs() < 0.0015,
         "row sum {got} against ray-cast {reference}"
+    );
+    // The floor where no direct light reaches: in the boxes' shadow, beside their faces.
+    let shadowed_floor = |e: &Element| e.normal.y > 0.5 && e.direct.max_element() == 0.0;
+    let (got, reference) = (
+        row_sum(&h, &kept, shadowed_floor),
+        ray_cast_row_sum(&b, &h, &vis, shadowed_floor),
+    );
+    eprintln!("shadowed floor: row sums {got:.4}, ray-cast {reference:.4}");
+    assert!(
+        (got / reference - 1.0).abs() < 0.005,
+        "shadowed floor: row sum {got} against ray-cast {reference}"
     );
 }
 
 /// The area-weighted mean over the elements of `h` of the row sums of `links`.
-fn row_sum(h: &Hierarchy, links: &[Link]) -> f64 {
+fn row_sum(h: &Hierarchy, links: &[Link], of: impl Fn(&Element) -> bool) -> f64 {
     let ones = vec![DVec3::ONE; h.elements.len()];
     let got = h.push(&h.gather(links, &h.pull(&ones)));
-    let total: f64 = h.elements.iter().map(|e| e.area).sum();
-    h.elements
-        .iter()
-        .zip(&got)
-        .map(|(e, g)| e.area * g.x)
-        .sum::<f64>()
-        / total
+    let (mut sum, mut total) = (0.0, 0.0);
+    for (e, g) in h.elements.iter().zip(&got).filter(|(e, _)| of(e)) {
+        sum += e.area * g.x;
+        total += e.area;
+    }
+    sum / total
 }
 
 /// The ray-cast estimate of the row sums: the cosine-weighted fraction of each element's
 /// hemisphere that sees a reflecting surface (the sky's 256 stratified directions from its
 /// centroid), area-weighted over the elements of `h`.
-fn ray_cast_row_sum(b: &Bake, h: &Hierarchy, vis: &Visibility) -> f64 {
+fn ray_cast_row_sum(
+    b: &Bake,
+    h: &Hierarchy,
+    vis: &Visibility,
+    of: impl Fn(&Element) -> bool,
+) -> f64 {
     let mut reflects = vec![false; b.scene.polygons.len()];
     for e in &h.elements {
         reflects[e.polygon] |= e.rho.max_element() > 0.0;
     }
     let sky = Sky::new(&b.scene, DVec3::ONE, 256).expect("a sky");
     let (mut sum, mut total) = (0.0, 0.0);
-    for e in &h.elements {
+    for e in h.elements.iter().filter(|e| of(e)) {
         let at = SurfacePoint::new((e.p[0] + e.p[1] + e.p[2]) / 3.0, e.normal, e.polygon, vis);
         let seen = sky.hit_fraction(vis, &at, |t, d| {
             let t = &b.scene.triangles[t];
