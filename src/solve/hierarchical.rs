@@ -1809,7 +1809,7 @@ fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<
         let reg = REGULARIZATION * trace;
         let (sxx, syy) = (sxx + reg, syy + reg);
         let det = sxx * syy - sxy * sxy;
-        if !(det > 0.0) {
+        if det.is_nan() || det <= 0.0 {
             return (mean, 0.0);
         }
         let d = at - c;
