@@ -188,7 +188,9 @@
 //! its mean: every iteration fits each surface node a radiosity gradient (least squares over
 //! its elements' centroids, [`Hierarchy::gradients`]), and the link, which stores where its
 //! receiver looks (`toward`: the offset of the source samples' mean weighted by the
-//! point-to-point kernel from the receiver's samples, [`seen_offset`]), gathers `B̄_s + ∇B_s ·
+//! point-to-point kernel from the receiver's samples over the pairs that see each other,
+//! [`seen_offset`]; counting the hidden pairs too, the Cornell box's umbra read 0.45% of the
+//! lit mean against 0.43%, indirect 0.56% against 0.52%), gathers `B̄_s + ∇B_s ·
 //! toward`, kept within 0 and `2 B̄_s`. A first-order answer to the source-mean bias that the
 //! source-uniformity test bounds: the part of the floor under the light, which the walls see
 //! most, is brighter than the floor's mean. Uniform radiosity (the furnace) has no gradient,
@@ -482,18 +484,21 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
 
 /// Where the receiver samples `sr` look in the source samples `ss` (of a source of area
 /// `area`): the mean of the source samples weighted by the summed point-to-point kernel
-/// `cos_r cos_s / (π d² + area / n)` from every receiver sample, minus their plain mean (scene
-/// units). Zero when no pair faces.
-fn seen_offset(sr: &[Sample], ss: &[Sample], area: f64) -> DVec3 {
+/// `cos_r cos_s / (π d² + area / n)` from every receiver sample, over the pairs set in
+/// `visible` ([`pair_bit`]), minus their plain mean (scene units). Zero when no pair faces.
+fn seen_offset(sr: &[Sample], ss: &[Sample], area: f64, visible: u16) -> DVec3 {
     if ss.len() < 2 {
         return DVec3::ZERO;
     }
     let a = area / ss.len() as f64;
     let (mut wsum, mut wp) = (0.0, DVec3::ZERO);
     let plain = ss.iter().map(|q| q.p).sum::<DVec3>() / ss.len() as f64;
-    for q in ss {
+    for (j, q) in ss.iter().enumerate() {
         let mut w = 0.0;
-        for p in sr {
+        for (i, p) in sr.iter().enumerate() {
+            if visible & pair_bit(i, j) == 0 {
+                continue;
+            }
             let dir = q.p - p.p;
             let d2 = dir.length_squared();
             if d2.is_nan() || d2 <= 0.0 {
@@ -721,9 +726,10 @@ fn pair_visibility(
     b: &[Sample],
     weight: impl Fn(&Sample, &Sample) -> f64,
     stop_if_partial: bool,
-) -> (f64, f64, bool, u64) {
+) -> (f64, f64, bool, u64, u16) {
     let visible =
         |p: &Sample, q: &Sample| !vis.occluded_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
+    let mut mask = 0u16;
     let first = a.len().max(b.len());
     let diagonal = |i: usize, j: usize| (0..first).any(|k| (k % a.len(), k % b.len()) == (i, j));
     let (mut seen, mut tested) = (0.0, 0.0);
@@ -737,12 +743,13 @@ fn pair_visibility(
             if visible(p, q) {
                 hits += 1;
                 seen += w;
+                mask |= pair_bit(k % a.len(), k % b.len());
             }
         }
     }
     let agree = cast >= 2 && (hits == 0 || hits == cast);
     if stop_if_partial && hits > 0 && hits < cast {
-        return (seen, tested, true, cast);
+        return (seen, tested, true, cast, mask);
     }
     for (i, p) in a.iter().enumerate() {
         for (j, q) in b.iter().enumerate() {
@@ -757,6 +764,7 @@ fn pair_visibility(
             if agree {
                 if hits > 0 {
                     seen += w;
+                    mask |= pair_bit(i, j);
                 }
                 continue;
             }
@@ -764,12 +772,18 @@ fn pair_visibility(
             if visible(p, q) {
                 hits += 1;
                 seen += w;
+                mask |= pair_bit(i, j);
             }
         }
     }
     // Taken to agree, the other pairs cast no ray: `cast` counts the rays either way.
     let partial = !agree && hits > 0 && hits < cast;
-    (seen, tested, partial, cast)
+    (seen, tested, partial, cast, mask)
+}
+
+/// The bit of the sample pair `(i, j)` (at most four samples a node) in a mask of pairs.
+fn pair_bit(i: usize, j: usize) -> u16 {
+    1 << (4 * i + j)
 }
 
 /// The bound on the point form factor from any point of node `r` to anything in node `s`
@@ -1079,7 +1093,7 @@ impl Hierarchy {
                     bound: 0.0,
                 };
             }
-            let (seen, tested, partial, rays) = pair_visibility(vis, sr, ss, facing, false);
+            let (seen, tested, partial, rays, _) = pair_visibility(vis, sr, ss, facing, false);
             let v = if tested > 0.0 { seen / tested } else { 1.0 };
             return Transfer {
                 k: unoccluded * v,
@@ -1102,7 +1116,7 @@ impl Hierarchy {
             }
             ns.area * ci * cj / (PI * d2 + ns.area)
         };
-        let (k, unoccluded, partial, rays) = pair_visibility(vis, sr, ss, disk, false);
+        let (k, unoccluded, partial, rays, _) = pair_visibility(vis, sr, ss, disk, false);
         let pairs = (sr.len() * ss.len()) as f64;
         // The sampled cosines may all miss (four samples of a cluster): the oracle bounds the
         // transfer geometrically instead.
@@ -1324,7 +1338,8 @@ impl Hierarchy {
         // Such a link is split when `B_s K_unoccluded` is over the limit: then the first pairs
         // that disagree settle it, and the other pairs need no ray.
         let splits_if_partial = can_split && b_s * unoccluded > limits.visibility;
-        let (seen, tested, partial, cast) = pair_visibility(vis, sr, ss, facing, splits_if_partial);
+        let (seen, tested, partial, cast, visible) =
+            pair_visibility(vis, sr, ss, facing, splits_if_partial);
         *rays += cast;
         if partial && splits_if_partial {
             return Decision::Split(larger);
@@ -1336,7 +1351,7 @@ impl Hierarchy {
         };
         let v = if tested > 0.0 { seen / tested } else { 1.0 };
         let toward = if ns.kids.is_some() {
-            seen_offset(sr, ss, ns.area)
+            seen_offset(sr, ss, ns.area, visible)
         } else {
             DVec3::ZERO
         };
