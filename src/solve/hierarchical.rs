@@ -237,27 +237,34 @@
 //! Against the Monte Carlo reference (`examples/solver_error.rs`, `penumbra compare`'s error by
 //! region, RMSE as a fraction of the mean lit irradiance):
 //!
-//! * Cornell box (256 samples per texel, 512² page, 2x2 sub-samples, 19 150 elements): no
-//!   worse than progressive in any region since hidden links in doubt are split (above): all
-//!   texels 0.79% against progressive's 2.06%; lit 0.56% against 0.79%; penumbra 0.81%
-//!   against 1.47%; umbra 0.49% against 0.48%; contact 1.9% against 5.8% (largest texel error
-//!   16.9% against 38.7%); indirect 0.60% against 2.16%. Before that: all 1.15%, lit 0.96%,
-//!   penumbra 1.52%, umbra 1.0%. Solve about 2x slower than progressive (4.2 s against 2.0 s),
-//!   whose 1024 patches suit a 36-triangle scene.
-//! * box-grid-20 (128 samples): all texels 8.0% against 15.7%, indirect 2.0% against 4.8%,
-//!   contact 8.7% against 18.0%; lit and penumbra within 0.2% of progressive's (5.2%, 16.7%:
-//!   both solvers share the direct light, and these errors are its texel resolution). Solve
-//!   4.2-5.1x faster than progressive in five runs (3.0 s against 14.0 s, 3.5 s against
-//!   17.7 s, 2.5 s against 10.4 s, 3.1 s against 14.4 s, `examples/hier_compare.rs`; with
-//!   hidden links split in doubt, 2.6 s against 13.3 s).
-//! * town-6k (64 samples): better in every region (indirect 1.1% against 3.3%); a 13 000
-//!   triangle town's solve 1.7-2.5x faster (1.4-1.7 s against 2.8-3.7 s; 1.7x with hidden
-//!   links split in doubt). Earlier, town-25k:
-//!   indirect 2.7% against 6.0%.
+//! * Cornell box (`penumbra compare`'s 256² page, 4x4 sub-samples, 1024 samples per texel,
+//!   15 554 elements): better than progressive in every region but the umbra: all texels
+//!   0.64% against 2.15%; lit 0.58% against 0.61%; penumbra 0.68% against 1.04%; contact
+//!   0.92% against 4.74% (largest texel error 9.9% against 37.0%); indirect 0.52% against
+//!   1.70%; umbra 0.43% against 0.24%, a bias: the umbra's elements are about 1.4% too bright
+//!   (0.25% of the lit mean), with the row sums of its links right (within 0.2% of ray
+//!   casting on the shadowed floor). Before the vertex fit and the sources' side: all 0.89%,
+//!   lit 0.65%, penumbra 0.72%, umbra 0.50%, contact 1.60%, indirect 0.73%. Solve about 2x
+//!   slower than progressive (3.8 s against 2.1 s), whose 1024 patches suit a 36-triangle
+//!   scene.
+//! * box-grid-20 (1024² page, one sub-sample, 128 samples): better in every region: all
+//!   texels 14.2% against 24.2%, indirect 4.0% against 17.9%, contact 19.1% against 30.5%,
+//!   lit 9.9% against 23.8%; penumbra and umbra within 2.5% (their error is the texel
+//!   resolution of the direct light both share). Solve 4.2-5.1x faster than progressive in
+//!   six runs of `examples/hier_compare.rs` before the vertex fit (3.0 s against 14.0 s,
+//!   3.5 s against 17.7 s, 2.5 s against 10.4 s, 3.1 s against 14.4 s, 2.6 s against 13.3 s);
+//!   3.9x after it (3.05 s against 11.9 s), with 9% more rays. Its mean indirect light at the
+//!   vertices is 1.9x progressive's there, and right: progressive's coarse patches leave the
+//!   lit region 17% of the lit mean too dark against the Monte Carlo reference (this solver:
+//!   4.7%).
+//! * town-6k (64 samples): better in every region (indirect 0.47% against 2.5%, contact 4.3%
+//!   against 6.5%); a 13 000 triangle town's solve 1.7-2.5x faster (1.4-1.7 s against
+//!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.67x after the vertex fit). Earlier, town-25k: indirect 2.7%
+//!   against 6.0%.
 //! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
 //!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
 //!   progressive: over 600 s).
-//! * Furnace box: `B = M/(1-rho)` within 1e-3 at every vertex.
+//! * Furnace box: `B = M/(1-rho)` within 1e-3 at every vertex (9.1e-4 at `rho` 0.8).
 //! * Values at vertices, tried: gathering each element's links at its corners (the point form
 //!   factor at the corner times the link's visible fraction, instead of the element's mean)
 //!   lowered every region's RMSE on the Cornell box by 3-14% but cost 25-35% more solve time
