@@ -1822,7 +1822,7 @@ fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<
         }
         let (trace, det) = (sxx + syy, sxx * syy - sxy * sxy);
         let gap = (trace * trace - 4.0 * det).max(0.0).sqrt();
-        let spread_ok = if trace > 0.0 {
+        let isotropy = if trace > 0.0 {
             (trace - gap) / (trace + gap)
         } else {
             0.0
@@ -1840,7 +1840,7 @@ fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<
         let spread = hi - lo;
         (
             value.clamp(lo - spread, hi + spread).max(DVec3::ZERO),
-            spread_ok,
+            isotropy,
         )
     };
     let mut stamp = vec![u32::MAX; items.len()];
@@ -1852,8 +1852,8 @@ fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<
                 return None;
             }
             let at = m.vertices[v as usize];
-            let (value, spread_ok) = fit(near, at);
-            if spread_ok >= WELL_SPREAD {
+            let (value, isotropy) = fit(near, at);
+            if isotropy >= WELL_SPREAD {
                 return Some(value);
             }
             wide.clear();
