@@ -1282,32 +1282,26 @@ impl Hierarchy {
             return keep(t.k, power, spread, reach, 0.0, DVec3::ZERO);
         };
         let f = &f[..n];
-        // A receiver across the source's plane: only its part in front sees the source, and
-        // its samples may all lie behind (a floor node reaching past a box's corner): split
-        // it while the bound on what its front part may receive is over the variation limit.
-        let across = if nr.kids.is_some() && across_plane(nr, ns) {
-            point_bound(nr, ns)
-        } else {
-            0.0
-        };
-        if b_s * across > variation {
-            return Decision::Split(true);
-        }
         let unoccluded = f.iter().sum::<f64>() / n as f64;
         if unoccluded <= 0.0 {
-            if across > 0.0 {
-                return keep(0.0, 0.0, across, 0.0, 0.0, DVec3::ZERO);
+            // A receiver across the source's plane whose samples all lie behind it (a floor
+            // node reaching past a box's corner): its part in front still sees the source.
+            // Split it while the bound on what that part may receive is over the variation
+            // limit, else keep it at `K = 0` for a later pass to test again. (With a sample in
+            // front, the variation test below decides on the samples' own values.)
+            if nr.kids.is_some() && across_plane(nr, ns) {
+                let bound = point_bound(nr, ns);
+                if b_s * bound > variation {
+                    return Decision::Split(true);
+                }
+                return keep(0.0, 0.0, bound, 0.0, 0.0, DVec3::ZERO);
             }
             return Decision::Drop;
         }
         let (lo, hi) = f.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
             (lo.min(x), hi.max(x))
         });
-        let spread = if nr.kids.is_some() {
-            (hi - lo).max(across)
-        } else {
-            0.0
-        };
+        let spread = if nr.kids.is_some() { hi - lo } else { 0.0 };
         let power = if can_split { unoccluded * nr.area } else { 0.0 };
         let reach = if ns.kids.is_some() { hi } else { 0.0 };
         let vary = b_s * spread > variation;
