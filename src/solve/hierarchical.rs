@@ -122,10 +122,13 @@
 //!   every vertex with the vertex values below (9.1e-4; at 3e-3, 1.5e-3 at the box's edges,
 //!   which the mean of the elements around a vertex used to hide: 1e-3 was the limit's old
 //!   rule); against 3e-3 it costs 7-13% more rays on box-grid-20 and a 13 000-triangle town.
-//!   A receiver whose bounding box reaches behind a surface source's plane (a floor node
-//!   past the corner of a box, across the plane of the box's side face) is split too while
-//!   `B_s` times the geometric bound on its form factor ([`point_bound`]) is over the limit:
-//!   only its part in front sees the source, and its samples may all lie behind. The source's coarseness needs no such
+//!   A receiver whose bounding box reaches across a surface source's plane while all its
+//!   samples lie behind it (a floor node past the corner of a box, across the plane of the
+//!   box's side face) is split too while `B_s` times the geometric bound on its form factor
+//!   ([`point_bound`]) is over the limit: its part in front still sees the source. (Splitting
+//!   every receiver across a source's plane by that bound cost 74% more refinements on Bevy's
+//!   Cornell box for the same error on ours; with a sample in front, the variation test
+//!   decides on the samples' own values.) The source's coarseness needs no such
 //!   test: the contour formula is exact for the whole source from each receiver point. A large surface source straddling the
 //!   receiver's horizon (estimated by the disk formula, crude at a contact) is split while
 //!   `B_s K̂` exceeds the same limit.
@@ -230,7 +233,9 @@
 //! 1.04 / 0.69%; with the wider fit at corners, 0.71 / 0.61 / 0.69 / 0.39 / 0.99 / 0.68%; with
 //! the correction step, 0.66 / 0.59 / 0.69 / 0.45 / 0.92 / 0.56% (the umbra's elements are
 //! about 1.4% too bright, and the step shows them as they are). At 1 986 elements, the last
-//! two: all texels 3.20% to 2.73%, indirect 2.63% to 1.48%, umbra 0.94% to 0.60%.
+//! two: all texels 3.20% to 2.73%, indirect 2.63% to 1.48%, umbra 0.94% to 0.60%. (These
+//! steps split every receiver across a source's plane; as it is now, with `toward` over the
+//! visible pairs: 0.65 / 0.59 / 0.69 / 0.43 / 0.92 / 0.53%.)
 //!
 //! # Status (measured on 2 shared cores, default options)
 //!
@@ -239,13 +244,13 @@
 //!
 //! * Cornell box (`penumbra compare`'s 256² page, 4x4 sub-samples, 1024 samples per texel,
 //!   15 554 elements): better than progressive in every region but the umbra: all texels
-//!   0.64% against 2.15%; lit 0.58% against 0.61%; penumbra 0.68% against 1.04%; contact
-//!   0.92% against 4.74% (largest texel error 9.9% against 37.0%); indirect 0.52% against
+//!   0.65% against 2.15%; lit 0.59% against 0.61%; penumbra 0.69% against 1.04%; contact
+//!   0.92% against 4.74% (largest texel error 9.9% against 37.0%); indirect 0.53% against
 //!   1.70%; umbra 0.43% against 0.24%, a bias: the umbra's elements are about 1.4% too bright
 //!   (0.25% of the lit mean), with the row sums of its links right (within 0.2% of ray
 //!   casting on the shadowed floor). Before the vertex fit and the sources' side: all 0.89%,
 //!   lit 0.65%, penumbra 0.72%, umbra 0.50%, contact 1.60%, indirect 0.73%. Solve about 2x
-//!   slower than progressive (3.8 s against 2.1 s), whose 1024 patches suit a 36-triangle
+//!   slower than progressive (3.0 s against 1.9 s), whose 1024 patches suit a 36-triangle
 //!   scene.
 //! * box-grid-20 (1024² page, one sub-sample, 128 samples): better in every region: all
 //!   texels 14.2% against 24.2%, indirect 4.0% against 17.9%, contact 19.1% against 30.5%,
@@ -253,13 +258,13 @@
 //!   resolution of the direct light both share). Solve 4.2-5.1x faster than progressive in
 //!   six runs of `examples/hier_compare.rs` before the vertex fit (3.0 s against 14.0 s,
 //!   3.5 s against 17.7 s, 2.5 s against 10.4 s, 3.1 s against 14.4 s, 2.6 s against 13.3 s);
-//!   3.9x after it (3.05 s against 11.9 s), with 9% more rays. Its mean indirect light at the
+//!   4.0x after it (2.78 s against 11.0 s), with 6% more rays. Its mean indirect light at the
 //!   vertices is 1.9x progressive's there, and right: progressive's coarse patches leave the
 //!   lit region 17% of the lit mean too dark against the Monte Carlo reference (this solver:
 //!   4.7%).
 //! * town-6k (64 samples): better in every region (indirect 0.47% against 2.5%, contact 4.3%
 //!   against 6.5%); a 13 000 triangle town's solve 1.7-2.5x faster (1.4-1.7 s against
-//!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.67x after the vertex fit). Earlier, town-25k: indirect 2.7%
+//!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.68x after the vertex fit). Earlier, town-25k: indirect 2.7%
 //!   against 6.0%.
 //! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
 //!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
