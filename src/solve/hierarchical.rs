@@ -262,7 +262,7 @@
 //!   vertices is 1.9x progressive's there, and right: progressive's coarse patches leave the
 //!   lit region 17% of the lit mean too dark against the Monte Carlo reference (this solver:
 //!   4.7%).
-//! * town-6k (64 samples): better in every region (indirect 0.47% against 2.5%, contact 4.3%
+//! * town-6k (64 samples): better in every region (indirect 0.48% against 2.5%, contact 4.3%
 //!   against 6.5%); a 13 000 triangle town's solve 1.7-2.5x faster (1.4-1.7 s against
 //!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.68x after the vertex fit). Earlier, town-25k: indirect 2.7%
 //!   against 6.0%.
