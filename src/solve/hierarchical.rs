@@ -256,8 +256,9 @@
 //!   the umbra's bias is +0.16% of the lit mean, while every other region falls 1% too
 //!   dark); it shrinks with the power tolerance: +0.23% at `--hr-tolerance` 3e-5 (the
 //!   default), +0.21% at 1e-5, +0.11% at 3e-6 (256 samples, 15 554 elements), which costs
-//!   15-43% more links on box-grid-20 and town-6k. Before the vertex fit and the sources' side: all 0.89%,
-//!   lit 0.65%, penumbra 0.72%, umbra 0.50%, contact 1.60%, indirect 0.73%. Solve about 2x
+//!   15-43% more links on box-grid-20 and town-6k. Before the vertex fit and the sources'
+//!   side: all 0.89%, lit 0.65%, penumbra 0.72%, umbra 0.50%, contact 1.60%, indirect 0.73%.
+//!   Solve about 2x
 //!   slower than progressive (3.0 s against 1.9 s), whose 1024 patches suit a 36-triangle
 //!   scene.
 //! * box-grid-20 (1024² page, one sub-sample, 128 samples): better in every region: all
