@@ -258,9 +258,8 @@
 //!   default), +0.21% at 1e-5, +0.11% at 3e-6 (256 samples, 15 554 elements), which costs
 //!   15-43% more links on box-grid-20 and town-6k. Before the vertex fit and the sources'
 //!   side: all 0.89%, lit 0.65%, penumbra 0.72%, umbra 0.50%, contact 1.60%, indirect 0.73%.
-//!   Solve about 2x
-//!   slower than progressive (3.0 s against 1.9 s), whose 1024 patches suit a 36-triangle
-//!   scene.
+//!   Solve about 2x slower than progressive (3.0 s against 1.9 s), whose 1024 patches suit a
+//!   36-triangle scene.
 //! * box-grid-20 (1024² page, one sub-sample, 128 samples): better in every region: all
 //!   texels 14.2% against 24.2%, indirect 4.0% against 17.9%, contact 19.1% against 30.5%,
 //!   lit 9.9% against 23.8%; penumbra and umbra within 2.5% (their error is the texel
@@ -268,15 +267,15 @@
 //!   six runs of `examples/hier_compare.rs` before the vertex fit (3.0 s against 14.0 s,
 //!   3.5 s against 17.7 s, 2.5 s against 10.4 s, 3.1 s against 14.4 s, 2.6 s against 13.3 s);
 //!   4.0x after it (2.78 s against 11.0 s), with 6% more rays; 4.1x (2.58 s against 10.6 s)
-//!   since the split links cast no hidden-check rays (7.2 M rays instead of 8.5 M). Its mean indirect light at the
-//!   vertices is 1.9x progressive's there, and right: progressive's coarse patches leave the
-//!   lit region 17% of the lit mean too dark against the Monte Carlo reference (this solver:
-//!   4.7%).
+//!   since the split links cast no hidden-check rays (7.2 M rays instead of 8.5 M). Its mean
+//!   indirect light at the vertices is 1.9x progressive's there, and right: progressive's
+//!   coarse patches leave the lit region 17% of the lit mean too dark against the Monte Carlo
+//!   reference (this solver: 4.7%).
 //! * town-6k (64 samples): better in every region (indirect 0.48% against 2.5%, contact 4.3%
 //!   against 6.5%); a 13 000 triangle town's solve 1.7-2.5x faster (1.4-1.7 s against
 //!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.68x after the vertex fit, 1.83x
-//!   with 3.1 M rays instead of 4.0 M: 1.73 s against 3.16 s). Earlier, town-25k: indirect 2.7%
-//!   against 6.0%.
+//!   with 3.1 M rays instead of 4.0 M: 1.73 s against 3.16 s). Earlier, town-25k: indirect
+//!   2.7% against 6.0%.
 //! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
 //!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
 //!   progressive: over 600 s).
@@ -579,7 +578,7 @@ impl Limits {
 ///
 /// The links are kept in runs, in order: parts refined in parallel are appended by moving
 /// their runs, not their links, and the runs are copied once, into one vector of the exact
-/// size, by [`Refined::sorted`]. (Appending the links themselves copied them once per level of
+/// size, by `Refined::sorted`. (Appending the links themselves copied them once per level of
 /// the parallel split and regrew each vector as it went: on box-grid-20 that was half the
 /// bake's page faults.)
 #[derive(Debug, Default)]
