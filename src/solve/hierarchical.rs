@@ -766,9 +766,8 @@ fn facing(a: &Sample, b: &Sample) -> f64 {
 /// The visibility of a link's sample pairs: one shadow ray per pair of positive `weight`
 /// (zero or less: the pair faces away and is not tested). The pairs `(k mod |a|, k mod |b|)`,
 /// one per sample of the larger end, go first; when they all agree (at least two of them),
-/// the rest are taken to agree too and cast no ray, else every pair is cast. Returns the
-/// weight seen, the weight tested, whether the tested pairs disagree, and the rays cast.
-/// Deterministic: the same pairs in the same order every time. With `stop_if_partial` (the
+/// the rest are taken to agree too and cast no ray, else every pair is cast (see
+/// [`PairVisibility`] for what it returns). Deterministic: the same pairs in the same order every time. With `stop_if_partial` (the
 /// caller splits a partially visible link), it returns as soon as the first pairs disagree,
 /// with the weights of those pairs only.
 fn pair_visibility(
@@ -777,7 +776,7 @@ fn pair_visibility(
     b: &[Sample],
     weight: impl Fn(&Sample, &Sample) -> f64,
     stop_if_partial: bool,
-) -> (f64, f64, bool, u64, u16) {
+) -> PairVisibility {
     let visible =
         |p: &Sample, q: &Sample| !vis.occluded_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
     let mut mask = 0u16;
@@ -800,7 +799,13 @@ fn pair_visibility(
     }
     let agree = cast >= 2 && (hits == 0 || hits == cast);
     if stop_if_partial && hits > 0 && hits < cast {
-        return (seen, tested, true, cast, mask);
+        return PairVisibility {
+            seen,
+            tested,
+            partial: true,
+            rays: cast,
+            visible: mask,
+        };
     }
     for (i, p) in a.iter().enumerate() {
         for (j, q) in b.iter().enumerate() {
@@ -828,8 +833,27 @@ fn pair_visibility(
         }
     }
     // Taken to agree, the other pairs cast no ray: `cast` counts the rays either way.
-    let partial = !agree && hits > 0 && hits < cast;
-    (seen, tested, partial, cast, mask)
+    PairVisibility {
+        seen,
+        tested,
+        partial: !agree && hits > 0 && hits < cast,
+        rays: cast,
+        visible: mask,
+    }
+}
+
+/// What [`pair_visibility`] found for a link's sample pairs.
+struct PairVisibility {
+    /// The weight of the pairs that see each other.
+    seen: f64,
+    /// The weight of the pairs tested (of positive weight).
+    tested: f64,
+    /// The tested pairs disagree: some see each other and some do not.
+    partial: bool,
+    /// Shadow rays cast.
+    rays: u64,
+    /// The pairs that see each other ([`pair_bit`]).
+    visible: u16,
 }
 
 /// The bit of the sample pair `(i, j)` (at most four samples a node) in a mask of pairs.
@@ -1144,7 +1168,13 @@ impl Hierarchy {
                     bound: 0.0,
                 };
             }
-            let (seen, tested, partial, rays, _) = pair_visibility(vis, sr, ss, facing, false);
+            let PairVisibility {
+                seen,
+                tested,
+                partial,
+                rays,
+                ..
+            } = pair_visibility(vis, sr, ss, facing, false);
             let v = if tested > 0.0 { seen / tested } else { 1.0 };
             return Transfer {
                 k: unoccluded * v,
@@ -1167,7 +1197,13 @@ impl Hierarchy {
             }
             ns.area * ci * cj / (PI * d2 + ns.area)
         };
-        let (k, unoccluded, partial, rays, _) = pair_visibility(vis, sr, ss, disk, false);
+        let PairVisibility {
+            seen: k,
+            tested: unoccluded,
+            partial,
+            rays,
+            ..
+        } = pair_visibility(vis, sr, ss, disk, false);
         let pairs = (sr.len() * ss.len()) as f64;
         // The sampled cosines may all miss (four samples of a cluster): the oracle bounds the
         // transfer geometrically instead.
@@ -1191,13 +1227,8 @@ impl Hierarchy {
             return true;
         }
         let behind = |plane: &Node, other: &Node| {
-            if plane.polygon == NO_POLYGON {
-                return false;
-            }
             let tol = 1e-9 * (other.radius + plane.radius).max(1e-300);
-            box_corners(other.min, other.max)
-                .iter()
-                .all(|q| plane.normal.dot(*q - plane.center) <= tol)
+            plane.polygon != NO_POLYGON && !plane_sides(plane, other, tol).0
         };
         behind(nr, ns) || behind(ns, nr)
     }
@@ -1387,8 +1418,13 @@ impl Hierarchy {
         // Such a link is split when `B_s K_unoccluded` is over the limit: then the first pairs
         // that disagree settle it, and the other pairs need no ray.
         let splits_if_partial = can_split && b_s * unoccluded > limits.visibility;
-        let (seen, tested, partial, cast, visible) =
-            pair_visibility(vis, sr, ss, facing, splits_if_partial);
+        let PairVisibility {
+            seen,
+            tested,
+            partial,
+            rays: cast,
+            visible,
+        } = pair_visibility(vis, sr, ss, facing, splits_if_partial);
         *rays += cast;
         if partial && splits_if_partial {
             return Decision::Split(larger);
@@ -1752,20 +1788,25 @@ fn enclosed(scene: &Scene, vis: &Visibility, p: &[DVec3; 3], n: DVec3, polygon: 
         })
 }
 
-/// True when the bounding box of `n` lies above (or touches) the horizon of `(p, normal)`.
+/// Whether node `other`'s bounding box has a corner more than `tol` (scene units) in front of
+/// the plane of the surface node `plane`, and one more than `tol` behind it.
+fn plane_sides(plane: &Node, other: &Node, tol: f64) -> (bool, bool) {
+    box_corners(other.min, other.max)
+        .iter()
+        .fold((false, false), |(front, back), q| {
+            let h = plane.normal.dot(*q - plane.center);
+            (front || h > tol, back || h < -tol)
+        })
+}
+
 /// True when node `r`'s bounding box has corners on both sides of the plane of the surface
 /// node `s`.
 fn across_plane(r: &Node, s: &Node) -> bool {
     let tol = 1e-9 * (r.radius + s.radius + r.center.distance(s.center));
-    let (mut front, mut back) = (false, false);
-    for q in box_corners(r.min, r.max) {
-        let h = s.normal.dot(q - s.center);
-        front |= h > tol;
-        back |= h < -tol;
-    }
-    front && back
+    plane_sides(s, r, tol) == (true, true)
 }
 
+/// True when the bounding box of `n` lies above (or touches) the horizon of `(p, normal)`.
 fn box_above(p: DVec3, normal: DVec3, n: &Node) -> bool {
     let tol = 1e-9 * (n.radius + n.center.distance(p));
     box_corners(n.min, n.max)
@@ -1830,10 +1871,14 @@ fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<
         }
     }
     let ring = |v: u32| &ring[start[v as usize] as usize..start[v as usize + 1] as usize];
-    let centroid = |i: u32| {
-        let [a, b, c] = m.triangles[items[i as usize].0 as usize].map(|v| m.vertices[v as usize]);
-        (a + b + c) / 3.0
-    };
+    let centroids: Vec<DVec2> = items
+        .iter()
+        .map(|&(t, _, _)| {
+            let [a, b, c] = m.triangles[t as usize].map(|v| m.vertices[v as usize]);
+            (a + b + c) / 3.0
+        })
+        .collect();
+    let centroid = |i: u32| centroids[i as usize];
     // The fit over the elements `set` at `at`, and how well their centroids determine the
     // gradient (the second moment's smaller eigenvalue over its larger).
     let fit = |set: &[u32], at: DVec2| {
