@@ -46,7 +46,7 @@ fn main() -> anyhow::Result<()> {
         let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).unwrap();
         let (reflected, initial) = h.reflected_direct();
         let (radiosity, _) = full.reflected_direct();
-        let limits = Limits::of_bake(tol, initial, total);
+        let limits = Limits::of_bake(tol, initial, total, h.mean_direct());
         let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
         let (links, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
         links
@@ -56,6 +56,7 @@ fn main() -> anyhow::Result<()> {
             variation: VARIATION,
             source: 1.0,
             visibility: PARTIAL_VISIBILITY,
+            lit: 0.0,
         };
         h.link(&vis, &h.sources(&ones), limits).0
     };

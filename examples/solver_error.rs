@@ -86,6 +86,23 @@ fn main() -> anyhow::Result<()> {
                 e.1 += 1;
             }
         }
+        if std::env::var("BY_POLY").is_ok() {
+            let mut per: std::collections::BTreeMap<(&str, usize), (f64, f64, usize)> = Default::default();
+            for (i, r) in regions.iter().enumerate() {
+                if let Some(r) = r {
+                    if let Some(sp) = layout.samples[i].first() {
+                        let d = (b.lightmap.texels[i] - refmap.mean[i]).element_sum() / 3.0;
+                        let e = per.entry((r.name(), sp.polygon)).or_default();
+                        e.0 += d / scale;
+                        e.1 += (refmap.mean[i].element_sum() / 3.0) / scale;
+                        e.2 += 1;
+                    }
+                }
+            }
+            for ((rn, poly), (d, m, n)) in per {
+                if n >= 20 { println!("    {rn} poly {poly}: n {n} mean ref {:.4} bias {:+.4} sum {:+.2}", m / n as f64, d / n as f64, d); }
+            }
+        }
         print!("  bias");
         for (name, (sum, n)) in bias {
             print!(" | {name} {:+.4}", sum / n as f64);

@@ -348,6 +348,11 @@ pub const VARIATION: f64 = 2e-3;
 /// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
 pub const SOURCE_VARIATION: f64 = 0.03;
 
+/// The source limit of a receiver that gets no direct light, as a fraction of [`SOURCE_VARIATION`]'s
+/// (dimensionless): a receiver's limit scales with its brightest element's direct irradiance
+/// against the scene's mean, down to this (see the module doc, "Source uniformity").
+pub const SHADOWED_SOURCE: f64 = 0.3;
+
 /// The refinement oracle's bound on the irradiance a partially visible link may carry, as a
 /// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
 pub const PARTIAL_VISIBILITY: f64 = 0.01;
@@ -435,6 +440,8 @@ pub struct Node {
     pub area: f64,
     /// Area-weighted reflectance.
     pub rho: DVec3,
+    /// The largest direct irradiance of its elements (W/m², mean over RGB).
+    pub direct: f64,
     pub min: DVec3,
     pub max: DVec3,
     /// Area-weighted centroid.
@@ -549,27 +556,44 @@ pub struct Sources {
 
 /// The oracle's limits: the most power one link may carry (W), the most a source's irradiance
 /// may vary across a receiver (W/m²), the most irradiance a source's non-uniformity may
-/// misplace (W/m²), the most irradiance a partially visible link may carry (W/m²).
+/// misplace at a lit receiver (W/m²), the most irradiance a partially visible link may carry
+/// (W/m²), and the direct irradiance from which a receiver counts as lit (W/m²; zero: every
+/// receiver does).
 #[derive(Clone, Copy, Debug)]
 pub struct Limits {
     pub power: f64,
     pub variation: f64,
     pub source: f64,
     pub visibility: f64,
+    pub lit: f64,
 }
 
 impl Limits {
     /// The limits a bake refines with: one link may carry `tolerance` of the reflected direct
     /// power `initial` (W), and the variation, source and visibility limits are
     /// [`VARIATION`], [`SOURCE_VARIATION`] and [`PARTIAL_VISIBILITY`] times the mean
-    /// reflected direct radiosity `initial / area` (`area`: all elements', scene units²).
-    pub fn of_bake(tolerance: f64, initial: f64, area: f64) -> Limits {
+    /// reflected direct radiosity `initial / area` (`area`: all elements', scene units²); a
+    /// receiver is lit from `lit`, the elements' mean direct irradiance (W/m²,
+    /// [`Hierarchy::mean_direct`]).
+    pub fn of_bake(tolerance: f64, initial: f64, area: f64, lit: f64) -> Limits {
         let mean = initial / area;
         Limits {
             power: tolerance * initial,
             variation: VARIATION * mean,
             source: SOURCE_VARIATION * mean,
             visibility: PARTIAL_VISIBILITY * mean,
+            lit,
+        }
+    }
+
+    /// The most irradiance a source's non-uniformity may misplace at the receiver `r` (W/m²):
+    /// the `source` limit scaled by the receiver's brightest direct irradiance against `lit`,
+    /// within [`SHADOWED_SOURCE`] and 1.
+    fn source_at(&self, r: &Node) -> f64 {
+        if self.lit > 0.0 {
+            self.source * (r.direct / self.lit).clamp(SHADOWED_SOURCE, 1.0)
+        } else {
+            self.source
         }
     }
 }
@@ -953,6 +977,7 @@ impl Builder<'_> {
             polygon: e.polygon,
             area: e.area,
             rho: e.rho,
+            direct: e.direct.element_sum() / 3.0,
             min,
             max,
             center: c,
@@ -986,6 +1011,7 @@ impl Builder<'_> {
             polygon,
             area,
             rho: na.rho * w + nb.rho * (1.0 - w),
+            direct: na.direct.max(nb.direct),
             min: na.min.min(nb.min),
             max: na.max.max(nb.max),
             center,
@@ -1145,6 +1171,14 @@ impl Hierarchy {
             samples,
             outline,
         })
+    }
+
+    /// The elements' area-weighted mean direct irradiance (W/m², mean over RGB).
+    pub fn mean_direct(&self) -> f64 {
+        let (sum, area) = self.elements.iter().fold((0.0, 0.0), |(s, a), e| {
+            (s + e.area * e.direct.element_sum() / 3.0, a + e.area)
+        });
+        if area > 0.0 { sum / area } else { 0.0 }
     }
 
     /// The root node.
@@ -1341,7 +1375,7 @@ impl Hierarchy {
             }
             // A non-uniform source: its mean radiosity misplaces up to `ΔB_s K̂`.
             let reach = if ns.kids.is_some() { bound } else { 0.0 };
-            if spread_s * reach > limits.source {
+            if spread_s * reach > limits.source_at(nr) {
                 return Decision::Split(false);
             }
             let t = self.transfer(vis, r, s);
@@ -1381,7 +1415,7 @@ impl Hierarchy {
         let reach = if ns.kids.is_some() { hi } else { 0.0 };
         let vary = b_s * spread > variation;
         let heavy = b_s * power > threshold;
-        let uneven = spread_s * reach > limits.source;
+        let uneven = spread_s * reach > limits.source_at(nr);
         // The receiver when its irradiance varies; the larger node when the link is heavy;
         // else the source (it is uneven).
         let split = Decision::Split(vary || (heavy && larger));
@@ -1477,7 +1511,7 @@ impl Hierarchy {
                     let (bs, ds) = (b.b[l.source as usize], b.spread[l.source as usize]);
                     if bs * f64::from(l.power) > limits.power
                         || bs * f64::from(l.spread) > limits.variation
-                        || ds * f64::from(l.reach) > limits.source
+                        || ds * f64::from(l.reach) > limits.source_at(&self.nodes[l.receiver as usize])
                         || bs * f64::from(l.shade) > limits.visibility
                     {
                         self.refine_into(vis, b, limits, l.receiver, l.source, &mut out);
@@ -2024,7 +2058,7 @@ pub fn indirect(
             let last = pass + 1 == REFINE_PASSES;
             let sources = h.sources(&b_el);
             let links = loop {
-                let limits = Limits::of_bake(tolerance, initial, total_area);
+                let limits = Limits::of_bake(tolerance, initial, total_area, h.mean_direct());
                 let (links, refinements, rays) = match &previous {
                     Some(p) => h.relink(vis, p, &sources, limits, last),
                     None => h.link(vis, &sources, limits),

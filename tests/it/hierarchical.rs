@@ -107,6 +107,7 @@ fn hierarchical_parallel_plates_form_factor() {
         variation: 1e-3,
         source: 1e-3,
         visibility: 1e-3,
+        lit: 0.0,
     };
     let (links, _, _) = h.link(&vis, &h.sources(&b_el), limits);
     assert!(links.len() > 10, "{} links", links.len());
@@ -271,6 +272,7 @@ fn hierarchical_row_sums_match_ray_casting_past_occluders() {
             variation: VARIATION,
             source: 1.0,
             visibility,
+            lit: 0.0,
         };
         row_sum(&h, &h.link(&vis, &h.sources(&ones), limits).0, |_| true)
     };
@@ -311,7 +313,7 @@ fn the_links_a_bake_keeps_match_ray_casting() {
     let (radiosity, _) = full.reflected_direct();
     let (reflected, power) = h.reflected_direct();
     let total: f64 = h.elements.iter().map(|e| e.area).sum();
-    let limits = Limits::of_bake(o.solve.hr_tolerance, power, total);
+    let limits = Limits::of_bake(o.solve.hr_tolerance, power, total, h.mean_direct());
     let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
     let (kept, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
     let all = |_: &Element| true;
