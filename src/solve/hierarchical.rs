@@ -2185,6 +2185,7 @@ mod tests {
             polygon: NO_POLYGON,
             area: 6.0,
             rho: DVec3::splat(0.5),
+            direct: 0.0,
             min: DVec3::ZERO,
             max: DVec3::ONE,
             center: DVec3::splat(0.5),

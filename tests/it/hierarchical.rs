@@ -5,6 +5,7 @@ use glam::DVec3;
 use penumbra::fixtures::{self, GlbBuilder, Material, horizontal_rect};
 use penumbra::light::{SurfacePoint, luminance};
 use penumbra::solve::Solver;
+use penumbra::geometry::point_polygon_form_factor;
 use penumbra::solve::hierarchical::{
     Element, Hierarchy, Limits, Link, PARTIAL_VISIBILITY, VARIATION,
 };
@@ -333,6 +334,80 @@ fn the_links_a_bake_keeps_match_ray_casting() {
     assert!(
         (got / reference - 1.0).abs() < 0.005,
         "shadowed floor: row sum {got} against ray-cast {reference}"
+    );
+}
+
+/// What the links gather from the bake's own radiosity where no direct light reaches: the
+/// floor in the boxes' shadow on the Cornell box at 16 000 elements, against a brute-force
+/// gather of the same element radiosities (every element's exact form factor from each
+/// shadowed element's centroid, one shadow ray between centroids). A link gathers a coarse
+/// source's mean radiosity (moved along its gradient), and a shadowed receiver sees most the
+/// parts of its sources that share its shadow: with one source limit for every receiver the
+/// shadowed floor gathered 0.75% too much (and the Monte Carlo reference found the Cornell
+/// box's umbra 0.25% of the lit mean too bright, against progressive's 0.03%); with the limit
+/// scaled by the receiver's direct light (`SHADOWED_SOURCE` of it where there is none), 0.07%
+/// too little.
+#[test]
+fn shadowed_receivers_gather_what_a_brute_force_gather_finds() {
+    let mut o = quick();
+    o.budget = Some(16_000);
+    let b = bake(&fixtures::cornell_box(), &o);
+    let vis = Visibility::new(&b.scene);
+    let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
+    let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).expect("full");
+    let (radiosity, _) = full.reflected_direct();
+    let (reflected, power) = h.reflected_direct();
+    let total: f64 = h.elements.iter().map(|e| e.area).sum();
+    let shadowed = |e: &Element| e.normal.y > 0.5 && e.direct.max_element() == 0.0;
+    let moments = h.inverse_moments();
+    let b_nodes = h.pull(&radiosity);
+    let gradients = h.gradients(&b_nodes, &moments);
+    let gathered = |lit: f64| {
+        let limits = Limits::of_bake(o.solve.hr_tolerance, power, total, lit);
+        let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
+        let (kept, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
+        let got = h.push(&h.gather_linear(&kept, &b_nodes, &gradients));
+        let (mut sum, mut area) = (0.0, 0.0);
+        for (e, g) in h.elements.iter().zip(&got).filter(|(e, _)| shadowed(e)) {
+            sum += e.area * luminance(*g);
+            area += e.area;
+        }
+        sum / area
+    };
+    let (mut sum, mut area) = (0.0, 0.0);
+    for e in h.elements.iter().filter(|e| shadowed(e)) {
+        let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
+        let at = SurfacePoint::new(c, e.normal, e.polygon, &vis);
+        let mut g = DVec3::ZERO;
+        for (s, bs) in h.elements.iter().zip(&radiosity) {
+            if s.polygon == e.polygon || bs.max_element() <= 0.0 {
+                continue;
+            }
+            let f = point_polygon_form_factor(c, e.normal, &s.p);
+            let cs = (s.p[0] + s.p[1] + s.p[2]) / 3.0;
+            let from = SurfacePoint::new(cs, s.normal, s.polygon, &vis);
+            if f > 0.0
+                && s.normal.dot(c - cs) > 0.0
+                && !vis.occluded_skipping(at.ray_origin, from.ray_origin, [e.polygon, s.polygon])
+            {
+                g += *bs * f;
+            }
+        }
+        sum += e.area * luminance(g);
+        area += e.area;
+    }
+    let reference = sum / area;
+    let (scaled, uniform) = (gathered(h.mean_direct()), gathered(0.0));
+    eprintln!(
+        "shadowed floor: gathered {scaled:.5} (one source limit: {uniform:.5}), brute force {reference:.5}"
+    );
+    assert!(
+        (scaled / reference - 1.0).abs() < 0.004,
+        "shadowed floor gathered {scaled}, brute force {reference}"
+    );
+    assert!(
+        (uniform / reference - 1.0).abs() > (scaled / reference - 1.0).abs(),
+        "the shadowed receivers' source limit made no difference: {uniform} {scaled} {reference}"
     );
 }
 
