@@ -140,7 +140,21 @@
 //!   are usually its brightest too (the middle of a floor under a ceiling light), so the mean
 //!   underestimates. Measured on the Cornell box against the Monte Carlo reference: without
 //!   this test the bake's RMSE was 7.5% of the lit mean (mean indirect light 12% low); with it
-//!   at 0.1, 3.0%; at 0.03, 1.9%.
+//!   at 0.1, 3.0%; at 0.03, 1.9%. The same bias has the other sign in shadow: a receiver that
+//!   the direct light does not reach sees most the nearby parts of its sources, which share
+//!   its shadow and are darker than the source's mean, and all its light is this indirect
+//!   light. So the limit is scaled per receiver by its brightest element's direct irradiance
+//!   against the elements' mean ([`Limits::source_at`]), down to [`SHADOWED_SOURCE`] (0.3)
+//!   where none arrives. On the Cornell box (`penumbra compare`'s measure, 15 554 elements)
+//!   the umbra read 0.25% of the lit mean too bright with one limit (RMSE 0.43%, progressive
+//!   0.24%), 0.04% too dark with the scaled one (RMSE 0.22%); against a brute-force gather of
+//!   the bake's own radiosity, the shadowed floor's links gathered 0.75% too much, now 0.07%
+//!   too little (`tests/it/hierarchical.rs`). At 0.1 instead of 0.3: 0.11% too dark, RMSE
+//!   0.28%, for more links. It costs 7-9% more links on the box grids and 22-32% on the sunlit
+//!   towns (whose shadowed ground and walls are large), 10-37% more solve time; on town-6k the
+//!   error against the reference did not move measurably (its umbra's error is the texel
+//!   resolution of the direct light). Scaling the power tolerance the same way instead changed
+//!   the umbra's bias by 0.03% of the lit mean.
 //! * **Partial visibility** (the "refined where it is partial"): a surface-to-surface
 //!   link whose tested sample pairs disagree (some see each other, some do not) is split at
 //!   its larger node while `B_s K_unoccluded`, the irradiance its visible fraction decides,
@@ -246,20 +260,18 @@
 //! region, RMSE as a fraction of the mean lit irradiance):
 //!
 //! * Cornell box (`penumbra compare`'s 256² page, 4x4 sub-samples, 1024 samples per texel,
-//!   15 554 elements): better than progressive in every region but the umbra: all texels
-//!   0.65% against 2.15%; lit 0.59% against 0.61%; penumbra 0.69% against 1.04%; contact
-//!   0.92% against 4.74% (largest texel error 9.9% against 37.0%); indirect 0.53% against
-//!   1.70%; umbra 0.43% against 0.24%, a bias: the umbra's elements are about 1.4% too bright
-//!   (0.25% of the lit mean), with the row sums of its links right (within 0.2% of ray
-//!   casting on the shadowed floor). Not the clusters (splitting every cluster end, source
-//!   or receiver, moved it by 1e-4 of the lit mean) nor the sources' gradients (without them
-//!   the umbra's bias is +0.16% of the lit mean, while every other region falls 1% too
-//!   dark); it shrinks with the power tolerance: +0.23% at `--hr-tolerance` 3e-5 (the
-//!   default), +0.21% at 1e-5, +0.11% at 3e-6 (256 samples, 15 554 elements), which costs
-//!   15-43% more links on box-grid-20 and town-6k. Before the vertex fit and the sources'
-//!   side: all 0.89%, lit 0.65%, penumbra 0.72%, umbra 0.50%, contact 1.60%, indirect 0.73%.
-//!   Solve about 2x slower than progressive (3.0 s against 1.9 s), whose 1024 patches suit a
-//!   36-triangle scene.
+//!   15 554 elements): better than progressive in every region: all texels 0.63% against
+//!   2.15%; lit 0.58% against 0.61%; penumbra 0.68% against 1.04%; umbra 0.22% against
+//!   0.24%; contact 0.88% against 4.74% (largest texel error 9.9% against 37.0%); indirect
+//!   0.49% against 1.70%. The umbra was 0.43% (a bias: its elements about 1.4% too bright,
+//!   0.25% of the lit mean) until the source limit was scaled by the receiver's direct light
+//!   (see "Source uniformity"); before that it was traced to the sources: not the clusters
+//!   (splitting every cluster end, source or receiver, moved it by 1e-4 of the lit mean), nor
+//!   the row sums (right within 0.2% of ray casting on the shadowed floor), nor the power
+//!   tolerance alone (+0.23% at 3e-5, +0.11% at 3e-6, for 15-43% more links). Before the
+//!   vertex fit and the sources' side: all 0.89%, lit 0.65%, penumbra 0.72%, umbra 0.50%,
+//!   contact 1.60%, indirect 0.73%. Solve about 2x slower than progressive (1.9 s against
+//!   0.9 s), whose 1024 patches suit a 36-triangle scene.
 //! * box-grid-20 (1024² page, one sub-sample, 128 samples): better in every region: all
 //!   texels 14.2% against 24.2%, indirect 4.0% against 17.9%, contact 19.1% against 30.5%,
 //!   lit 9.9% against 23.8%; penumbra and umbra within 2.5% (their error is the texel
