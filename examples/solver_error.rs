@@ -87,7 +87,8 @@ fn main() -> anyhow::Result<()> {
             }
         }
         if std::env::var("BY_POLY").is_ok() {
-            let mut per: std::collections::BTreeMap<(&str, usize), (f64, f64, usize)> = Default::default();
+            let mut per: std::collections::BTreeMap<(&str, usize), (f64, f64, usize)> =
+                Default::default();
             for (i, r) in regions.iter().enumerate() {
                 if let Some(r) = r {
                     if let Some(sp) = layout.samples[i].first() {
@@ -100,7 +101,14 @@ fn main() -> anyhow::Result<()> {
                 }
             }
             for ((rn, poly), (d, m, n)) in per {
-                if n >= 20 { println!("    {rn} poly {poly}: n {n} mean ref {:.4} bias {:+.4} sum {:+.2}", m / n as f64, d / n as f64, d); }
+                if n >= 20 {
+                    println!(
+                        "    {rn} poly {poly}: n {n} mean ref {:.4} bias {:+.4} sum {:+.2}",
+                        m / n as f64,
+                        d / n as f64,
+                        d
+                    );
+                }
             }
         }
         print!("  bias");

@@ -1523,7 +1523,8 @@ impl Hierarchy {
                     let (bs, ds) = (b.b[l.source as usize], b.spread[l.source as usize]);
                     if bs * f64::from(l.power) > limits.power
                         || bs * f64::from(l.spread) > limits.variation
-                        || ds * f64::from(l.reach) > limits.source_at(&self.nodes[l.receiver as usize])
+                        || ds * f64::from(l.reach)
+                            > limits.source_at(&self.nodes[l.receiver as usize])
                         || bs * f64::from(l.shade) > limits.visibility
                     {
                         self.refine_into(vis, b, limits, l.receiver, l.source, &mut out);

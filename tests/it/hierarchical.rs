@@ -3,9 +3,9 @@
 use crate::{bake, quick, scratch};
 use glam::DVec3;
 use penumbra::fixtures::{self, GlbBuilder, Material, horizontal_rect};
+use penumbra::geometry::point_polygon_form_factor;
 use penumbra::light::{SurfacePoint, luminance};
 use penumbra::solve::Solver;
-use penumbra::geometry::point_polygon_form_factor;
 use penumbra::solve::hierarchical::{
     Element, Hierarchy, Limits, Link, PARTIAL_VISIBILITY, VARIATION,
 };
