@@ -1,6 +1,8 @@
 //! Bakes one glb with each solver and measures every lightmap against one Monte Carlo
 //! reference, by region (`penumbra compare`'s measure, and the signed mean error, a bias):
-//! `cargo run --release --example solver_error -- scene.glb [spp] [budget] [hr_tolerance]`.
+//! `cargo run --release --example solver_error -- scene.glb [spp] [budget] [hr_tolerance]`
+//! (`RES` and `SS`: lightmap size and sub-samples per texel side; `BY_POLYGON=1`: the bias per
+//! region and polygon).
 
 use penumbra::compare::{classify, lightmap_error, mean_lit_irradiance};
 use penumbra::reference::{ReferenceOptions, reference_with, texel_layout};
@@ -86,27 +88,26 @@ fn main() -> anyhow::Result<()> {
                 e.1 += 1;
             }
         }
-        if std::env::var("BY_POLY").is_ok() {
+        // `BY_POLYGON=1`: the bias per region and polygon (polygons of 20 texels or more), to
+        // find where a region's bias comes from.
+        if std::env::var("BY_POLYGON").is_ok() {
             let mut per: std::collections::BTreeMap<(&str, usize), (f64, f64, usize)> =
                 Default::default();
             for (i, r) in regions.iter().enumerate() {
-                if let Some(r) = r {
-                    if let Some(sp) = layout.samples[i].first() {
-                        let d = (b.lightmap.texels[i] - refmap.mean[i]).element_sum() / 3.0;
-                        let e = per.entry((r.name(), sp.polygon)).or_default();
-                        e.0 += d / scale;
-                        e.1 += (refmap.mean[i].element_sum() / 3.0) / scale;
-                        e.2 += 1;
-                    }
-                }
+                let (Some(r), Some(at)) = (r, layout.samples[i].first()) else {
+                    continue;
+                };
+                let e = per.entry((r.name(), at.polygon)).or_default();
+                e.0 += (b.lightmap.texels[i] - refmap.mean[i]).element_sum() / 3.0 / scale;
+                e.1 += refmap.mean[i].element_sum() / 3.0 / scale;
+                e.2 += 1;
             }
-            for ((rn, poly), (d, m, n)) in per {
+            for ((region, polygon), (bias, mean, n)) in per {
                 if n >= 20 {
                     println!(
-                        "    {rn} poly {poly}: n {n} mean ref {:.4} bias {:+.4} sum {:+.2}",
-                        m / n as f64,
-                        d / n as f64,
-                        d
+                        "    {region} polygon {polygon}: {n} texels, reference mean {:.4}, bias {:+.4}",
+                        mean / n as f64,
+                        bias / n as f64,
                     );
                 }
             }

@@ -305,18 +305,8 @@ fn hierarchical_row_sums_match_ray_casting_past_occluders() {
 /// face's plane split), the sums are 0.07% over and the shadowed floor's 0.3%.
 #[test]
 fn the_links_a_bake_keeps_match_ray_casting() {
-    let mut o = quick();
-    o.budget = Some(16_000);
-    let b = bake(&fixtures::cornell_box(), &o);
-    let vis = Visibility::new(&b.scene);
-    let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
-    let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).expect("full");
-    let (radiosity, _) = full.reflected_direct();
-    let (reflected, power) = h.reflected_direct();
-    let total: f64 = h.elements.iter().map(|e| e.area).sum();
-    let limits = Limits::of_bake(o.solve.hr_tolerance, power, total, h.mean_direct());
-    let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
-    let (kept, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
+    let (b, vis, h, radiosity) = cornell_16k();
+    let kept = bake_links(&h, &vis, &radiosity, h.mean_direct());
     let all = |_: &Element| true;
     let (got, reference) = (row_sum(&h, &kept, all), ray_cast_row_sum(&b, &h, &vis, all));
     eprintln!("row sums of the bake's links {got:.4}, ray-cast {reference:.4}");
@@ -349,23 +339,13 @@ fn the_links_a_bake_keeps_match_ray_casting() {
 /// too little.
 #[test]
 fn shadowed_receivers_gather_what_a_brute_force_gather_finds() {
-    let mut o = quick();
-    o.budget = Some(16_000);
-    let b = bake(&fixtures::cornell_box(), &o);
-    let vis = Visibility::new(&b.scene);
-    let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
-    let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).expect("full");
-    let (radiosity, _) = full.reflected_direct();
-    let (reflected, power) = h.reflected_direct();
-    let total: f64 = h.elements.iter().map(|e| e.area).sum();
+    let (_, vis, h, radiosity) = cornell_16k();
     let shadowed = |e: &Element| e.normal.y > 0.5 && e.direct.max_element() == 0.0;
     let moments = h.inverse_moments();
     let b_nodes = h.pull(&radiosity);
     let gradients = h.gradients(&b_nodes, &moments);
     let gathered = |lit: f64| {
-        let limits = Limits::of_bake(o.solve.hr_tolerance, power, total, lit);
-        let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
-        let (kept, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
+        let kept = bake_links(&h, &vis, &radiosity, lit);
         let got = h.push(&h.gather_linear(&kept, &b_nodes, &gradients));
         let (mut sum, mut area) = (0.0, 0.0);
         for (e, g) in h.elements.iter().zip(&got).filter(|(e, _)| shadowed(e)) {
@@ -409,6 +389,31 @@ fn shadowed_receivers_gather_what_a_brute_force_gather_finds() {
         (uniform / reference - 1.0).abs() > (scaled / reference - 1.0).abs(),
         "the shadowed receivers' source limit made no difference: {uniform} {scaled} {reference}"
     );
+}
+
+/// The Cornell box baked at 16 000 elements (quick options), its BVH, the hierarchy of its
+/// meshes (with their direct light) and every element's radiosity in the bake's solution.
+fn cornell_16k() -> (Bake, Visibility, Hierarchy, Vec<DVec3>) {
+    let mut o = quick();
+    o.budget = Some(16_000);
+    let b = bake(&fixtures::cornell_box(), &o);
+    let vis = Visibility::new(&b.scene);
+    let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
+    let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).expect("full");
+    let (radiosity, _) = full.reflected_direct();
+    (b, vis, h, radiosity)
+}
+
+/// The links a bake keeps: refined with the reflected direct light, then again with the full
+/// `radiosity`, at the default tolerance's limits, receivers counting as lit from `lit`
+/// (W/m²; zero: all of them).
+fn bake_links(h: &Hierarchy, vis: &Visibility, radiosity: &[DVec3], lit: f64) -> Vec<Link> {
+    let (reflected, power) = h.reflected_direct();
+    let total: f64 = h.elements.iter().map(|e| e.area).sum();
+    let tolerance = BakeOptions::default().solve.hr_tolerance;
+    let limits = Limits::of_bake(tolerance, power, total, lit);
+    let (first, _, _) = h.link(vis, &h.sources(&reflected), limits);
+    h.relink(vis, &first, &h.sources(radiosity), limits, true).0
 }
 
 /// The area-weighted mean over the elements of `h` of the row sums of `links`.
