@@ -360,9 +360,10 @@ pub const VARIATION: f64 = 2e-3;
 /// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
 pub const SOURCE_VARIATION: f64 = 0.03;
 
-/// The source limit of a receiver that gets no direct light, as a fraction of [`SOURCE_VARIATION`]'s
-/// (dimensionless): a receiver's limit scales with its brightest element's direct irradiance
-/// against the scene's mean, down to this (see the module doc, "Source uniformity").
+/// The source limit of a receiver that gets no direct light, as a fraction of the limit
+/// [`SOURCE_VARIATION`] sets for a lit one (dimensionless): a receiver's limit scales with its
+/// brightest element's direct irradiance against the scene's mean, down to this (see the
+/// module doc, "Source uniformity").
 pub const SHADOWED_SOURCE: f64 = 0.3;
 
 /// The refinement oracle's bound on the irradiance a partially visible link may carry, as a
@@ -2064,6 +2065,7 @@ pub fn indirect(
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
         let total_area: f64 = els.iter().map(|e| e.area).sum();
+        let lit = h.mean_direct();
         let mut previous: Option<Vec<Link>> = None;
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
@@ -2071,7 +2073,7 @@ pub fn indirect(
             let last = pass + 1 == REFINE_PASSES;
             let sources = h.sources(&b_el);
             let links = loop {
-                let limits = Limits::of_bake(tolerance, initial, total_area, h.mean_direct());
+                let limits = Limits::of_bake(tolerance, initial, total_area, lit);
                 let (links, refinements, rays) = match &previous {
                     Some(p) => h.relink(vis, p, &sources, limits, last),
                     None => h.link(vis, &sources, limits),
