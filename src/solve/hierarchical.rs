@@ -2058,14 +2058,15 @@ pub fn indirect(
     let mean = |c: DVec3| c.element_sum() / 3.0;
     let els = &h.elements;
     let (reflected_direct, initial) = h.reflected_direct();
-    stats.direct_power = els.iter().map(|e| e.area * mean(e.direct)).sum();
+    let total_area: f64 = els.iter().map(|e| e.area).sum();
+    // Receivers count as lit from the mean direct irradiance (see `Limits::source_at`).
+    let lit = h.mean_direct();
+    stats.direct_power = lit * total_area;
     let mut indirect = vec![DVec3::ZERO; els.len()];
     let mut b_el = reflected_direct.clone();
     let mut left = 0.0;
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
-        let total_area: f64 = els.iter().map(|e| e.area).sum();
-        let lit = h.mean_direct();
         let mut previous: Option<Vec<Link>> = None;
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
