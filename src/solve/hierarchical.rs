@@ -710,6 +710,10 @@ pub struct Hierarchy {
     outline: Vec<Vec<Edge>>,
 }
 
+/// The unoccluded point form factors from a link's receiver samples to its source, and how
+/// many samples there are (see [`Hierarchy::point_factors`]).
+type Factors = ([f64; 4], usize);
+
 /// A directed edge of a surface node's outline: mesh vertex ids, world ends.
 type Edge = (u32, u32, DVec3, DVec3);
 
@@ -902,16 +906,32 @@ fn pair_bit(i: usize, j: usize) -> u16 {
 /// (with visibility): the disk bound with both cosines at 1, `A_s / (π g² + A_s)` (`g` the
 /// gap between the bounding spheres), and at most `sin² θ = (R_s / d)²`, the projected solid
 /// angle over π of the cone from the point around the source's bounding sphere of radius
-/// `R_s` at distance `d` (everything the point sees of the source lies in that cone).
+/// `R_s` at distance `d` (everything the point sees of the source lies in that cone). Where
+/// the spheres are apart, also at most `P_s / (π g²)`, `P_s` the most projected area the
+/// source can show along the cone between the spheres ([`projected_bound`]): the receiver's
+/// cosine at most 1, every source element's `cos / d²` at most its projected share over `g²`.
+/// On the 20x20 box grid that bound cut the refinements by 12% (2.07 M against 2.36 M; at a
+/// cluster end this bound is what the source-uniformity test reads), with the same error on
+/// the Cornell box in every region.
 fn point_bound(nr: &Node, ns: &Node) -> f64 {
     let d = nr.center.distance(ns.center) - nr.radius;
     let gap = (d - ns.radius).max(0.0);
     let disk = ns.area / (PI * gap * gap + ns.area);
-    if d > ns.radius {
+    let bound = if d > ns.radius {
         disk.min((ns.radius / d).powi(2))
     } else {
         disk
+    };
+    // Where the spheres are apart, also by the source's orientation (see [`power_bound`]).
+    let axis = ns.center - nr.center;
+    let dist = axis.length();
+    let gap = dist - nr.radius - ns.radius;
+    if gap <= 0.0 || dist.is_nan() {
+        return bound;
     }
+    let sin = ((nr.radius + ns.radius) / dist).min(1.0);
+    let cone = (sin, (1.0 - sin * sin).sqrt());
+    bound.min(projected_bound(ns, -axis / dist, cone) / (PI * gap * gap))
 }
 
 /// The bound on the power (per unit source radiosity, scene units²) a link `r ← s` can carry,
@@ -1283,7 +1303,7 @@ impl Hierarchy {
     /// The unoccluded point-to-source form factors at the receiver samples of `r ← s` when
     /// both are surface nodes and the contour formula applies (see the module doc), else
     /// `None`. Returns the per-sample values and their count.
-    fn point_factors(&self, r: u32, s: u32) -> Option<([f64; 4], usize)> {
+    fn point_factors(&self, r: u32, s: u32) -> Option<Factors> {
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         let sr = &self.samples[r as usize];
         let contour = nr.polygon != NO_POLYGON
@@ -1333,16 +1353,61 @@ impl Hierarchy {
         }
     }
 
+    /// The receiver samples' point form factors to the children `kids` of the surface source
+    /// `s`, given `f`, those to `s` itself: the contour sum is additive over a source's parts
+    /// (interior edges cancel), so the costlier child's factor is `s`'s minus the cheaper
+    /// child's, with no contour sum of its own. Only for samples where all three are summed
+    /// exactly (in front of the plane, inside [`FAR_FIELD`]); elsewhere, or for either child
+    /// when any sample falls outside, `None` (computed by the child's own decision). On the
+    /// 13 000-triangle town the link phase took 9% less time (0.62 s against 0.68 s), with
+    /// the same links.
+    fn source_split_factors(
+        &self,
+        r: u32,
+        s: u32,
+        (f, n): Factors,
+        kids: [u32; 2],
+    ) -> [Option<Factors>; 2] {
+        let sr = &self.samples[r as usize];
+        let exact = |a: &Sample, node: u32| {
+            let ns = &self.nodes[node as usize];
+            let dir = ns.center - a.p;
+            ns.normal.dot(dir) < 0.0 && dir.length_squared() <= (FAR_FIELD * ns.radius).powi(2)
+        };
+        if !sr[..n]
+            .iter()
+            .all(|a| exact(a, s) && exact(a, kids[0]) && exact(a, kids[1]))
+        {
+            return [None, None];
+        }
+        // The child with the shorter outline is summed.
+        let cheap = usize::from(
+            self.outline[kids[1] as usize].len() < self.outline[kids[0] as usize].len(),
+        );
+        let mut direct = [0.0; 4];
+        let mut rest = [0.0; 4];
+        for i in 0..n {
+            direct[i] = self.point_factor(&sr[i], kids[cheap]);
+            rest[i] = f[i] - direct[i];
+        }
+        let mut out = [None, None];
+        out[cheap] = Some((direct, n));
+        out[1 - cheap] = Some((rest, n));
+        out
+    }
+
     /// The refinement oracle for the link `r ← s` (see the module doc): `b_s` is the source's
     /// radiosity (W/m², scalar), `threshold` the most power a link may carry (W), `variation`
     /// the most the source's irradiance may vary across the receiver's samples (W/m²). Casts
     /// only the shadow rays the decision needs (counted in `rays`).
+    #[allow(clippy::too_many_arguments)]
     fn decide(
         &self,
         vis: &Visibility,
         r: u32,
         s: u32,
         (b_s, spread_s): (f64, f64),
+        factors: Option<Factors>,
         limits: Limits,
         rays: &mut u64,
     ) -> Decision {
@@ -1371,7 +1436,7 @@ impl Hierarchy {
             *rays += 1;
             !vis.occluded_skipping(a.ray, b.ray, [a.polygon, b.polygon])
         };
-        let Some((f, n)) = self.point_factors(r, s) else {
+        let Some((f, n)) = factors else {
             // A cluster end (or a large straddling source): the geometric bound decides, with
             // no rays; a kept link is estimated by the sampled disk formula.
             let bound = point_bound(nr, ns);
@@ -1498,7 +1563,7 @@ impl Hierarchy {
     pub fn link(&self, vis: &Visibility, b: &Sources, limits: Limits) -> (Vec<Link>, u64, u64) {
         let root = self.root();
         let mut out = Refined::default();
-        self.refine_into(vis, b, limits, root, root, &mut out);
+        self.refine_into(vis, b, limits, root, root, None, &mut out);
         out.sorted()
     }
 
@@ -1528,7 +1593,7 @@ impl Hierarchy {
                             > limits.source_at(&self.nodes[l.receiver as usize])
                         || bs * f64::from(l.shade) > limits.visibility
                     {
-                        self.refine_into(vis, b, limits, l.receiver, l.source, &mut out);
+                        self.refine_into(vis, b, limits, l.receiver, l.source, None, &mut out);
                     } else {
                         out.links.push(*l);
                     }
@@ -1549,6 +1614,10 @@ impl Hierarchy {
     /// Refines the link `r ← s` into `out`: the pairs a split makes are refined in parallel
     /// while they span more than [`PARALLEL_ELEMENTS`] elements, else in turn into the same
     /// output (the links come out in the same order either way).
+    ///
+    /// `known`: the receiver samples' point form factors to `s` when the caller has them
+    /// ([`Hierarchy::source_split_factors`]), else they are computed here.
+    #[allow(clippy::too_many_arguments)]
     fn refine_into(
         &self,
         vis: &Visibility,
@@ -1556,16 +1625,17 @@ impl Hierarchy {
         limits: Limits,
         r: u32,
         s: u32,
+        known: Option<Factors>,
         out: &mut Refined,
     ) {
-        let split = |pairs: &[(u32, u32)], out: &mut Refined| {
+        let split = |pairs: &[(u32, u32, Option<Factors>)], out: &mut Refined| {
             let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
             if (nr.hi - nr.lo) + (ns.hi - ns.lo) > PARALLEL_ELEMENTS {
                 let parts: Vec<Refined> = pairs
                     .par_iter()
-                    .map(|&(r, s)| {
+                    .map(|&(r, s, known)| {
                         let mut part = Refined::default();
-                        self.refine_into(vis, b, limits, r, s, &mut part);
+                        self.refine_into(vis, b, limits, r, s, known, &mut part);
                         part
                     })
                     .collect();
@@ -1573,8 +1643,8 @@ impl Hierarchy {
                     out.append(part);
                 }
             } else {
-                for &(r, s) in pairs {
-                    self.refine_into(vis, b, limits, r, s, out);
+                for &(r, s, known) in pairs {
+                    self.refine_into(vis, b, limits, r, s, known, out);
                 }
             }
         };
@@ -1582,7 +1652,10 @@ impl Hierarchy {
             let n = &self.nodes[r as usize];
             // A self-link split is not a refinement of an estimated link.
             if let (Some([a, c]), NO_POLYGON) = (n.kids, n.polygon) {
-                split(&[(a, a), (a, c), (c, a), (c, c)], out);
+                split(
+                    &[(a, a, None), (a, c, None), (c, a, None), (c, c, None)],
+                    out,
+                );
             }
             return;
         }
@@ -1590,14 +1663,21 @@ impl Hierarchy {
             return;
         }
         let source = (b.b[s as usize], b.spread[s as usize]);
-        let d = self.decide(vis, r, s, source, limits, &mut out.rays);
+        let factors = known.or_else(|| self.point_factors(r, s));
+        let d = self.decide(vis, r, s, source, factors, limits, &mut out.rays);
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         match d {
             Decision::Split(receiver) => {
                 let pairs = match (receiver, nr.kids, ns.kids) {
-                    (true, Some(kr), _) => [(kr[0], s), (kr[1], s)],
-                    (_, _, Some(ks)) => [(r, ks[0]), (r, ks[1])],
-                    (_, Some(kr), None) => [(kr[0], s), (kr[1], s)],
+                    (true, Some(kr), _) => [(kr[0], s, None), (kr[1], s, None)],
+                    (_, _, Some(ks)) => {
+                        let [fa, fb] = match factors {
+                            Some(f) => self.source_split_factors(r, s, f, ks),
+                            None => [None, None],
+                        };
+                        [(r, ks[0], fa), (r, ks[1], fb)]
+                    }
+                    (_, Some(kr), None) => [(kr[0], s, None), (kr[1], s, None)],
                     (_, None, None) => unreachable!("a split needs a node with children"),
                 };
                 out.refinements += 1;
