@@ -1251,6 +1251,17 @@ impl Hierarchy {
                 bound: if partial { unoccluded } else { unoccluded * v },
             };
         }
+        Transfer {
+            bound: point_bound(nr, ns),
+            ..self.disk_transfer(vis, r, s)
+        }
+    }
+
+    /// The sampled disk estimate of the link `r ← s` (see the module doc), for a cluster end
+    /// or a large straddling source; its `bound` is left at zero (the caller has it).
+    fn disk_transfer(&self, vis: &Visibility, r: u32, s: u32) -> Transfer {
+        let ns = &self.nodes[s as usize];
+        let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
         let disk = |a: &Sample, b: &Sample| {
             let dir = b.p - a.p;
             let d2 = dir.length_squared();
@@ -1272,15 +1283,12 @@ impl Hierarchy {
             ..
         } = pair_visibility(vis, sr, ss, disk, false);
         let pairs = (sr.len() * ss.len()) as f64;
-        // The sampled cosines may all miss (four samples of a cluster): the oracle bounds the
-        // transfer geometrically instead.
-        let bound = point_bound(nr, ns);
         Transfer {
             k: k / pairs,
             unoccluded: unoccluded / pairs,
             partial,
             rays,
-            bound,
+            bound: 0.0,
         }
     }
 
@@ -1439,8 +1447,13 @@ impl Hierarchy {
         let Some((f, n)) = factors else {
             // A cluster end (or a large straddling source): the geometric bound decides, with
             // no rays; a kept link is estimated by the sampled disk formula.
-            let bound = point_bound(nr, ns);
             let carried = power_bound(nr, ns);
+            // Nothing in one node faces the other along any direction between them: no part
+            // of this link can carry light, at any level below either.
+            if carried <= 0.0 {
+                return Decision::Drop;
+            }
+            let bound = point_bound(nr, ns);
             if can_split && b_s * carried > threshold {
                 return Decision::Split(larger);
             }
@@ -1456,7 +1469,7 @@ impl Hierarchy {
             if spread_s * reach > limits.source_at(nr) {
                 return Decision::Split(false);
             }
-            let t = self.transfer(vis, r, s);
+            let t = self.disk_transfer(vis, r, s);
             *rays += t.rays;
             let power = if can_split { carried } else { 0.0 };
             let spread = if surfaces && ns.kids.is_some() {
