@@ -638,7 +638,7 @@ impl Refined {
         }
         links.extend(self.links);
         // One link per node pair: the keys are distinct, and an unstable sort needs no buffer.
-        links.sort_unstable_by_key(|l| (l.receiver, l.source));
+        links.par_sort_unstable_by_key(|l| (l.receiver, l.source));
         debug_assert!(
             links
                 .windows(2)
@@ -1194,7 +1194,7 @@ impl Hierarchy {
             .map(|n| node_samples(n, &b.elements, vis))
             .collect();
         let outline = outlines(&b.nodes, &b.elements)
-            .into_iter()
+            .into_par_iter()
             .map(|o| merge_collinear(&o))
             .collect();
         Some(Hierarchy {
