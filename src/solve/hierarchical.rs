@@ -269,17 +269,19 @@
 //!
 //! * Cornell box (`penumbra compare`'s 256² page, 4x4 sub-samples, 1024 samples per texel,
 //!   15 554 elements): better than progressive in every region: all texels 0.63% against
-//!   2.15%; lit 0.58% against 0.61%; penumbra 0.68% against 1.04%; umbra 0.22% against
-//!   0.24%; contact 0.88% against 4.74% (largest texel error 9.9% against 37.0%); indirect
-//!   0.49% against 1.70%. The umbra was 0.43% (a bias: its elements about 1.4% too bright,
+//!   2.15%; lit 0.58% against 0.61%; penumbra 0.69% against 1.04%; umbra 0.23% against
+//!   0.24%; contact 0.88% against 4.74% (largest texel error 10.0% against 37.0%); indirect
+//!   0.50% against 1.70% (0.68%, 0.22% and 0.49% before kept links stopped at their first
+//!   pairs' visibility, see "Partial visibility"). The umbra was 0.43% (a bias: its elements about 1.4% too bright,
 //!   0.25% of the lit mean) until the source limit was scaled by the receiver's direct light
 //!   (see "Source uniformity"); before that it was traced to the sources: not the clusters
 //!   (splitting every cluster end, source or receiver, moved it by 1e-4 of the lit mean), nor
 //!   the row sums (right within 0.2% of ray casting on the shadowed floor), nor the power
 //!   tolerance alone (+0.23% at 3e-5, +0.11% at 3e-6, for 15-43% more links). Before the
 //!   vertex fit and the sources' side: all 0.89%, lit 0.65%, penumbra 0.72%, umbra 0.50%,
-//!   contact 1.60%, indirect 0.73%. Solve about 2x slower than progressive (1.9 s against
-//!   0.9 s), whose 1024 patches suit a 36-triangle scene.
+//!   contact 1.60%, indirect 0.73%. Solve 1.4x slower than progressive (1.3 s against
+//!   0.9 s; 1.9 s before this session's link-phase changes), whose 1024 patches suit a
+//!   36-triangle scene.
 //! * box-grid-20 (1024² page, one sub-sample, 128 samples): better in every region: all
 //!   texels 14.2% against 24.2%, indirect 4.0% against 17.9%, contact 19.1% against 30.5%,
 //!   lit 9.9% against 23.8%; penumbra and umbra within 2.5% (their error is the texel
@@ -287,14 +289,19 @@
 //!   six runs of `examples/hier_compare.rs` before the vertex fit (3.0 s against 14.0 s,
 //!   3.5 s against 17.7 s, 2.5 s against 10.4 s, 3.1 s against 14.4 s, 2.6 s against 13.3 s);
 //!   4.0x after it (2.78 s against 11.0 s), with 6% more rays; 4.1x (2.58 s against 10.6 s)
-//!   since the split links cast no hidden-check rays (7.2 M rays instead of 8.5 M). Its mean
+//!   since the split links cast no hidden-check rays (7.2 M rays instead of 8.5 M); 5.26x
+//!   (1.12 s against 5.91 s; the previous code 4.37x in the same run) with the projected point
+//!   bound, the reused contour sums and the first-pair visibility of kept links. Its mean
 //!   indirect light at the vertices is 1.9x progressive's there, and right: progressive's
 //!   coarse patches leave the lit region 17% of the lit mean too dark against the Monte Carlo
 //!   reference (this solver: 4.7%).
 //! * town-6k (64 samples): better in every region (indirect 0.48% against 2.5%, contact 4.3%
 //!   against 6.5%); a 13 000 triangle town's solve 1.7-2.5x faster (1.4-1.7 s against
 //!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.68x after the vertex fit, 1.83x
-//!   with 3.1 M rays instead of 4.0 M: 1.73 s against 3.16 s). Earlier, town-25k: indirect
+//!   with 3.1 M rays instead of 4.0 M: 1.73 s against 3.16 s; 1.97x now, 0.73 s against
+//!   1.43 s, 3.0 M rays). Its links are nearly all between a wall element and a polygon or a
+//!   piece of the ground: a building's cluster has lit and shadowed faces side by side, so
+//!   the source-uniformity test splits it to its polygons. Earlier, town-25k: indirect
 //!   2.7% against 6.0%.
 //! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
 //!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
