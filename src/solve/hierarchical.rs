@@ -76,10 +76,11 @@
 //! surface like [`SurfacePoint::new`], skipping the two points' own polygons), in two stages:
 //! first the pairs `(k mod 4, k mod 4)`, one per sample; when at least two are tested and all
 //! agree (all visible or all hidden), the other pairs are taken to agree too, else every pair
-//! is cast. Most links are wholly visible, so this casts about half the rays: on the 20x20 box
-//! grid 6.9 M instead of 12.2 M (measured before partially visible links were refined, below),
-//! with the same error against the Monte Carlo reference in every region (and on the Cornell
-//! box). Deterministic points, no randomness.
+//! is cast (a surface-to-surface link whose first pairs disagree is settled by them alone, see
+//! "Partial visibility" below). Most links are wholly visible, so this casts about half the
+//! rays: on the 20x20 box grid 6.9 M instead of 12.2 M (measured before partially visible
+//! links were refined, below), with the same error against the Monte Carlo reference in every
+//! region (and on the Cornell box). Deterministic points, no randomness.
 //!
 //! Pairs that carry nothing are never linked: two nodes of one plane (a planar polygon does not
 //! see itself), a source whose bounding box lies behind (or in) a surface receiver's plane, a
@@ -272,9 +273,10 @@
 //!   2.15%; lit 0.58% against 0.61%; penumbra 0.69% against 1.04%; umbra 0.23% against
 //!   0.24%; contact 0.88% against 4.74% (largest texel error 10.0% against 37.0%); indirect
 //!   0.50% against 1.70% (0.68%, 0.22% and 0.49% before kept links stopped at their first
-//!   pairs' visibility, see "Partial visibility"). The umbra was 0.43% (a bias: its elements about 1.4% too bright,
-//!   0.25% of the lit mean) until the source limit was scaled by the receiver's direct light
-//!   (see "Source uniformity"); before that it was traced to the sources: not the clusters
+//!   pairs' visibility, see "Partial visibility"). The umbra was 0.43% (a bias: its elements
+//!   about 1.4% too bright, 0.25% of the lit mean) until the source limit was scaled by the
+//!   receiver's direct light (see "Source uniformity"); before that it was traced to the
+//!   sources: not the clusters
 //!   (splitting every cluster end, source or receiver, moved it by 1e-4 of the lit mean), nor
 //!   the row sums (right within 0.2% of ray casting on the shadowed floor), nor the power
 //!   tolerance alone (+0.23% at 3e-5, +0.11% at 3e-6, for 15-43% more links). Before the
@@ -1421,8 +1423,11 @@ impl Hierarchy {
 
     /// The refinement oracle for the link `r ← s` (see the module doc): `b_s` is the source's
     /// radiosity (W/m², scalar), `threshold` the most power a link may carry (W), `variation`
-    /// the most the source's irradiance may vary across the receiver's samples (W/m²). Casts
-    /// only the shadow rays the decision needs (counted in `rays`).
+    /// the most the source's irradiance may vary across the receiver's samples (W/m²);
+    /// `factors` the receiver samples' point form factors to the source where both ends are
+    /// surface nodes and the contour formula applies ([`Hierarchy::point_factors`]), else
+    /// `None` (a cluster end). Casts only the shadow rays the decision needs (counted in
+    /// `rays`).
     #[allow(clippy::too_many_arguments)]
     fn decide(
         &self,
@@ -2296,8 +2301,8 @@ pub fn indirect(
 mod tests {
     use super::*;
 
-    /// The Cornell box's hierarchy at about 2 000 elements, and its scene's visibility.
-    fn cornell() -> (Hierarchy, Visibility) {
+    /// The Cornell box's hierarchy at about 2 000 elements.
+    fn cornell() -> Hierarchy {
         let gltf = crate::load::from_bytes(
             crate::fixtures::cornell_box(),
             std::path::Path::new("cornell.glb"),
@@ -2310,8 +2315,7 @@ mod tests {
         };
         let b = crate::bake(&gltf, &options, &|_, _, _| {}).expect("bake");
         let vis = Visibility::new(&b.scene);
-        let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
-        (h, vis)
+        Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements")
     }
 
     /// A source split's form factors from its parent's ([`Hierarchy::source_split_factors`])
@@ -2319,7 +2323,7 @@ mod tests {
     /// they apply (and they apply often enough that the test cannot pass empty).
     #[test]
     fn a_split_sources_form_factors_are_its_parents_minus_the_other_childs() {
-        let (h, _) = cornell();
+        let h = cornell();
         let surfaces: Vec<u32> = (0..h.nodes.len() as u32)
             .filter(|&i| h.nodes[i as usize].polygon != NO_POLYGON)
             .step_by(7)
@@ -2367,7 +2371,7 @@ mod tests {
     /// quarter of it did).
     #[test]
     fn the_point_bound_bounds_the_point_form_factors() {
-        let (h, _) = cornell();
+        let h = cornell();
         let nodes: Vec<u32> = (0..h.nodes.len() as u32).step_by(13).collect();
         let (mut checked, mut tightened) = (0, 0);
         for &r in &nodes {
