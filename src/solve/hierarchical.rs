@@ -301,9 +301,10 @@
 //!   against 6.5%); a 13 000 triangle town's solve 1.7-2.5x faster (1.4-1.7 s against
 //!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.68x after the vertex fit, 1.83x
 //!   with 3.1 M rays instead of 4.0 M: 1.73 s against 3.16 s; 1.97x now, 0.73 s against
-//!   1.43 s, 3.0 M rays). Its links are nearly all between a wall element and a polygon or a
-//!   piece of the ground: a building's cluster has lit and shadowed faces side by side, so
-//!   the source-uniformity test splits it to its polygons. Earlier, town-25k: indirect
+//!   1.43 s, 3.0 M rays). Three in four of its links end at a wall element, and nearly all
+//!   start at a polygon or a piece of the ground, whose radiosity steps at the shadow lines;
+//!   the clusters are not what costs (with the source-uniformity test off for cluster
+//!   sources, 406 000 links instead of 413 000, the same time). Earlier, town-25k: indirect
 //!   2.7% against 6.0%.
 //! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
 //!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
