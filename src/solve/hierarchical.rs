@@ -1332,17 +1332,21 @@ impl Hierarchy {
     fn point_factors(&self, r: u32, s: u32) -> Option<Factors> {
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         let sr = &self.samples[r as usize];
-        let contour = nr.polygon != NO_POLYGON
-            && ns.polygon != NO_POLYGON
-            && sr
-                .iter()
-                .all(|a| box_above(a.p, a.n, ns) || ns.hi - ns.lo <= CONTOUR_ELEMENTS);
-        if !contour {
+        if nr.polygon == NO_POLYGON || ns.polygon == NO_POLYGON {
+            return None;
+        }
+        // Whether the source lies above each sample's horizon, once: the condition and the
+        // choice of formula both read it.
+        let mut above = [false; 4];
+        for (up, a) in above.iter_mut().zip(sr) {
+            *up = box_above(a.p, a.n, ns);
+        }
+        if !above[..sr.len()].iter().all(|&up| up) && ns.hi - ns.lo > CONTOUR_ELEMENTS {
             return None;
         }
         let mut f = [0.0; 4];
-        for (fi, a) in f.iter_mut().zip(sr) {
-            *fi = self.point_factor(a, s);
+        for ((fi, a), &up) in f.iter_mut().zip(sr).zip(&above) {
+            *fi = self.point_factor(a, s, up);
         }
         Some((f, sr.len().min(4)))
     }
@@ -1353,7 +1357,9 @@ impl Hierarchy {
     /// node's centre (its error falls as `(radius / d)²`, under 3% there); nearer, Lambert's
     /// contour formula over the node's outline when the node lies above the sample's horizon,
     /// else per element, each clipped to the horizon.
-    fn point_factor(&self, a: &Sample, s: u32) -> f64 {
+    ///
+    /// `above`: whether the node's bounding box lies above the sample's horizon ([`box_above`]).
+    fn point_factor(&self, a: &Sample, s: u32, above: bool) -> f64 {
         let ns = &self.nodes[s as usize];
         let dir = ns.center - a.p;
         // The contour formula is blind to the side: it would give a sample behind the source's
@@ -1369,7 +1375,7 @@ impl Hierarchy {
             let (ci, cj) = (a.n.dot(dir) / len, -ns.normal.dot(dir) / len);
             return ns.area * ci.max(0.0) * cj.max(0.0) / (PI * d2 + ns.area);
         }
-        if box_above(a.p, a.n, ns) {
+        if above {
             edge_contour_sum(a.p, a.n, &self.outline[s as usize]).abs() / (2.0 * PI)
         } else {
             self.elements[ns.lo as usize..ns.hi as usize]
@@ -1413,7 +1419,8 @@ impl Hierarchy {
         let mut direct = [0.0; 4];
         let mut rest = [0.0; 4];
         for i in 0..n {
-            direct[i] = self.point_factor(&sr[i], kids[cheap]);
+            let child = &self.nodes[kids[cheap] as usize];
+            direct[i] = self.point_factor(&sr[i], kids[cheap], box_above(sr[i].p, sr[i].n, child));
             rest[i] = f[i] - direct[i];
         }
         let mut out = [None, None];
