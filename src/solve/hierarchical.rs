@@ -735,30 +735,71 @@ type Factors = ([f64; 4], usize);
 /// A directed edge of a surface node's outline: mesh vertex ids, world ends.
 type Edge = (u32, u32, DVec3, DVec3);
 
-/// The outlines of every surface node (children before parents): interior edges appear once in
-/// each direction and cancel in Lambert's contour sum, so the form factor of a whole surface
-/// node is the contour sum over its outline alone.
+/// The outlines of every node, collinear runs merged ([`merge_collinear`]); empty for a
+/// cluster. Interior edges appear once in each direction and cancel in Lambert's contour sum,
+/// so the form factor of a whole surface node is the contour sum over its outline alone.
+///
+/// A polygon's surface nodes are numbered contiguously (children before parents), so each
+/// run of nodes of one polygon is computed on its own, in parallel.
 fn outlines(nodes: &[Node], elements: &[Element]) -> Vec<Vec<Edge>> {
+    let mut runs = Vec::new();
+    let mut start = 0;
+    for i in 1..=nodes.len() {
+        if i == nodes.len() || nodes[i].polygon != nodes[start].polygon {
+            runs.push(start..i);
+            start = i;
+        }
+    }
+    let parts: Vec<Vec<Vec<Edge>>> = runs
+        .into_par_iter()
+        .map(|run| {
+            if nodes[run.start].polygon == NO_POLYGON {
+                return vec![Vec::new(); run.len()];
+            }
+            let raw = run_outlines(&nodes[run.clone()], run.start as u32, elements);
+            raw.iter().map(|o| merge_collinear(o)).collect()
+        })
+        .collect();
+    parts.into_iter().flatten().collect()
+}
+
+/// The outlines of the surface nodes `nodes`, numbered from `first`, children before parents
+/// and all within `nodes`, each sorted by (from, to) vertex id.
+fn run_outlines(nodes: &[Node], first: u32, elements: &[Element]) -> Vec<Vec<Edge>> {
     let mut out: Vec<Vec<Edge>> = Vec::with_capacity(nodes.len());
     for n in nodes {
         let edges = match n.kids {
             None => {
                 let e = &elements[n.lo as usize];
-                (0..3)
+                let mut edges: Vec<Edge> = (0..3)
                     .map(|i| (e.v[i], e.v[(i + 1) % 3], e.p[i], e.p[(i + 1) % 3]))
-                    .collect()
-            }
-            Some(_) if n.polygon == NO_POLYGON => Vec::new(),
-            Some([a, b]) => {
-                let mut all: Vec<Edge> = out[a as usize]
-                    .iter()
-                    .chain(&out[b as usize])
-                    .copied()
                     .collect();
-                all.sort_by_key(|e| (e.0, e.1));
+                edges.sort_by_key(|e| (e.0, e.1));
+                edges
+            }
+            Some([a, b]) => {
+                // The children's outlines are sorted by (from, to): merged in order, and an edge
+                // whose reverse is in the other child's outline is interior to the node.
+                let (ea, eb) = (&out[(a - first) as usize], &out[(b - first) as usize]);
+                let key = |e: &Edge| (e.0, e.1);
                 let has =
-                    |x: u32, y: u32| all.binary_search_by_key(&(x, y), |e| (e.0, e.1)).is_ok();
-                all.iter().filter(|e| !has(e.1, e.0)).copied().collect()
+                    |list: &[Edge], x: u32, y: u32| list.binary_search_by_key(&(x, y), key).is_ok();
+                let mut all = Vec::with_capacity(ea.len() + eb.len());
+                let (mut i, mut j) = (0, 0);
+                while i < ea.len() || j < eb.len() {
+                    let from_a = j == eb.len() || (i < ea.len() && key(&ea[i]) <= key(&eb[j]));
+                    let (e, other) = if from_a {
+                        i += 1;
+                        (ea[i - 1], eb)
+                    } else {
+                        j += 1;
+                        (eb[j - 1], ea)
+                    };
+                    if !has(other, e.1, e.0) {
+                        all.push(e);
+                    }
+                }
+                all
             }
         };
         out.push(edges);
@@ -771,40 +812,52 @@ fn outlines(nodes: &[Node], elements: &[Element]) -> Vec<Vec<Edge>> {
 /// (they span one plane through the point), so the sum is unchanged and costs fewer terms (a
 /// polygon boundary split at many mesh vertices becomes its few sides).
 fn merge_collinear(edges: &[Edge]) -> Vec<Edge> {
-    use std::collections::HashMap;
-    let (mut from, mut into): (HashMap<u32, Vec<usize>>, HashMap<u32, Vec<usize>>) =
-        Default::default();
-    for (i, e) in edges.iter().enumerate() {
-        from.entry(e.0).or_default().push(i);
-        into.entry(e.1).or_default().push(i);
-    }
+    // The edges leaving and entering each vertex: indices sorted by (vertex, index), looked up
+    // by binary search (a hash map of vectors allocated per vertex cost most of the build).
+    let index = |end: fn(&Edge) -> u32| {
+        let mut v: Vec<(u32, usize)> = edges.iter().enumerate().map(|(i, e)| (end(e), i)).collect();
+        v.sort_unstable();
+        v
+    };
+    let (from, into) = (index(|e| e.0), index(|e| e.1));
+    let at = |list: &[(u32, usize)], v: u32| -> std::ops::Range<usize> {
+        list.partition_point(|&(x, _)| x < v)..list.partition_point(|&(x, _)| x <= v)
+    };
     let straight = |a: DVec3, b: DVec3, c: DVec3| {
         let (u, v) = (b - a, c - b);
         u.dot(v) > 0.0
             && u.cross(v).length_squared() <= 1e-24 * u.length_squared() * v.length_squared()
     };
-    // The edge that continues `e` straight on through a vertex joining only the two of them.
-    let next = |e: &Edge| match (from.get(&e.1).map(Vec::as_slice), into.get(&e.1)) {
-        (Some(&[j]), Some(v)) if v.len() == 1 && straight(e.2, e.3, edges[j].3) => Some(j),
-        _ => None,
-    };
-    let continues = |j: usize| {
-        into.get(&edges[j].0)
-            .is_some_and(|v| v.len() == 1 && next(&edges[v[0]]) == Some(j))
-    };
+    // The edge after each edge through a vertex joining only the two of them.
+    let after: Vec<Option<usize>> = edges
+        .iter()
+        .map(|e| {
+            let (out, inn) = (at(&from, e.1), at(&into, e.1));
+            (out.len() == 1 && inn.len() == 1).then(|| from[out.start].1)
+        })
+        .collect();
+    // Whether an edge continues the one before it straight on.
+    let mut continues = vec![false; edges.len()];
+    for (e, &j) in edges.iter().zip(&after) {
+        if let Some(j) = j.filter(|&j| straight(e.2, e.3, edges[j].3)) {
+            continues[j] = true;
+        }
+    }
     let mut used = vec![false; edges.len()];
     let mut out = Vec::new();
     // Runs from their first edge; then whatever is left (a closed loop cannot be straight).
-    let heads = (0..edges.len()).filter(|&i| !continues(i));
+    let heads = (0..edges.len()).filter(|&i| !continues[i]);
     for i in heads.chain(0..edges.len()) {
         if used[i] {
             continue;
         }
         used[i] = true;
-        let mut e = edges[i];
-        while let Some(j) = next(&e).filter(|&j| !used[j]) {
+        let (mut e, mut k) = (edges[i], i);
+        // Straight on from the run's start, not only from the last edge.
+        while let Some(j) = after[k].filter(|&j| !used[j] && straight(e.2, e.3, edges[j].3)) {
             used[j] = true;
             e = (e.0, edges[j].1, e.2, edges[j].3);
+            k = j;
         }
         out.push(e);
     }
@@ -1080,31 +1133,22 @@ impl Builder<'_> {
     }
 
     /// A surface tree over `items` (indices into `self.items`, all of one polygon).
-    fn surface(&mut self, items: &mut [u32]) -> u32 {
+    fn surface(&mut self, items: &mut [(DVec2, u32)]) -> u32 {
         if items.len() == 1 {
-            let e = self.items[items[0] as usize].clone();
+            let e = self.items[items[0].1 as usize].clone();
             return self.leaf(e);
         }
-        let frame = &self.scene.polygons[self.items[items[0] as usize].polygon].frame;
-        let key = |i: u32, items: &[Element]| -> DVec2 {
-            let e = &items[i as usize];
-            frame.plane_from_world((e.p[0] + e.p[1] + e.p[2]) / 3.0)
-        };
         let (lo, hi) = items.iter().fold(
             (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
-            |(lo, hi), &i| {
-                let c = key(i, &self.items);
-                (lo.min(c), hi.max(c))
-            },
+            |(lo, hi), &(c, _)| (lo.min(c), hi.max(c)),
         );
         let axis = usize::from(hi.y - lo.y > hi.x - lo.x);
-        let all = &self.items;
-        items.sort_by(|&a, &b| {
-            key(a, all)[axis]
-                .total_cmp(&key(b, all)[axis])
-                .then(a.cmp(&b))
-        });
+        // The lower half by centroid along the axis (ties by item), in linear time: each half
+        // is ordered again by its own split.
         let mid = items.len() / 2;
+        items.select_nth_unstable_by(mid, |a, b| {
+            a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
+        });
         let (l, r) = items.split_at_mut(mid);
         let a = self.surface(l);
         let b = self.surface(r);
@@ -1114,7 +1158,16 @@ impl Builder<'_> {
     /// A cluster tree over `polys`: (polygon bounding-box centre, that polygon's items).
     fn cluster(&mut self, polys: &mut [(DVec3, Vec<u32>)]) -> u32 {
         if polys.len() == 1 {
-            let mut items = std::mem::take(&mut polys[0].1);
+            // Each item with its centroid in the polygon's 2D frame.
+            let frame = &self.scene.polygons[self.items[polys[0].1[0] as usize].polygon].frame;
+            let mut items: Vec<(DVec2, u32)> = polys[0]
+                .1
+                .iter()
+                .map(|&i| {
+                    let e = &self.items[i as usize];
+                    (frame.plane_from_world((e.p[0] + e.p[1] + e.p[2]) / 3.0), i)
+                })
+                .collect();
             return self.surface(&mut items);
         }
         let (lo, hi) = polys.iter().fold(
@@ -1129,8 +1182,10 @@ impl Builder<'_> {
         } else {
             2
         };
-        polys.sort_by(|a, b| a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1)));
         let mid = polys.len() / 2;
+        polys.select_nth_unstable_by(mid, |a, b| {
+            a.0[axis].total_cmp(&b.0[axis]).then(a.1.cmp(&b.1))
+        });
         let (l, r) = polys.split_at_mut(mid);
         let a = self.cluster(l);
         let b = self.cluster(r);
@@ -1148,52 +1203,64 @@ impl Hierarchy {
         meshes: &[ReceiverMesh],
         direct_h: &[Vec<DVec3>],
     ) -> Option<Hierarchy> {
+        // Per mesh, in parallel (the enclosure test casts rays): its elements and the centre
+        // of its triangles' bounding box; then numbered in mesh order.
+        let per_mesh: Vec<(Vec<Element>, DVec3)> = meshes
+            .par_iter()
+            .enumerate()
+            .map(|(mi, m)| {
+                let poly = &scene.polygons[m.polygon];
+                let rho = scene.materials[poly.material].rho;
+                let mut out = Vec::new();
+                let (mut lo, mut hi) =
+                    (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
+                for (ti, t) in m.triangles.iter().enumerate() {
+                    let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
+                    let area = triangle_area(&p);
+                    if area.is_nan() || area <= 0.0 {
+                        continue;
+                    }
+                    let direct = direct_h
+                        .get(mi)
+                        .map(|d| {
+                            t.iter()
+                                .map(|&i| d.get(i as usize).copied().unwrap_or(DVec3::ZERO))
+                                .sum::<DVec3>()
+                                / 3.0
+                        })
+                        .unwrap_or(DVec3::ZERO);
+                    for q in &p {
+                        lo = lo.min(*q);
+                        hi = hi.max(*q);
+                    }
+                    if enclosed(scene, vis, &p, poly.frame.n, m.polygon) {
+                        continue;
+                    }
+                    out.push(Element {
+                        mesh: mi,
+                        triangle: ti,
+                        polygon: m.polygon,
+                        p,
+                        normal: poly.frame.n,
+                        area,
+                        rho,
+                        direct,
+                        v: *t,
+                    });
+                }
+                (out, (lo + hi) * 0.5)
+            })
+            .collect();
         let mut items = Vec::new();
         // Per polygon (in mesh order): its items.
         let mut groups: Vec<(DVec3, Vec<u32>)> = Vec::new();
-        for (mi, m) in meshes.iter().enumerate() {
-            let poly = &scene.polygons[m.polygon];
-            let rho = scene.materials[poly.material].rho;
-            let mut ids = Vec::new();
-            let (mut lo, mut hi) = (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
-            for (ti, t) in m.triangles.iter().enumerate() {
-                let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
-                let area = triangle_area(&p);
-                if area.is_nan() || area <= 0.0 {
-                    continue;
-                }
-                let direct = direct_h
-                    .get(mi)
-                    .map(|d| {
-                        t.iter()
-                            .map(|&i| d.get(i as usize).copied().unwrap_or(DVec3::ZERO))
-                            .sum::<DVec3>()
-                            / 3.0
-                    })
-                    .unwrap_or(DVec3::ZERO);
-                for q in &p {
-                    lo = lo.min(*q);
-                    hi = hi.max(*q);
-                }
-                if enclosed(scene, vis, &p, poly.frame.n, m.polygon) {
-                    continue;
-                }
-                ids.push(items.len() as u32);
-                items.push(Element {
-                    mesh: mi,
-                    triangle: ti,
-                    polygon: m.polygon,
-                    p,
-                    normal: poly.frame.n,
-                    area,
-                    rho,
-                    direct,
-                    v: *t,
-                });
+        for (elements, centre) in per_mesh {
+            if elements.is_empty() {
+                continue;
             }
-            if !ids.is_empty() {
-                groups.push(((lo + hi) * 0.5, ids));
-            }
+            let first = items.len() as u32;
+            groups.push((centre, (first..first + elements.len() as u32).collect()));
+            items.extend(elements);
         }
         if groups.is_empty() {
             return None;
@@ -1211,10 +1278,7 @@ impl Hierarchy {
             .par_iter()
             .map(|n| node_samples(n, &b.elements, vis))
             .collect();
-        let outline = outlines(&b.nodes, &b.elements)
-            .into_par_iter()
-            .map(|o| merge_collinear(&o))
-            .collect();
+        let outline = outlines(&b.nodes, &b.elements);
         Some(Hierarchy {
             elements: b.elements,
             nodes: b.nodes,
