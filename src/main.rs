@@ -258,7 +258,9 @@ struct BakeArgs {
     matrix_memory: u64,
     /// Hierarchical solver: the most power one link may carry before it is refined, as a
     /// fraction of the total reflected direct power (dimensionless, in (0, 1]; smaller: more
-    /// links, more accurate).
+    /// links, more accurate). The refinement's other limits (irradiance variation across a
+    /// receiver, source non-uniformity, partial visibility) scale with it from the default, so
+    /// it is the solver's one speed/accuracy dial: 3e-4 refines about 4x fewer links.
     #[arg(long, default_value_t = penumbra::solve::DEFAULT_HR_TOLERANCE)]
     hr_tolerance: f64,
     /// Exact direct light with many emitters: a group of emitters (a node of the light tree) is

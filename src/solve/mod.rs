@@ -129,7 +129,8 @@ pub struct SolveOptions {
     /// Which solver computes the indirect light.
     pub solver: Solver,
     /// Hierarchical radiosity: the most power one link may carry before it is refined, as a
-    /// fraction of the total reflected direct power (dimensionless; see [`hierarchical`]).
+    /// fraction of the total reflected direct power (dimensionless); the oracle's other limits
+    /// scale with it from [`DEFAULT_HR_TOLERANCE`] (see [`hierarchical::Limits::of_bake`]).
     pub hr_tolerance: f64,
     /// How the patch solvers (progressive, matrix) compute form factors.
     pub form_factors: FormFactors,
