@@ -51,6 +51,9 @@ pub struct Method {
     pub direct: DirectMethod,
     pub solver: Solver,
     pub form_factors: FormFactors,
+    /// The hierarchical solver's `--hr-tolerance` as a multiple of its default (1: the
+    /// default; the solver's speed/accuracy dial).
+    pub hr_scale: u32,
 }
 
 impl Method {
@@ -62,13 +65,16 @@ impl Method {
             direct,
             solver: Solver::Progressive,
             form_factors: FormFactors::ClosedForm,
+            hr_scale: 1,
         }
     }
 
     /// `mesher-direct[-solver][-form factors]`, e.g. `discontinuity-exact`,
     /// `discontinuity-exact-matrix`; the solver is named unless progressive, the form factors
     /// unless closed-form. With hemicube form factors the direct-light method is left out
-    /// (the hemicube carries the area emitters' light): `uniform-matrix-hemicube`.
+    /// (the hemicube carries the area emitters' light): `uniform-matrix-hemicube`. A
+    /// hierarchical solve at `n` times the default tolerance ends in `-xn`:
+    /// `discontinuity-exact-hierarchical-x10`.
     pub fn name(&self) -> String {
         let mut name = format!("{:?}", self.mesher).to_lowercase();
         if self.form_factors != FormFactors::Hemicube {
@@ -79,6 +85,9 @@ impl Method {
         }
         if self.form_factors != FormFactors::ClosedForm {
             name = format!("{name}-{}", self.form_factors.name());
+        }
+        if self.hr_scale != 1 {
+            name = format!("{name}-x{}", self.hr_scale);
         }
         name
     }
@@ -97,8 +106,9 @@ impl Method {
 
     /// The other solvers and form factors, on the discontinuity mesh (the same vertices as
     /// `discontinuity-exact`, so only the indirect solve differs): classic radiosity
-    /// (`-matrix`), hierarchical radiosity, hemicube form factors with either patch solver;
-    /// and the whole classic 1985 pipeline, `uniform-matrix-hemicube`.
+    /// (`-matrix`), hierarchical radiosity at its default tolerance and at ten times it (its
+    /// speed/accuracy dial), hemicube form factors with either patch solver; and the whole
+    /// classic 1985 pipeline, `uniform-matrix-hemicube`.
     pub fn classic() -> Vec<Method> {
         let d = Method::new(Mesher::Discontinuity, DirectMethod::Exact);
         vec![
@@ -108,6 +118,11 @@ impl Method {
             },
             Method {
                 solver: Solver::Hierarchical,
+                ..d
+            },
+            Method {
+                solver: Solver::Hierarchical,
+                hr_scale: 10,
                 ..d
             },
             Method {
@@ -165,6 +180,7 @@ impl Method {
 
     fn dashed(&self) -> bool {
         self.direct == DirectMethod::Sampled
+            || self.hr_scale != 1
             || (!self.is_default_solve() && self.mesher == Mesher::Uniform)
     }
 }
@@ -358,6 +374,8 @@ pub struct Run {
     pub direct: DirectMethod,
     pub solver: Solver,
     pub form_factors: FormFactors,
+    /// See [`Method::hr_scale`].
+    pub hr_scale: u32,
     pub budget: usize,
     pub elements: usize,
     /// Coarse patches of the patch solvers (0 for hierarchical).
@@ -498,6 +516,7 @@ fn measure(
             options.solve.direct = method.direct;
             options.solve.solver = method.solver;
             options.solve.form_factors = method.form_factors;
+            options.solve.hr_tolerance *= f64::from(method.hr_scale);
             let start = Instant::now();
             let mut b = match crate::bake(gltf, &options, &|_, _, _| {}) {
                 // Classic radiosity only on scenes small enough for its matrix.
@@ -527,6 +546,7 @@ fn measure(
                 direct: method.direct,
                 solver: method.solver,
                 form_factors: method.form_factors,
+                hr_scale: method.hr_scale,
                 budget,
                 elements: b.stats.elements,
                 patches: s.patches,
@@ -902,6 +922,7 @@ fn series(report: &SceneReport, x: Axis, y: &dyn Fn(&Run) -> Option<f64>) -> Vec
             direct: r.direct,
             solver: r.solver,
             form_factors: r.form_factors,
+            hr_scale: r.hr_scale,
         };
         if !methods.contains(&m) {
             methods.push(m);
