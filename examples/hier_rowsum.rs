@@ -7,7 +7,7 @@
 //! so a shortfall of the bake's coarser links shows.
 use glam::DVec3;
 use penumbra::light::SurfacePoint;
-use penumbra::solve::hierarchical::{Hierarchy, Limits, PARTIAL_VISIBILITY, VARIATION};
+use penumbra::solve::hierarchical::{Hierarchy, Limits, MAX_LINKS, PARTIAL_VISIBILITY, VARIATION};
 use penumbra::solve::sky::Sky;
 use penumbra::visibility::Visibility;
 use penumbra::{BakeOptions, load};
@@ -47,9 +47,9 @@ fn main() -> anyhow::Result<()> {
         let (reflected, initial) = h.reflected_direct();
         let (radiosity, _) = full.reflected_direct();
         let limits = Limits::of_bake(tol, initial, total, h.mean_direct());
-        let (first, _, _) = h.link(&vis, &h.sources(&reflected), limits);
-        let (links, _, _) = h.relink(&vis, &first, &h.sources(&radiosity), limits, true);
-        links
+        let first = h.link(&vis, &h.sources(&reflected), limits).links;
+        h.relink(&vis, &first, &h.sources(&radiosity), limits, true)
+            .links
     } else {
         let limits = Limits {
             power: tol * total,
@@ -57,8 +57,9 @@ fn main() -> anyhow::Result<()> {
             source: 1.0,
             visibility: PARTIAL_VISIBILITY,
             lit: 0.0,
+            max_links: MAX_LINKS,
         };
-        h.link(&vis, &h.sources(&ones), limits).0
+        h.link(&vis, &h.sources(&ones), limits).links
     };
     let got = h.push(&h.gather(&links, &bn));
     // Reflecting receivers: the polygons of the hierarchy with reflectance.

@@ -386,6 +386,7 @@ use crate::visibility::Visibility;
 use glam::{DMat3, DVec2, DVec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
 /// Refinement passes: the first with the reflected direct light as the sources' radiosity, the
@@ -424,8 +425,9 @@ pub const FAR_FIELD: f64 = 6.0;
 /// parallel (below, in turn: a parallel task per small pair costs more than it saves).
 const PARALLEL_ELEMENTS: u32 = 2048;
 
-/// Most links held; past it the refinement is redone with a 4× larger tolerance (a warning).
-/// The links of zero `K` a pass keeps for the next one count; the last pass keeps none.
+/// Most links a refinement may hold (the default of [`SolveOptions::hr_max_links`]: 1.4 GB
+/// at 48 bytes a link); past it the refinement stops and is redone with a 4× larger
+/// tolerance, up to 1 (a warning). The links of zero `K` a pass keeps for the next one count.
 pub const MAX_LINKS: usize = 30_000_000;
 
 /// The Tikhonov term of the radiosity-gradient fit ([`Hierarchy::inverse_moments`]), as a fraction of
@@ -625,6 +627,9 @@ pub struct Limits {
     pub source: f64,
     pub visibility: f64,
     pub lit: f64,
+    /// The most links a refinement may hold (the links of zero `K` kept for a later pass
+    /// count); past it the refinement stops and reports an overflow ([`Linked::overflow`]).
+    pub max_links: usize,
 }
 
 impl Limits {
@@ -643,6 +648,7 @@ impl Limits {
             source: SOURCE_VARIATION * mean,
             visibility: PARTIAL_VISIBILITY * mean,
             lit,
+            max_links: MAX_LINKS,
         }
     }
 
@@ -665,6 +671,78 @@ impl Limits {
 /// size, by `Refined::sorted`. (Appending the links themselves copied them once per level of
 /// the parallel split and regrew each vector as it went: on box-grid-20 that was half the
 /// bake's page faults.)
+/// What a refinement reads besides the hierarchy, and how many links it holds so far (all
+/// its parallel parts together), so that it stops once they pass [`Limits::max_links`]
+/// instead of growing without bound. The count is of every link kept, so whether a
+/// refinement overflows does not depend on the order its parts run in.
+struct Refinement<'a> {
+    vis: &'a Visibility,
+    b: &'a Sources,
+    limits: Limits,
+    kept: AtomicUsize,
+}
+
+impl<'a> Refinement<'a> {
+    fn new(vis: &'a Visibility, b: &'a Sources, limits: Limits) -> Self {
+        Refinement {
+            vis,
+            b,
+            limits,
+            kept: AtomicUsize::new(0),
+        }
+    }
+
+    /// Counts a link kept into `out`: in `out` first, then in the shared count by batches (one
+    /// shared counter updated per link would be written by both cores all the time).
+    fn keep(&self, out: &mut Refined) {
+        out.pending += 1;
+        if out.pending >= KEEP_BATCH {
+            self.kept.fetch_add(out.pending, Ordering::Relaxed);
+            out.pending = 0;
+        }
+    }
+
+    /// True once more links are counted than the limit allows (the links of a batch not yet
+    /// counted can only add to it).
+    fn full(&self) -> bool {
+        self.kept.load(Ordering::Relaxed) > self.limits.max_links
+    }
+
+    /// The refinement's result from its output (all its parts appended: their counts too).
+    fn linked(&self, mut out: Refined) -> Linked {
+        self.kept
+            .fetch_add(std::mem::take(&mut out.pending), Ordering::Relaxed);
+        let overflow = self.full();
+        let (links, refinements, rays) = if overflow {
+            (Vec::new(), out.refinements, out.rays)
+        } else {
+            out.sorted()
+        };
+        Linked {
+            links,
+            refinements,
+            rays,
+            overflow,
+        }
+    }
+}
+
+/// Links a refinement's part keeps before adding them to the shared count.
+const KEEP_BATCH: usize = 1024;
+
+/// The result of a refinement pass ([`Hierarchy::link`], [`Hierarchy::relink`]).
+#[derive(Debug)]
+pub struct Linked {
+    /// The links, sorted by receiver then source; empty on overflow.
+    pub links: Vec<Link>,
+    /// Links split.
+    pub refinements: u64,
+    /// Shadow rays cast.
+    pub rays: u64,
+    /// True when the refinement stopped at [`Limits::max_links`] links.
+    pub overflow: bool,
+}
+
 #[derive(Debug, Default)]
 struct Refined {
     /// Finished runs of links, in order.
@@ -673,6 +751,9 @@ struct Refined {
     links: Vec<Link>,
     refinements: u64,
     rays: u64,
+    /// Links kept and not yet counted in the refinement's shared count
+    /// ([`Refinement::keep`]).
+    pending: usize,
 }
 
 impl Refined {
@@ -705,6 +786,7 @@ impl Refined {
         }
         self.refinements += other.refinements;
         self.rays += other.rays;
+        self.pending += other.pending;
     }
 
     /// Keeps only the links that `keep` accepts.
@@ -1691,22 +1773,21 @@ impl Hierarchy {
         keep(unoccluded * v, power, spread, reach, shade, toward)
     }
 
-    /// The links from refining the root-to-root link: `b[s]` (W/m², a scalar) is the source
-    /// radiosity the oracle uses, `threshold` the most power one link may carry (W) and
-    /// `variation` the most a surface source's irradiance may vary across a receiver's samples
-    /// (W/m²) before the receiver is split. Links sorted by receiver, then source (including links of zero `K`, estimated hidden, that a later pass may refine). Returns the
-    /// links, the refinements and the rays.
-    pub fn link(&self, vis: &Visibility, b: &Sources, limits: Limits) -> (Vec<Link>, u64, u64) {
+    /// The links from refining the root-to-root link with the source radiosities `b` (W/m²,
+    /// scalar) and the oracle's `limits`, sorted by receiver, then source (including links of
+    /// zero `K`, estimated hidden, that a later pass may refine).
+    pub fn link(&self, vis: &Visibility, b: &Sources, limits: Limits) -> Linked {
         let root = self.root();
+        let cx = Refinement::new(vis, b, limits);
         let mut out = Refined::default();
-        self.refine_into(vis, b, limits, root, root, None, &mut out);
-        out.sorted()
+        self.refine_into(&cx, root, root, None, &mut out);
+        cx.linked(out)
     }
 
     /// Refines existing `links` with new source radiosities `b` (W/m², scalar): a link the
     /// oracle still accepts is kept as it is (no new estimate), the others are refined from
-    /// their node pair as in [`Hierarchy::link`]. Same return as [`Hierarchy::link`], without
-    /// the links of zero `K` when this is the `last` pass (no later pass tests them again).
+    /// their node pair as in [`Hierarchy::link`]. As [`Hierarchy::link`], without the links
+    /// of zero `K` when this is the `last` pass (no later pass tests them again).
     pub fn relink(
         &self,
         vis: &Visibility,
@@ -1714,7 +1795,8 @@ impl Hierarchy {
         b: &Sources,
         limits: Limits,
         last: bool,
-    ) -> (Vec<Link>, u64, u64) {
+    ) -> Linked {
+        let cx = Refinement::new(vis, b, limits);
         // In chunks of links, each refined in turn into one output: most links are kept as
         // they are, and a task or a vector per link would cost more than the test.
         let parts: Vec<Refined> = links
@@ -1722,6 +1804,9 @@ impl Hierarchy {
             .map(|chunk| {
                 let mut out = Refined::default();
                 for l in chunk {
+                    if cx.full() {
+                        break;
+                    }
                     let (bs, ds) = (b.b[l.source as usize], b.spread[l.source as usize]);
                     if bs * f64::from(l.power) > limits.power
                         || bs * f64::from(l.spread) > limits.variation
@@ -1729,8 +1814,9 @@ impl Hierarchy {
                             > limits.source_at(&self.nodes[l.receiver as usize])
                         || bs * f64::from(l.shade) > limits.visibility
                     {
-                        self.refine_into(vis, b, limits, l.receiver, l.source, None, &mut out);
+                        self.refine_into(&cx, l.receiver, l.source, None, &mut out);
                     } else {
+                        cx.keep(&mut out);
                         out.links.push(*l);
                     }
                 }
@@ -1744,26 +1830,27 @@ impl Hierarchy {
         for part in parts {
             out.append(part);
         }
-        out.sorted()
+        cx.linked(out)
     }
 
     /// Refines the link `r ← s` into `out`: the pairs a split makes are refined in parallel
     /// while they span more than [`PARALLEL_ELEMENTS`] elements, else in turn into the same
-    /// output (the links come out in the same order either way).
+    /// output (the links come out in the same order either way). Nothing once the refinement
+    /// holds more than its [`Limits::max_links`].
     ///
     /// `known`: the receiver samples' point form factors to `s` when the caller has them
     /// ([`Hierarchy::source_split_factors`]), else they are computed here.
-    #[allow(clippy::too_many_arguments)]
     fn refine_into(
         &self,
-        vis: &Visibility,
-        b: &Sources,
-        limits: Limits,
+        cx: &Refinement<'_>,
         r: u32,
         s: u32,
         known: Option<Factors>,
         out: &mut Refined,
     ) {
+        if cx.full() {
+            return;
+        }
         let split = |pairs: &[(u32, u32, Option<Factors>)], out: &mut Refined| {
             let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
             if (nr.hi - nr.lo) + (ns.hi - ns.lo) > PARALLEL_ELEMENTS {
@@ -1771,7 +1858,7 @@ impl Hierarchy {
                     .par_iter()
                     .map(|&(r, s, known)| {
                         let mut part = Refined::default();
-                        self.refine_into(vis, b, limits, r, s, known, &mut part);
+                        self.refine_into(cx, r, s, known, &mut part);
                         part
                     })
                     .collect();
@@ -1780,7 +1867,7 @@ impl Hierarchy {
                 }
             } else {
                 for &(r, s, known) in pairs {
-                    self.refine_into(vis, b, limits, r, s, known, out);
+                    self.refine_into(cx, r, s, known, out);
                 }
             }
         };
@@ -1798,9 +1885,9 @@ impl Hierarchy {
         if self.culled(r, s) {
             return;
         }
-        let source = (b.b[s as usize], b.spread[s as usize]);
+        let source = (cx.b.b[s as usize], cx.b.spread[s as usize]);
         let factors = known.or_else(|| self.point_factors(r, s));
-        let d = self.decide(vis, r, s, source, factors, limits, &mut out.rays);
+        let d = self.decide(cx.vis, r, s, source, factors, cx.limits, &mut out.rays);
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         match d {
             Decision::Split(receiver) => {
@@ -1820,6 +1907,7 @@ impl Hierarchy {
                 split(&pairs, out);
             }
             Decision::Keep(l) if l.k > 0.0 || l.power > 0.0 || l.spread > 0.0 || l.reach > 0.0 => {
+                cx.keep(out);
                 out.links.push(l);
             }
             Decision::Keep(..) | Decision::Drop => {}
@@ -2290,23 +2378,30 @@ pub fn indirect(
             let last = pass + 1 == REFINE_PASSES;
             let sources = h.sources(&b_el);
             let links = loop {
-                let limits = Limits::of_bake(tolerance, initial, total_area, lit);
-                let (links, refinements, rays) = match &previous {
+                let mut limits = Limits::of_bake(tolerance, initial, total_area, lit);
+                // At the loosest tolerance the links are what the hierarchy's shape asks for
+                // (a cluster's self-link is always split): no cap then.
+                limits.max_links = if tolerance < 1.0 {
+                    options.hr_max_links
+                } else {
+                    usize::MAX
+                };
+                let r = match &previous {
                     Some(p) => h.relink(vis, p, &sources, limits, last),
                     None => h.link(vis, &sources, limits),
                 };
-                hs.refinements += refinements;
-                hs.rays += rays;
-                if links.len() <= MAX_LINKS {
-                    break links;
+                hs.refinements += r.refinements;
+                hs.rays += r.rays;
+                if !r.overflow {
+                    break r.links;
                 }
+                let looser = (tolerance * 4.0).min(1.0);
                 stats.warnings.push(format!(
-                    "hierarchical radiosity: {} links at tolerance {tolerance:e} exceed the cap \
-                     {MAX_LINKS}; refined again at {:e}",
-                    links.len(),
-                    tolerance * 4.0
+                    "hierarchical radiosity: more than {} links at --hr-tolerance {tolerance:e}; \
+                     refined again at {looser:e}",
+                    options.hr_max_links
                 ));
-                tolerance *= 4.0;
+                tolerance = looser;
                 previous = None;
             };
             hs.tolerance = tolerance;

@@ -132,6 +132,9 @@ pub struct SolveOptions {
     /// fraction of the total reflected direct power (dimensionless); the oracle's other limits
     /// scale with it from [`DEFAULT_HR_TOLERANCE`] (see [`hierarchical::Limits::of_bake`]).
     pub hr_tolerance: f64,
+    /// Hierarchical radiosity: the most links a refinement pass may hold before it stops and
+    /// starts again at 4x the tolerance, with a warning (memory: 48 bytes a link).
+    pub hr_max_links: usize,
     /// How the patch solvers (progressive, matrix) compute form factors.
     pub form_factors: FormFactors,
     /// Cells across the hemicube's top face (even, 2 to 2048), for hemicube form factors.
@@ -161,6 +164,7 @@ impl Default for SolveOptions {
             tolerance: 1e-3,
             solver: Solver::Hierarchical,
             hr_tolerance: DEFAULT_HR_TOLERANCE,
+            hr_max_links: hierarchical::MAX_LINKS,
             light_error: lightcuts::EPSILON,
             form_factors: FormFactors::ClosedForm,
             hemicube_resolution: hemicube::DEFAULT_RESOLUTION,

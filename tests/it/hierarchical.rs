@@ -7,7 +7,7 @@ use penumbra::geometry::point_polygon_form_factor;
 use penumbra::light::{SurfacePoint, luminance};
 use penumbra::solve::Solver;
 use penumbra::solve::hierarchical::{
-    Element, Hierarchy, Limits, Link, PARTIAL_VISIBILITY, VARIATION,
+    Element, Hierarchy, Limits, Link, MAX_LINKS, PARTIAL_VISIBILITY, VARIATION,
 };
 use penumbra::solve::sky::Sky;
 use penumbra::visibility::Visibility;
@@ -109,8 +109,9 @@ fn hierarchical_parallel_plates_form_factor() {
         source: 1e-3,
         visibility: 1e-3,
         lit: 0.0,
+        max_links: MAX_LINKS,
     };
-    let (links, _, _) = h.link(&vis, &h.sources(&b_el), limits);
+    let links = h.link(&vis, &h.sources(&b_el), limits).links;
     assert!(links.len() > 10, "{} links", links.len());
     let got = h.push(&h.gather(&links, &b_node));
     let (mut sum, mut area) = (0.0, 0.0);
@@ -272,6 +273,49 @@ fn hierarchical_bake_is_thread_count_independent() {
     assert_eq!(run(1), run(2));
 }
 
+/// Bad input and limits: a refinement that would hold more than `hr_max_links` links stops,
+/// and the bake refines again at 4x the tolerance with a warning, until it fits: the links stay
+/// under the cap, the light stays close to the uncapped bake's, and the bytes do not depend on
+/// the thread count (whether a pass overflows is decided on the count of every link it keeps,
+/// not on which part ran first).
+#[test]
+fn a_refinement_over_the_link_cap_is_redone_looser_with_a_warning() {
+    let bytes = fixtures::cornell_box();
+    let free = bake(&bytes, &hierarchical(quick()));
+    let links = |b: &Bake| b.stats.solve.hierarchical.as_ref().map_or(0, |h| h.links);
+    let mut o = hierarchical(quick());
+    o.solve.hr_max_links = links(&free) / 8;
+    let capped = bake(&bytes, &o);
+    let warned: Vec<_> = capped
+        .stats
+        .warnings
+        .iter()
+        .filter(|w| w.contains("links at --hr-tolerance"))
+        .collect();
+    assert!(
+        !warned.is_empty(),
+        "no warning: {:?}",
+        capped.stats.warnings
+    );
+    assert!(
+        links(&capped) <= o.solve.hr_max_links,
+        "{} links over the cap {}",
+        links(&capped),
+        o.solve.hr_max_links
+    );
+    let tolerance = capped.stats.solve.hierarchical.as_ref().unwrap().tolerance;
+    assert!(tolerance > o.solve.hr_tolerance, "tolerance {tolerance}");
+    let ((_, i_free), (_, i_capped)) = (mean_luminance(&free), mean_luminance(&capped));
+    eprintln!("{warned:?}; mean indirect {i_free} -> {i_capped} at tolerance {tolerance}");
+    assert!(
+        (i_capped / i_free - 1.0).abs() < 0.05,
+        "mean indirect H {i_free} uncapped, {i_capped} capped"
+    );
+    let dir = scratch("hierarchical-cap-threads");
+    let run = |threads| crate::output::bake_to_file_with(&bytes, &dir, threads, &o);
+    assert_eq!(run(1), run(2));
+}
+
 /// The row sums of the links' `K` (every element at `B = 1`) in the Cornell box, against a
 /// ray-cast estimate of the same quantity (the cosine-weighted fraction of each element's
 /// hemisphere that sees a reflecting surface, 256 stratified rays from its centroid),
@@ -296,8 +340,9 @@ fn hierarchical_row_sums_match_ray_casting_past_occluders() {
             source: 1.0,
             visibility,
             lit: 0.0,
+            max_links: MAX_LINKS,
         };
-        row_sum(&h, &h.link(&vis, &h.sources(&ones), limits).0, |_| true)
+        row_sum(&h, &h.link(&vis, &h.sources(&ones), limits).links, |_| true)
     };
     let reference = ray_cast_row_sum(&b, &h, &vis, |_| true);
     let refined = uniform(PARTIAL_VISIBILITY);
@@ -446,8 +491,9 @@ fn bake_links(h: &Hierarchy, vis: &Visibility, radiosity: &[DVec3], lit: f64) ->
     let total: f64 = h.elements.iter().map(|e| e.area).sum();
     let tolerance = BakeOptions::default().solve.hr_tolerance;
     let limits = Limits::of_bake(tolerance, power, total, lit);
-    let (first, _, _) = h.link(vis, &h.sources(&reflected), limits);
-    h.relink(vis, &first, &h.sources(radiosity), limits, true).0
+    let first = h.link(vis, &h.sources(&reflected), limits).links;
+    h.relink(vis, &first, &h.sources(radiosity), limits, true)
+        .links
 }
 
 /// The area-weighted mean over the elements of `h` of the row sums of `links`.
