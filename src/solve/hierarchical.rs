@@ -286,10 +286,10 @@
 //! (town-13k: `examples/hier_compare.rs`, the ratio to progressive's solve in the same run.)
 //! On the sunlit towns, whose error is mostly the texel resolution of the direct light, 3e-4
 //! is still better than progressive in every region at 5x its speed (town-13k, 64 samples,
-//! 512² page: 6.62 / 5.10 / 8.23 / 9.99 / 2.62 against 8.43 / 6.34 / 8.49 / 12.34 / 7.06); the Cornell box, whose
-//! indirect light is a large part of what is seen, needs the default to be no worse than
-//! progressive in any region (its lit region is 0.58% against 0.61%), and that is why the
-//! default is 3e-5.
+//! 512² page: 6.62 / 5.10 / 8.23 / 9.99 / 2.62 against 8.43 / 6.34 / 8.49 / 12.34 / 7.06);
+//! the Cornell box, whose indirect light is a large part of what is seen, needs the default
+//! to be no worse than progressive in any region (its lit region is 0.58% against 0.61%), and
+//! that is why the default is 3e-5.
 //!
 //! # Status (measured on 2 shared cores, default options)
 //!
@@ -664,13 +664,6 @@ impl Limits {
     }
 }
 
-/// The output of refining links: the links kept, the links split, the shadow rays cast.
-///
-/// The links are kept in runs, in order: parts refined in parallel are appended by moving
-/// their runs, not their links, and the runs are copied once, into one vector of the exact
-/// size, by `Refined::sorted`. (Appending the links themselves copied them once per level of
-/// the parallel split and regrew each vector as it went: on box-grid-20 that was half the
-/// bake's page faults.)
 /// What a refinement reads besides the hierarchy, and how many links it holds so far (all
 /// its parallel parts together), so that it stops once they pass [`Limits::max_links`]
 /// instead of growing without bound. The count is of every link kept, so whether a
@@ -743,6 +736,13 @@ pub struct Linked {
     pub overflow: bool,
 }
 
+/// The output of refining links: the links kept, the links split, the shadow rays cast.
+///
+/// The links are kept in runs, in order: parts refined in parallel are appended by moving
+/// their runs, not their links, and the runs are copied once, into one vector of the exact
+/// size, by `Refined::sorted`. (Appending the links themselves copied them once per level of
+/// the parallel split and regrew each vector as it went: on box-grid-20 that was half the
+/// bake's page faults.)
 #[derive(Debug, Default)]
 struct Refined {
     /// Finished runs of links, in order.
