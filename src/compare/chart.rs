@@ -75,8 +75,54 @@ fn draw<DB: DrawingBackend>(
     let columns = columns.clamp(1, panels.len().max(1));
     let rows = panels.len().div_ceil(columns).max(1);
     let areas = root.split_evenly((rows, columns));
+    // With a free slot in the grid, one legend there for every panel, off their curves;
+    // else each panel carries its own.
+    let spare = areas.get(panels.len());
     for (panel, area) in panels.iter().zip(areas.iter()) {
-        draw_panel(area, panel)?;
+        draw_panel(area, panel, spare.is_none())?;
+    }
+    if let Some(area) = spare {
+        draw_legend(area, panels)?;
+    }
+    Ok(())
+}
+
+/// Every curve's label (and the reference line's), once, in order of first appearance, as a
+/// column of line samples and names in `area`.
+fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panels: &[Panel]) -> Result<()> {
+    let grey = (150, 150, 150);
+    let mut entries: Vec<(String, (u8, u8, u8), bool, u32)> = Vec::new();
+    for p in panels {
+        if let Some((_, label)) = &p.floor
+            && !entries.iter().any(|e| &e.0 == label)
+        {
+            entries.push((label.clone(), grey, true, 1));
+        }
+        for s in &p.series {
+            if !entries.iter().any(|e| e.0 == s.label) {
+                entries.push((s.label.clone(), s.colour, s.dashed, 2));
+            }
+        }
+    }
+    let (x0, mut y) = (30i32, 40i32);
+    for (label, (r, g, b), dashed, width) in entries {
+        let style = RGBColor(r, g, b).stroke_width(width);
+        let pieces: Vec<(i32, i32)> = if dashed {
+            vec![(x0, x0 + 9), (x0 + 14, x0 + 23), (x0 + 28, x0 + 36)]
+        } else {
+            vec![(x0, x0 + 36)]
+        };
+        for (a, b) in pieces {
+            area.draw(&PathElement::new([(a, y), (b, y)], style))
+                .map_err(chart_error)?;
+        }
+        area.draw(&Text::new(
+            label,
+            (x0 + 48, y - 7),
+            ("sans-serif", 14).into_font().color(&BLACK),
+        ))
+        .map_err(chart_error)?;
+        y += 22;
     }
     Ok(())
 }
@@ -109,7 +155,11 @@ fn tick(v: f64) -> String {
     }
 }
 
-fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) -> Result<()> {
+fn draw_panel<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    panel: &Panel,
+    legend: bool,
+) -> Result<()> {
     let ok = |p: &&(f64, f64)| p.0 > 0.0 && p.1 > 0.0 && p.0.is_finite() && p.1.is_finite();
     let xs = panel
         .series
@@ -176,14 +226,16 @@ fn draw_panel<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panel: &Panel) 
             .draw_series(points.iter().map(|&p| Circle::new(p, 3, c.filled())))
             .map_err(chart_error)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .label_font(("sans-serif", 12))
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .draw()
-        .map_err(chart_error)?;
+    if legend {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .label_font(("sans-serif", 12))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .draw()
+            .map_err(chart_error)?;
+    }
     Ok(())
 }
 
@@ -219,6 +271,20 @@ mod tests {
             .filter(|p| p.0.iter().all(|&c| c < 100))
             .count();
         assert!(dark > 500 && dark < 960 * 360 / 4, "{dark} dark pixels");
+    }
+
+    /// Three panels on a grid of four: one legend, in the free slot, names every curve once.
+    #[test]
+    fn a_free_slot_holds_one_legend() {
+        let mut other = panel();
+        other.series[0].label = "discontinuity-exact".into();
+        let svg = svg(&[panel(), other, panel()], 2).unwrap();
+        assert_eq!(svg.matches("uniform-exact").count(), 1, "{svg}");
+        assert_eq!(svg.matches("discontinuity-exact").count(), 1);
+        assert_eq!(svg.matches("reference noise").count(), 1);
+        // Without a free slot each panel names its own curves.
+        let two = svg(&[panel(), panel()], 2).unwrap();
+        assert_eq!(two.matches("uniform-exact").count(), 2);
     }
 
     #[test]
