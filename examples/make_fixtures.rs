@@ -28,7 +28,8 @@ fn main() -> std::io::Result<()> {
     let usage = || -> ! {
         eprintln!(
             "usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR \
-             | make_fixtures --town TRIANGLES FILE | make_fixtures --tiled-box TILES FILE \
+             | make_fixtures --town TRIANGLES FILE | make_fixtures --interior ROOMS FILE \
+             | make_fixtures --tiled-box TILES FILE \
              | make_fixtures --box-on-ground FILE"
         );
         std::process::exit(2);
@@ -52,6 +53,7 @@ fn main() -> std::io::Result<()> {
     }
     let generated: Option<fn(usize) -> Vec<u8>> = match args.first().and_then(|a| a.to_str()) {
         Some("--town") => Some(penumbra::fixtures::ladder::town),
+        Some("--interior") => Some(penumbra::fixtures::ladder::interior),
         Some("--tiled-box") => Some(penumbra::fixtures::tiled_box_on_floor),
         _ => None,
     };
