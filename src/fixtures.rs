@@ -36,11 +36,11 @@ use std::f64::consts::PI;
 use glam::{DMat3, DMat4, DQuat, DVec3};
 use serde_json::{Map, Value, json};
 
-/// The failure sweep: scenes where each meshing method is known to break down.
+// The failure sweep: scenes where each meshing method is known to break down.
 pub mod failure;
 
-/// The scale ladder: generated towns and a house interior of game-level size (about 5 000 to
-/// 100 000 triangles), for measuring how the baker scales.
+// The scale ladder: generated towns and a house interior of game-level size (about 5 000 to
+// 100 000 triangles), for measuring how the baker scales.
 pub mod ladder;
 
 /// glTF `bufferView.target` for vertex attributes.

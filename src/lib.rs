@@ -10,80 +10,84 @@
 //! W/m² (or the scene's own photometric equivalents, consistently). The lightmap stores irradiance
 //! `H`, linear, without albedo.
 
+// The docs describe how each stage works, private helpers included (their links resolve with
+// `cargo doc --document-private-items`).
+#![allow(rustdoc::private_intra_doc_links)]
+
 // The stages, in pipeline order.
 
-/// Reading glTF and building the scene.
+// Reading glTF and building the scene.
 pub mod load;
 
-/// Planar receiver polygons, materials, emitters, lights; the back sides of double-sided
-/// surfaces; triangles too long for one lightmap page cut (`scene::cut`).
+// Planar receiver polygons, materials, emitters, lights; the back sides of double-sided
+// surfaces; triangles too long for one lightmap page cut (`scene::cut`).
 pub mod scene;
 
-/// BVH ray queries.
+// BVH ray queries.
 pub mod visibility;
 
-/// UV atlas (xatlas), packed right after the scene so an impossible request fails before the
-/// solve.
+// UV atlas (xatlas), packed right after the scene so an impossible request fails before the
+// solve.
 pub mod atlas;
 
-/// Umbra, penumbra and contact segments per receiver.
+// Umbra, penumbra and contact segments per receiver.
 pub mod discontinuity;
 
-/// Receiver meshes: uniform, discontinuity, adaptive.
+// Receiver meshes: uniform, discontinuity, adaptive.
 pub mod mesh;
 
-/// Direct and indirect light at the mesh vertices: one solver per file under `solve/`.
+// Direct and indirect light at the mesh vertices: one solver per file under `solve/`.
 pub mod solve;
 
-/// Exact visible emitter parts (used by `solve`).
+// Exact visible emitter parts (used by `solve`).
 pub mod backproject;
 
-/// Texels from the receiver meshes (buried sub-samples left out, dilation), and the
-/// stitching of the seams between charts.
+// Texels from the receiver meshes (buried sub-samples left out, dilation), and the
+// stitching of the seams between charts.
 pub mod lightmap;
 
-/// The lightmapped glb.
+// The lightmapped glb.
 pub mod write;
 
 // Shared physics, used by several stages (depend on nothing but `scene`'s plain data).
 
-/// Form factors by Lambert's contour formula, polygon clipping, convex pieces, areas,
-/// barycentrics, a bucket grid of 2D boxes.
+// Form factors by Lambert's contour formula, polygon clipping, convex pieces, areas,
+// barycentrics, a bucket grid of 2D boxes.
 pub mod geometry;
 
-/// Receiving points, area emitters, the punctual light model, luminance.
+// Receiving points, area emitters, the punctual light model, luminance.
 pub mod light;
 
 // The pipeline driver and its bookkeeping.
 
-/// [`bake()`]: the stages in order.
+// [`bake()`]: the stages in order.
 pub mod bake;
 
-/// Errors.
+// Errors.
 pub mod error;
 
-/// `--stats` and progress.
+// `--stats` and progress.
 pub mod stats;
 
-/// Output files: never the input, written together or not at all, cleaned up on signals.
+// Output files: never the input, written together or not at all, cleaned up on signals.
 pub mod files;
 
 // Tools around the pipeline.
 
-/// `penumbra compare`: every method against the Monte Carlo reference over a budget sweep, by
-/// region; report, charts, picture strip, failure sweep.
+// `penumbra compare`: every method against the Monte Carlo reference over a budget sweep, by
+// region; report, charts, picture strip, failure sweep.
 pub mod compare;
 
-/// Debug views (SVG).
+// Debug views (SVG).
 pub mod debug;
 
-/// Generated test scenes, and the failure-sweep family.
+// Generated test scenes, and the failure-sweep family.
 pub mod fixtures;
 
-/// Monte Carlo reference for a baked lightmap.
+// Monte Carlo reference for a baked lightmap.
 pub mod reference;
 
-/// Pictures of a baked glb.
+// Pictures of a baked glb.
 pub mod render;
 
 pub use bake::{Bake, BakeOptions, DoubleSided, OutputFiles, Seams, bake, bake_file};

@@ -64,7 +64,7 @@ use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::path::Path;
 
-/// What [`reference`] is told.
+/// What [`reference`](fn@reference) is told.
 #[derive(Clone, Debug, PartialEq)]
 pub struct ReferenceOptions {
     /// Paths per texel, split evenly over its covered sub-samples (at least 2 per sub-sample,
@@ -680,7 +680,7 @@ pub fn reference(gltf: &Gltf, options: &ReferenceOptions) -> Result<ReferenceMap
     Ok(reference_with(&scene, &vis, &layout, options))
 }
 
-/// [`reference`] on an already loaded scene and layout.
+/// [`reference`](fn@reference) on an already loaded scene and layout.
 pub fn reference_with(
     scene: &Scene,
     vis: &Visibility,

@@ -343,7 +343,7 @@ pub fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
     crate::lightmap::seams::Footprint::at(map.width, map.height, page, texel_uv).sample(&map.texels)
 }
 
-/// The sRGB opto-electronic transfer function (IEC 61966-2-1), value in [0,1].
+/// The sRGB opto-electronic transfer function (IEC 61966-2-1), value in \[0, 1\].
 pub fn linear_to_srgb(c: f64) -> f64 {
     if c <= 0.0031308 {
         12.92 * c
@@ -353,7 +353,7 @@ pub fn linear_to_srgb(c: f64) -> f64 {
 }
 
 /// The sRGB electro-optical transfer function (IEC 61966-2-1), the inverse of
-/// [`linear_to_srgb`]: encoded value in [0,1] to linear.
+/// [`linear_to_srgb`]: encoded value in \[0, 1\] to linear.
 pub fn srgb_to_linear(e: f64) -> f64 {
     if e <= 0.04045 {
         e / 12.92

@@ -23,7 +23,7 @@
 //!
 //! * **Classic radiosity** (`--solver matrix`, [`matrix`]): the same patches and final gather,
 //!   but every pair's form factor in a matrix and the system solved by Gauss-Seidel
-//!   ([`gauss_seidel`]).
+//!   ([`gauss_seidel`](mod@gauss_seidel)).
 //! * **Form factors** of the patch solvers (`--form-factors`, [`form_factors`]): closed form
 //!   (the default), ray cast (Wallace et al. 1989), or hemicube ([`hemicube`]; Cohen and
 //!   Greenberg 1985), which also carries the area emitters' light.
