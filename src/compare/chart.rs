@@ -27,6 +27,9 @@ pub struct Panel {
     pub floor: Option<(f64, String)>,
 }
 
+/// The reference line's colour (and its legend sample's).
+const FLOOR_GREY: (u8, u8, u8) = (150, 150, 150);
+
 /// Panel size in pixels.
 const PANEL: (u32, u32) = (480, 360);
 
@@ -103,7 +106,7 @@ fn draw_legend<DB: DrawingBackend>(area: &DrawingArea<DB, Shift>, panels: &[Pane
         {
             entries.push(Entry {
                 label,
-                colour: (150, 150, 150),
+                colour: FLOOR_GREY,
                 dashed: true,
                 width: 1,
             });
@@ -211,7 +214,7 @@ fn draw_panel<DB: DrawingBackend>(
         .draw()
         .map_err(chart_error)?;
     if let Some((y, label)) = &panel.floor {
-        let grey = RGBColor(150, 150, 150);
+        let grey = RGBColor(FLOOR_GREY.0, FLOOR_GREY.1, FLOOR_GREY.2);
         chart
             .draw_series(DashedLineSeries::new(
                 [(x_range.start, *y), (x_range.end, *y)],
