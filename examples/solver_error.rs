@@ -2,7 +2,7 @@
 //! reference, by region (`penumbra compare`'s measure, and the signed mean error, a bias):
 //! `cargo run --release --example solver_error -- scene.glb [spp] [budget] [hr_tolerance]`
 //! (`RES` and `SS`: lightmap size and sub-samples per texel side; `BY_POLYGON=1`: the bias per
-//! region and polygon).
+//! region and polygon; `ONLY=hierarchical` or `ONLY=progressive`: one solver).
 
 use penumbra::compare::{classify, lightmap_error, mean_lit_irradiance};
 use penumbra::reference::{ReferenceOptions, reference_with, texel_layout};
@@ -39,7 +39,12 @@ fn main() -> anyhow::Result<()> {
         options.solve.hr_tolerance = t;
     }
     let mut bakes = Vec::new();
+    // `ONLY=hierarchical` (or `progressive`) in the environment: that solver alone.
+    let only = std::env::var("ONLY").unwrap_or_default();
     for solver in [Solver::Progressive, Solver::Hierarchical] {
+        if !only.is_empty() && !format!("{solver:?}").eq_ignore_ascii_case(&only) {
+            continue;
+        }
         let mut o = options.clone();
         o.solve.solver = solver;
         let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;

@@ -987,11 +987,32 @@ pub fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) -> Vec<Re
 }
 
 /// The adaptive rule on top of `start`: up to `rounds` times, evaluate the light, rank the
-/// elements across which it varies by more than [`LIGHT_TOLERANCE`] of the brightest vertex,
-/// and add a vertex (`split` of the triangle's corners) to the worst ones, as many as the
-/// budget allows; `rebuild(mesh, points)` remeshes `start[mesh]` with all the points added to
-/// it so far. Stops at 95% of the budget; a round that would overshoot it by more than
-/// [`BUDGET_SLACK`] is undone. Returns the meshes and the points added to each.
+/// elements whose error exceeds [`LIGHT_TOLERANCE`] of the brightest vertex, and add a vertex
+/// (`split` of the triangle's corners) to the worst ones, as many as the budget allows;
+/// `rebuild(mesh, points)` remeshes `start[mesh]` with all the points added to it so far.
+/// Stops at 95% of the budget; a round that would overshoot it by more than [`BUDGET_SLACK`]
+/// is undone. Returns the meshes and the points added to each.
+///
+/// An element's error is the larger of
+///
+/// * the *variation*: the spread of the light over its three vertices (the classic rule, Cohen
+///   et al. 1986), which finds shadow edges and steep falloff, and
+/// * the *missed* light: the exact light at its centroid minus the mean of its vertices (what
+///   linear interpolation shows there), times its area in average elements (at least one).
+///
+/// The first alone cannot see a peak between an element's vertices: a house's wall under a
+/// ceiling light is dark at the ceiling and at the floor and brightest in between, and with
+/// every vertex of its few large elements on those edges the wall read a third of its light.
+/// On a 20-room house (`interior-20`) the bake's direct light over all surfaces was 82% of what
+/// the lamps emit, and against the Monte Carlo reference the RMSE over all texels was 18.8% of
+/// the lit mean; with the missed light, 94% and 11.6%; at night under 256 street lamps
+/// (`night-town-25k`) 17.1% and 14.4% (the ground's lit pools: their bias from -16% to 0.1%).
+/// The missed light is weighted by area because a large element that misses a peak misplaces
+/// that light over all its area, as much as that many average elements would; unweighted
+/// it changed nothing. The variation stays unweighted: weighted too, the Cornell box's
+/// penumbra error went from 0.69% to 1.13% of the lit mean, the budget taken from the small
+/// elements along the shadow edges (the missed light alone leaves the Cornell box's mesh as
+/// it was).
 fn refine_by_light<S, R>(
     start: &[ReceiverMesh],
     budget: usize,
@@ -1010,35 +1031,50 @@ where
     let mut added: Vec<Vec<DVec2>> = vec![Vec::new(); start.len()];
     // Elements one split adds, measured after each round.
     let mut per_split = 2.0;
-    // The light at each mesh's vertices; after a round only the rebuilt meshes are evaluated.
-    let mut values: Vec<Vec<glam::DVec3>> = Vec::new();
+    // The light at each mesh's vertices and at its triangles' centroids; after a round only
+    // the rebuilt meshes are evaluated.
+    let mut values: Vec<Vec<glam::DVec3>> = vec![Vec::new(); meshes.len()];
+    let mut centroids: Vec<Vec<glam::DVec3>> = vec![Vec::new(); meshes.len()];
     let mut stale: Vec<usize> = (0..meshes.len()).collect();
     for _ in 0..rounds {
         let total = element_count(&meshes);
         if total * 20 >= budget * 19 {
             break;
         }
-        if values.is_empty() {
-            values = evaluate(&meshes);
-        } else if !stale.is_empty() {
-            let subset: Vec<ReceiverMesh> = stale.iter().map(|&mi| meshes[mi].clone()).collect();
-            for (&mi, v) in stale.iter().zip(evaluate(&subset)) {
-                values[mi] = v;
+        if !stale.is_empty() {
+            // One evaluation for both: each stale mesh's vertices, then a mesh of its centroids
+            // alone (no triangles: the points are inside the polygon).
+            let mut subset: Vec<ReceiverMesh> =
+                stale.iter().map(|&mi| meshes[mi].clone()).collect();
+            subset.extend(stale.iter().map(|&mi| centroid_points(&meshes[mi])));
+            let mut out = evaluate(&subset).into_iter();
+            for &mi in &stale {
+                values[mi] = out.next().unwrap_or_default();
+            }
+            for &mi in &stale {
+                centroids[mi] = out.next().unwrap_or_default();
             }
         }
         let peak = values.iter().flatten().map(lum).fold(0.0, f64::max);
         if peak <= 0.0 {
             break;
         }
-        // (variation, mesh, triangle), largest first; ties in a fixed order.
+        let mean_area = meshes.iter().map(ReceiverMesh::area).sum::<f64>() / total.max(1) as f64;
+        // (error, mesh, triangle), largest first; ties in a fixed order.
         let mut ranked: Vec<(f64, usize, usize)> = Vec::new();
         for (mi, (m, v)) in meshes.iter().zip(&values).enumerate() {
             for (ti, t) in m.triangles.iter().enumerate() {
                 let l = t.map(|i| lum(&v[i as usize]));
                 let variation = l.iter().fold(f64::MIN, |a, &b| a.max(b))
                     - l.iter().fold(f64::MAX, |a, &b| a.min(b));
-                if variation > LIGHT_TOLERANCE * peak {
-                    ranked.push((variation, mi, ti));
+                let p = t.map(|i| m.vertices[i as usize]);
+                let area = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs();
+                let missed = centroids[mi]
+                    .get(ti)
+                    .map_or(0.0, |c| (lum(c) - (l[0] + l[1] + l[2]) / 3.0).abs());
+                let error = variation.max(missed * (area / mean_area).max(1.0));
+                if error > LIGHT_TOLERANCE * peak {
+                    ranked.push((error, mi, ti));
                 }
             }
         }
@@ -1090,6 +1126,21 @@ where
         added = next_added;
     }
     (meshes, added)
+}
+
+/// A mesh of `m`'s triangle centroids as vertices, with no triangles (for evaluating the
+/// light there).
+fn centroid_points(m: &ReceiverMesh) -> ReceiverMesh {
+    ReceiverMesh {
+        polygon: m.polygon,
+        vertices: m
+            .triangles
+            .iter()
+            .map(|t| t.iter().map(|&i| m.vertices[i as usize]).sum::<DVec2>() / 3.0)
+            .collect(),
+        triangles: Vec::new(),
+        constraints: Vec::new(),
+    }
 }
 
 #[cfg(test)]
