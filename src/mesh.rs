@@ -548,8 +548,9 @@ pub const LIGHT_SHARE: f64 = 0.2;
 /// light on the whole mesh).
 pub const LIGHT_ROUNDS: usize = 3;
 
-/// Elements split by [`adaptive`] and by the discontinuity mesher's refinement when the light
-/// across them varies by more than this fraction of the brightest vertex.
+/// Elements split by [`adaptive`] and by the discontinuity mesher's refinement when their
+/// error (the light's spread over their vertices, or the light they miss between them: see
+/// `refine_by_light`) is more than this fraction of the brightest vertex.
 pub const LIGHT_TOLERANCE: f64 = 0.01;
 
 /// The direct light (W/m², linear RGB) at every vertex of a set of meshes.
@@ -955,9 +956,10 @@ fn inside_faces(
 /// The a-posteriori adaptive mesher, the classic alternative to discontinuity meshing (e.g.
 /// Cohen, Greenberg, Immel, Brock, "An efficient radiosity approach for realistic image
 /// synthesis", 1986): start from a uniform mesh of a quarter of the budget, solve, and split the
-/// elements across which the solution varies most (the longest edge at its midpoint), then solve
-/// and split again, until the budget is reached or no element varies by more than `tolerance`
-/// of the brightest vertex. `evaluate` gives the values (irradiance) at every mesh's vertices.
+/// elements across which the solution varies most, or whose centroid it misses most (the
+/// longest edge at its midpoint; the error of `refine_by_light`), then solve and split again,
+/// until the budget is reached or no element's error is over [`LIGHT_TOLERANCE`] of the
+/// brightest vertex. `evaluate` gives the values (irradiance) at every mesh's vertices.
 pub fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) -> Vec<ReceiverMesh> {
     let start = uniform(scene, (budget / 4).max(1));
     refine_by_light(
