@@ -553,6 +553,14 @@ pub const LIGHT_ROUNDS: usize = 3;
 /// `refine_by_light`) is more than this fraction of the brightest vertex.
 pub const LIGHT_TOLERANCE: f64 = 0.01;
 
+/// The light-driven refinement looks for light missed between an element's vertices in the
+/// elements larger than this fraction of the average element: in smaller ones the vertices
+/// sample the light finely enough. On interior-20 and a two-room house this found the same
+/// meshes as looking in every element, and the extra direct light costs 0.12 s of mesh stage on
+/// bevy_DepthOfFieldExample (2048 emitters) instead of 0.95 s; above the average element
+/// (1.0), the two-room house at 2 000 elements showed 92% of its lamps' light instead of 96%.
+pub const MISSED_AREA: f64 = 0.5;
+
 /// The direct light (W/m², linear RGB) at every vertex of a set of meshes.
 pub type Evaluate<'a> = dyn Fn(&[ReceiverMesh]) -> Vec<Vec<glam::DVec3>> + 'a;
 
@@ -1000,7 +1008,8 @@ pub fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) -> Vec<Re
 /// * the *variation*: the spread of the light over its three vertices (the classic rule, Cohen
 ///   et al. 1986), which finds shadow edges and steep falloff, and
 /// * the *missed* light: the exact light at its centroid minus the mean of its vertices (what
-///   linear interpolation shows there), times its area in average elements (at least one).
+///   linear interpolation shows there), times its area in average elements (at least one);
+///   looked for in the elements larger than [`MISSED_AREA`] of the average one.
 ///
 /// The first alone cannot see a peak between an element's vertices: a house's wall under a
 /// ceiling light is dark at the ceiling and at the floor and brightest in between, and with
@@ -1033,35 +1042,57 @@ where
     let mut added: Vec<Vec<DVec2>> = vec![Vec::new(); start.len()];
     // Elements one split adds, measured after each round.
     let mut per_split = 2.0;
-    // The light at each mesh's vertices and at its triangles' centroids; after a round only
-    // the rebuilt meshes are evaluated.
+    // The light at each mesh's vertices (after a round, only the rebuilt meshes are evaluated
+    // again) and at the centroids of its elements larger than MISSED_AREA of the round's
+    // average element (evaluated once per element: `None` until then).
     let mut values: Vec<Vec<glam::DVec3>> = vec![Vec::new(); meshes.len()];
-    let mut centroids: Vec<Vec<glam::DVec3>> = vec![Vec::new(); meshes.len()];
+    let mut centroids: Vec<Vec<Option<glam::DVec3>>> = vec![Vec::new(); meshes.len()];
     let mut stale: Vec<usize> = (0..meshes.len()).collect();
     for _ in 0..rounds {
         let total = element_count(&meshes);
         if total * 20 >= budget * 19 {
             break;
         }
-        if !stale.is_empty() {
-            // One evaluation for both: each stale mesh's vertices, then a mesh of its centroids
-            // alone (no triangles: the points are inside the polygon).
-            let mut subset: Vec<ReceiverMesh> =
-                stale.iter().map(|&mi| meshes[mi].clone()).collect();
-            subset.extend(stale.iter().map(|&mi| centroid_points(&meshes[mi])));
-            let mut out = evaluate(&subset).into_iter();
-            for &mi in &stale {
-                values[mi] = out.next().unwrap_or_default();
-            }
-            for &mi in &stale {
-                centroids[mi] = out.next().unwrap_or_default();
+        let mean_area = meshes.iter().map(ReceiverMesh::area).sum::<f64>() / total.max(1) as f64;
+        for &mi in &stale {
+            centroids[mi] = vec![None; meshes[mi].triangles.len()];
+        }
+        // Per mesh, the large elements whose centroid has no value yet.
+        let wanted: Vec<(usize, Vec<usize>)> = meshes
+            .iter()
+            .enumerate()
+            .filter_map(|(mi, m)| {
+                let ts: Vec<usize> = (0..m.triangles.len())
+                    .filter(|&ti| {
+                        centroids[mi][ti].is_none()
+                            && triangle_area_2d(m.triangles[ti].map(|i| m.vertices[i as usize]))
+                                > MISSED_AREA * mean_area
+                    })
+                    .collect();
+                (!ts.is_empty()).then_some((mi, ts))
+            })
+            .collect();
+        // One evaluation for both: the stale meshes' vertices, then per mesh a mesh of the
+        // wanted centroids alone (no triangles: the points are inside the polygon).
+        let mut subset: Vec<ReceiverMesh> = stale.iter().map(|&mi| meshes[mi].clone()).collect();
+        subset.extend(
+            wanted
+                .iter()
+                .map(|(mi, ts)| centroid_points(&meshes[*mi], ts)),
+        );
+        let mut out = evaluate(&subset).into_iter();
+        for &mi in &stale {
+            values[mi] = out.next().unwrap_or_default();
+        }
+        for (mi, ts) in &wanted {
+            for (&ti, h) in ts.iter().zip(out.next().unwrap_or_default()) {
+                centroids[*mi][ti] = Some(h);
             }
         }
         let peak = values.iter().flatten().map(lum).fold(0.0, f64::max);
         if peak <= 0.0 {
             break;
         }
-        let mean_area = meshes.iter().map(ReceiverMesh::area).sum::<f64>() / total.max(1) as f64;
         // (error, mesh, triangle), largest first; ties in a fixed order.
         let mut ranked: Vec<(f64, usize, usize)> = Vec::new();
         for (mi, (m, v)) in meshes.iter().zip(&values).enumerate() {
@@ -1069,12 +1100,14 @@ where
                 let l = t.map(|i| lum(&v[i as usize]));
                 let variation = l.iter().fold(f64::MIN, |a, &b| a.max(b))
                     - l.iter().fold(f64::MAX, |a, &b| a.min(b));
-                let p = t.map(|i| m.vertices[i as usize]);
-                let area = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs();
-                let missed = centroids[mi]
-                    .get(ti)
-                    .map_or(0.0, |c| (lum(c) - (l[0] + l[1] + l[2]) / 3.0).abs());
-                let error = variation.max(missed * (area / mean_area).max(1.0));
+                let missed = match centroids[mi].get(ti) {
+                    Some(Some(c)) => {
+                        let area = triangle_area_2d(t.map(|i| m.vertices[i as usize]));
+                        (lum(c) - (l[0] + l[1] + l[2]) / 3.0).abs() * (area / mean_area).max(1.0)
+                    }
+                    _ => 0.0,
+                };
+                let error = variation.max(missed);
                 if error > LIGHT_TOLERANCE * peak {
                     ranked.push((error, mi, ti));
                 }
@@ -1130,19 +1163,29 @@ where
     (meshes, added)
 }
 
-/// A mesh of `m`'s triangle centroids as vertices, with no triangles (for evaluating the
-/// light there).
-fn centroid_points(m: &ReceiverMesh) -> ReceiverMesh {
+/// A mesh of the centroids of `m`'s `triangles` as vertices, with no triangles (for
+/// evaluating the light there).
+fn centroid_points(m: &ReceiverMesh, triangles: &[usize]) -> ReceiverMesh {
     ReceiverMesh {
         polygon: m.polygon,
-        vertices: m
-            .triangles
+        vertices: triangles
             .iter()
-            .map(|t| t.iter().map(|&i| m.vertices[i as usize]).sum::<DVec2>() / 3.0)
+            .map(|&ti| {
+                m.triangles[ti]
+                    .iter()
+                    .map(|&i| m.vertices[i as usize])
+                    .sum::<DVec2>()
+                    / 3.0
+            })
             .collect(),
         triangles: Vec::new(),
         constraints: Vec::new(),
     }
+}
+
+/// The area of a triangle in the plane (scene units²).
+fn triangle_area_2d(p: [DVec2; 3]) -> f64 {
+    0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs()
 }
 
 #[cfg(test)]
