@@ -1065,8 +1065,7 @@ where
                 let ts: Vec<usize> = (0..m.triangles.len())
                     .filter(|&ti| {
                         centroids[mi][ti].is_none()
-                            && triangle_area_2d(m.triangles[ti].map(|i| m.vertices[i as usize]))
-                                > MISSED_AREA * mean_area
+                            && tri_area(m, &m.triangles[ti]) > MISSED_AREA * mean_area
                     })
                     .collect();
                 (!ts.is_empty()).then_some((mi, ts))
@@ -1102,8 +1101,8 @@ where
                     - l.iter().fold(f64::MAX, |a, &b| a.min(b));
                 let missed = match centroids[mi].get(ti) {
                     Some(Some(c)) => {
-                        let area = triangle_area_2d(t.map(|i| m.vertices[i as usize]));
-                        (lum(c) - (l[0] + l[1] + l[2]) / 3.0).abs() * (area / mean_area).max(1.0)
+                        let weight = (tri_area(m, t) / mean_area).max(1.0);
+                        (lum(c) - (l[0] + l[1] + l[2]) / 3.0).abs() * weight
                     }
                     _ => 0.0,
                 };
@@ -1181,11 +1180,6 @@ fn centroid_points(m: &ReceiverMesh, triangles: &[usize]) -> ReceiverMesh {
         triangles: Vec::new(),
         constraints: Vec::new(),
     }
-}
-
-/// The area of a triangle in the plane (scene units²).
-fn triangle_area_2d(p: [DVec2; 3]) -> f64 {
-    0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs()
 }
 
 #[cfg(test)]
