@@ -1088,7 +1088,14 @@ where
                 centroids[*mi][ti] = Some(h);
             }
         }
-        let peak = values.iter().flatten().map(lum).fold(0.0, f64::max);
+        // The brightest point seen, vertex or centroid: a pool of light may lie between dark
+        // vertices only.
+        let peak = values
+            .iter()
+            .flatten()
+            .chain(centroids.iter().flatten().flatten())
+            .map(lum)
+            .fold(0.0, f64::max);
         if peak <= 0.0 {
             break;
         }
@@ -1220,6 +1227,66 @@ mod tests {
             "{n} triangles for a budget of 500"
         );
         assert!(m.triangles.iter().all(|t| tri_area(m, t) > 0.0));
+    }
+
+    /// A pool of light (a paraboloid cap of radius 1.2, zero outside) in the middle of a 4 x 4
+    /// floor whose two triangles' corners are all dark: the spread over the vertices sees
+    /// nothing, the light missed at the centroids finds the pool, and the refined mesh shows
+    /// its light (`pi r² / 2` exactly) to within 5% (measured 1.6% at 400 elements).
+    #[test]
+    fn light_between_dark_vertices_is_found_and_refined() {
+        let scene = floor_scene(
+            vec![
+                DVec3::new(0.0, 0.0, 0.0),
+                DVec3::new(4.0, 0.0, 0.0),
+                DVec3::new(4.0, 0.0, -4.0),
+                DVec3::new(0.0, 0.0, -4.0),
+            ],
+            vec![0, 1, 2, 0, 2, 3],
+        );
+        let polygon = &scene.polygons[0];
+        let start = vec![triangulate_points(0, polygon, &[])];
+        assert_eq!(start[0].triangles.len(), 2);
+        let centre = polygon.frame.plane_from_world(DVec3::new(2.0, 0.0, -2.0));
+        let (r, peak) = (1.2, 1.0);
+        let light = |v: DVec2| peak * (1.0 - (v - centre).length_squared() / (r * r)).max(0.0);
+        let evaluate = |meshes: &[ReceiverMesh]| -> Vec<Vec<DVec3>> {
+            meshes
+                .iter()
+                .map(|m| m.vertices.iter().map(|&v| DVec3::splat(light(v))).collect())
+                .collect()
+        };
+        let (meshes, added) = refine_by_light(
+            &start,
+            400,
+            8,
+            &evaluate,
+            |t| (t[0] + t[1] + t[2]) / 3.0,
+            |mi, points| {
+                let mut all = start[mi].vertices.clone();
+                all.extend(points);
+                triangulate_points(0, polygon, &all)
+            },
+        );
+        assert!(!added[0].is_empty(), "no split");
+        let m = &meshes[0];
+        let shown: f64 = m
+            .triangles
+            .iter()
+            .map(|t| {
+                tri_area(m, t)
+                    * t.iter()
+                        .map(|&i| light(m.vertices[i as usize]))
+                        .sum::<f64>()
+                    / 3.0
+            })
+            .sum();
+        let exact = std::f64::consts::PI * r * r / 2.0 * peak;
+        assert!(
+            (shown / exact - 1.0).abs() < 0.05,
+            "shown {shown:.4} of {exact:.4} with {} elements",
+            m.triangles.len()
+        );
     }
 
     /// A 40 x 1 board on a 100 x 100 ground: the board is larger than the coarsest element (64
