@@ -712,13 +712,11 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 /// The discontinuity mesher: each polygon's discontinuity `segments` as constraints, then the
 /// same refinement as [`uniform`], at most `budget` (1 + [`BUDGET_SLACK`]) triangles in all.
 ///
-/// Discontinuities take the budget first, up to a share: when the coarsest meshing with every
-/// wedge piece costs more than [`DM_SHARE`] of what the meshing without them
-/// ([`geometry_floor`]; `known_floor` when the caller already counted it at this budget)
-/// leaves of the budget, the weakest pieces (lowest significance; D0 lines are always kept)
-/// are dropped until it costs at most that, so that the rest still refines the surfaces
-/// between the lines. (Until this was also applied to lines that fit within the budget,
-/// box-grid-40's lines took all of it: no element was left for the light-driven rounds.)
+/// Discontinuities take the budget first: when every wedge piece does not fit even with the
+/// coarsest refinement, the weakest pieces (lowest significance; D0 lines are always kept)
+/// are dropped until the coarsest meshing costs at most [`DM_SHARE`] of what the meshing
+/// without them ([`geometry_floor`]; `known_floor` when the caller already counted it at
+/// this budget) leaves of the budget, so that the rest still refines the surfaces between the lines.
 ///
 /// With `refine` (the direct light at the vertices of a set of meshes), [`LIGHT_SHARE`] of what
 /// the coarsest meshing with the lines leaves of the budget is kept back, and goes where the light
@@ -795,25 +793,17 @@ pub fn discontinuity(
         }))
     };
     let mut keep = ranked.len();
+    let most = (budget as f64 * (1.0 + BUDGET_SLACK)) as usize;
     let all = floor(keep);
     // The coarsest meshing's count with the pieces kept.
     let mut least = all;
-    // The wedges may take DM_SHARE of what the meshing without them leaves of the budget, so
-    // that the rest refines between the lines (the light-driven rounds too). That share is at
-    // least DM_SHARE of the budget: below it the geometry need not be meshed to know.
-    let share = if all as f64 > budget as f64 * DM_SHARE {
-        let none = known_floor.unwrap_or_else(|| geometry_floor(scene, segments, budget));
-        Some((
-            none,
-            none + ((budget.saturating_sub(none)) as f64 * DM_SHARE) as usize,
-        ))
-    } else {
-        None
-    };
-    if let Some((none, share)) = share.filter(|&(_, share)| all > share) {
-        // Search for the most pieces that fit, interpolating (the count grows about linearly
+    if all > most {
+        // The wedges may take DM_SHARE of what the meshing without them leaves of the budget:
+        // search for the most pieces that fit, interpolating (the count grows about linearly
         // in the pieces kept) or bisecting between the most known to fit and the fewest known
         // not to.
+        let none = known_floor.unwrap_or_else(|| geometry_floor(scene, segments, budget));
+        let share = none + ((budget.saturating_sub(none)) as f64 * DM_SHARE) as usize;
         let (mut fits, mut fails) = ((0, none), (ranked.len(), all));
         for _ in 0..BUDGET_PASSES {
             if none > share || fails.0 - fits.0 <= (ranked.len() / 100).max(1) {
@@ -1297,65 +1287,6 @@ mod tests {
             "shown {shown:.4} of {exact:.4} with {} elements",
             m.triangles.len()
         );
-    }
-
-    /// Wedge lines that all fit at the coarsest cap but take more than [`DM_SHARE`] of what the
-    /// geometry leaves of the budget: the weakest are dropped until they take at most that, so
-    /// the rest of the budget refines between them (before, every line was kept and the
-    /// coarsest meshing with them left nothing: on box-grid-40 the RMSE against the reference
-    /// went from 27.8% to 23.2% of the lit mean over all texels, better in every region).
-    #[test]
-    fn lines_that_fit_leave_the_refinement_its_share() {
-        let p = |x: f64, z: f64| DVec3::new(x, 0.0, -z);
-        let scene = floor_scene(
-            vec![p(0., 0.), p(100., 0.), p(100., 100.), p(0., 100.)],
-            vec![0, 1, 2, 0, 2, 3],
-        );
-        let frame = &scene.polygons[0].frame;
-        let lines = 20;
-        let mut segments = Vec::new();
-        for k in 0..lines {
-            let t = 100.0 * (k as f64 + 0.5) / lines as f64;
-            for (a, b) in [(p(t, 0.), p(t, 100.)), (p(0., t), p(100., t))] {
-                segments.push(Segment {
-                    a: frame.plane_from_world(a),
-                    b: frame.plane_from_world(b),
-                    kind: Kind::Ve,
-                    event: k,
-                    significance: 1.0 + k as f64,
-                });
-            }
-        }
-        let budget = 2_000;
-        let none = geometry_floor(&scene, &[], budget);
-        let share = none + ((budget - none) as f64 * DM_SHARE) as usize;
-        let (snap, clearance) = line_spacing(&scene, budget);
-        let with = |segments: &[Segment]| {
-            let coarsest = element_area(&scene, budget) * COARSEST;
-            element_count(&mesh_at(&scene, coarsest, &|i, area, cap| {
-                let lines = Lines {
-                    segments,
-                    snap,
-                    clearance,
-                    points: &[],
-                };
-                triangulate_with(i, &scene.polygons[i], lines, area, cap).0
-            }))
-        };
-        // Every line fits within the budget at the coarsest cap, but takes more than its share.
-        let all = with(&segments);
-        let most = (budget as f64 * (1.0 + BUDGET_SLACK)) as usize;
-        assert!(share < all && all <= most, "share {share}, all {all}");
-        let (meshes, _, dropped) = discontinuity(&scene, &[segments.clone()], budget, None, None);
-        assert!(dropped > 0);
-        // The strongest lines are kept, and take at most their share.
-        segments.sort_by(|a, b| b.significance.total_cmp(&a.significance));
-        let kept = with(&segments[..segments.len() - dropped]);
-        assert!(
-            kept <= share,
-            "kept lines take {kept} of a share of {share}"
-        );
-        assert!(element_count(&meshes) <= most);
     }
 
     /// A 40 x 1 board on a 100 x 100 ground: the board is larger than the coarsest element (64
