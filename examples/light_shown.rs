@@ -21,12 +21,14 @@ fn main() -> anyhow::Result<()> {
     let path = args
         .next()
         .ok_or_else(|| anyhow::anyhow!("usage: light_shown SCENE.glb [BUDGET] [ROWS]"))?;
-    let mut options = BakeOptions::default();
-    options.budget = args
-        .next()
-        .filter(|s| s != "-")
-        .map(|s| s.parse())
-        .transpose()?;
+    let options = BakeOptions {
+        budget: args
+            .next()
+            .filter(|s| s != "-")
+            .map(|s| s.parse())
+            .transpose()?,
+        ..BakeOptions::default()
+    };
     let rows: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(10);
     let gltf = load::read(Path::new(&path))?;
     let bake = penumbra::bake(&gltf, &options, &|_, _, _| {})?;
