@@ -1206,17 +1206,22 @@ mod tests {
         scene
     }
 
-    #[test]
-    fn uniform_mesh_covers_the_polygon_and_meets_the_budget() {
-        let scene = floor_scene(
+    /// A `w` x `d` floor at y = 0 (two triangles).
+    fn rectangle(w: f64, d: f64) -> Scene {
+        floor_scene(
             vec![
                 DVec3::new(0.0, 0.0, 0.0),
-                DVec3::new(2.0, 0.0, 0.0),
-                DVec3::new(2.0, 0.0, -1.0),
-                DVec3::new(0.0, 0.0, -1.0),
+                DVec3::new(w, 0.0, 0.0),
+                DVec3::new(w, 0.0, -d),
+                DVec3::new(0.0, 0.0, -d),
             ],
             vec![0, 1, 2, 0, 2, 3],
-        );
+        )
+    }
+
+    #[test]
+    fn uniform_mesh_covers_the_polygon_and_meets_the_budget() {
+        let scene = rectangle(2.0, 1.0);
         let meshes = uniform(&scene, 500);
         assert_eq!(meshes.len(), 1);
         let m = &meshes[0];
@@ -1235,15 +1240,7 @@ mod tests {
     /// its light (`pi r² / 2` exactly) to within 5% (measured 1.6% at 400 elements).
     #[test]
     fn light_between_dark_vertices_is_found_and_refined() {
-        let scene = floor_scene(
-            vec![
-                DVec3::new(0.0, 0.0, 0.0),
-                DVec3::new(4.0, 0.0, 0.0),
-                DVec3::new(4.0, 0.0, -4.0),
-                DVec3::new(0.0, 0.0, -4.0),
-            ],
-            vec![0, 1, 2, 0, 2, 3],
-        );
+        let scene = rectangle(4.0, 4.0);
         let polygon = &scene.polygons[0];
         let start = vec![triangulate_points(0, polygon, &[])];
         assert_eq!(start[0].triangles.len(), 2);
