@@ -28,7 +28,7 @@ pub enum Mesher {
     #[default]
     Discontinuity,
     /// A-posteriori adaptive meshing: uniform start, split where the solved direct light varies
-    /// most across an element, repeat to the budget.
+    /// most across an element or is missed most between its vertices, repeat to the budget.
     Adaptive,
 }
 
@@ -720,7 +720,8 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 ///
 /// With `refine` (the direct light at the vertices of a set of meshes), [`LIGHT_SHARE`] of what
 /// the coarsest meshing with the lines leaves of the budget is kept back, and goes where the light
-/// varies most across an element ([`LIGHT_ROUNDS`] rounds of the adaptive mesher's rule,
+/// varies most across an element or is missed most between its vertices ([`LIGHT_ROUNDS`]
+/// rounds of the adaptive mesher's rule,
 /// splitting at the centroid so that no split lands on a line). Returns the meshes, what became
 /// of the segments passed to the triangulation and the wedge pieces dropped for the budget.
 pub fn discontinuity(
