@@ -329,11 +329,22 @@
 //!   against 6.5%); a 13 000 triangle town's solve 1.7-2.5x faster (1.4-1.7 s against
 //!   2.8-3.7 s; 1.7x with hidden links split in doubt, 1.68x after the vertex fit, 1.83x
 //!   with 3.1 M rays instead of 4.0 M: 1.73 s against 3.16 s; 1.97x now, 0.73 s against
-//!   1.43 s, 3.0 M rays). Three in four of its links end at a wall element, and nearly all
-//!   start at a polygon or a piece of the ground, whose radiosity steps at the shadow lines;
-//!   the clusters are not what costs (with the source-uniformity test off for cluster
-//!   sources, 406 000 links instead of 413 000, the same time). Earlier, town-25k: indirect
-//!   2.7% against 6.0%.
+//!   1.43 s, 3.0 M rays). Where its 414 000 links go (a census of the bake's links): 56% end
+//!   on walls and 40% on up-facing surfaces (ground, roofs), 4% on clusters; 60% end on
+//!   receivers in shadow (direct light under 0.2 of the mean), where all the light is this
+//!   indirect light and the source limit is tightest; 98% start at a surface node or an
+//!   element, 2% at a cluster. So the clusters are not what costs: the links between
+//!   surfaces are (with the source-uniformity test off for cluster sources, 406 000 links
+//!   instead of 413 000, the same time). Of the splits, the source-uniformity test asks for
+//!   two in three of those between surfaces (the walls' and the ground's radiosity steps at
+//!   the shadow lines), the power bound of cluster ends for most of the others. Tried, to
+//!   reach 5x: bounding the source test by how much the point kernel varies over the source's
+//!   bounding sphere (4% fewer links); testing the source's spread about its fitted gradient
+//!   (which the gather applies) instead of about its mean (13% fewer links, 4% less solve
+//!   time, but the Cornell box's lit region 0.63% and umbra 0.34% of the lit mean, worse than
+//!   progressive's 0.61% and 0.24%); loosening every limit at receivers brighter than the
+//!   mean direct light, by that ratio (8% fewer links). None is in. Earlier, town-25k:
+//!   indirect 2.7% against 6.0%.
 //! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
 //!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
 //!   progressive: over 600 s).
