@@ -573,8 +573,8 @@ pub fn element_count(meshes: &[ReceiverMesh]) -> usize {
 }
 
 /// Meshes every polygon with `mesh_one(polygon, max_area, vertex_cap)` at one area cap (scene
-/// units²), chosen so that the whole scene has at most `budget` (1 + [`BUDGET_SLACK`])
-/// triangles and not many fewer.
+/// units²), chosen so that the whole scene has at most `most` triangles (usually
+/// [`with_slack`]`(budget)`) and not many fewer than `budget`.
 ///
 /// The count falls with the cap, but not as `1/cap`: constraints and the angle bound grade the
 /// mesh, so part of it does not scale. The search starts at area/budget and brackets the
@@ -582,12 +582,12 @@ pub fn element_count(meshes: &[ReceiverMesh]) -> usize {
 /// log(cap), log(count) within the bracket (bisecting when that stalls). The cap stays within
 /// [`COARSEST`] times area/budget; when even that gives too many, that meshing is returned and
 /// the caller decides what to drop.
-fn to_budget<F>(scene: &Scene, budget: usize, mesh_one: F) -> (Vec<ReceiverMesh>, f64)
+fn to_budget<F>(scene: &Scene, budget: usize, most: usize, mesh_one: F) -> (Vec<ReceiverMesh>, f64)
 where
     F: Fn(usize, f64, usize) -> ReceiverMesh + Sync,
 {
     let budget = budget.max(1) as f64;
-    let most = budget * (1.0 + BUDGET_SLACK);
+    let most = most as f64;
     let mesh_all = |max_area: f64| -> (Vec<ReceiverMesh>, f64) {
         let meshes = mesh_at(scene, max_area, &mesh_one);
         let count = element_count(&meshes) as f64;
@@ -615,8 +615,9 @@ where
         } else {
             under = Some(last);
         }
-        // Aim a little under the budget: the interpolation is not exact.
-        let target = budget * (1.0 - BUDGET_SLACK / 2.0);
+        // Aim a little under the budget (and under `most`, when that is the tighter bound):
+        // the interpolation is not exact.
+        let target = (budget * (1.0 - BUDGET_SLACK / 2.0)).min(most * (1.0 - BUDGET_SLACK / 4.0));
         let next = match (over, under) {
             (Some((c0, n0)), Some((c1, n1))) => {
                 let slope = (n1.max(1.0) / n0).ln() / (c1 / c0).ln();
@@ -675,6 +676,18 @@ where
     (best, best_cap)
 }
 
+/// The element count at which the light-driven rounds stop (95% of `budget`): a round adds
+/// what the budget has room for, and the last few percent are not worth evaluating the light
+/// on the whole scene again.
+fn rounds_stop(budget: usize) -> usize {
+    budget.saturating_mul(19).div_ceil(20)
+}
+
+/// The most elements a meshing for `budget` may have: `budget` (1 + [`BUDGET_SLACK`]).
+fn with_slack(budget: usize) -> usize {
+    (budget as f64 * (1.0 + BUDGET_SLACK)) as usize
+}
+
 /// The average element area (scene units²) at `budget` elements over the whole scene; the budget
 /// search's cap stays within [`COARSEST`] times it.
 fn element_area(scene: &Scene, budget: usize) -> f64 {
@@ -703,7 +716,7 @@ fn vertex_cap(p: &Polygon, max_area: f64) -> usize {
 
 /// The uniform mesher: every polygon refined to one area cap, about `budget` triangles in all.
 pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
-    to_budget(scene, budget, |i, area, cap| {
+    to_budget(scene, budget, with_slack(budget), |i, area, cap| {
         triangulate(i, &scene.polygons[i], area, cap)
     })
     .0
@@ -722,7 +735,8 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 /// the coarsest meshing with the lines leaves of the budget is kept back, and goes where the light
 /// varies most across an element or is missed most between its vertices ([`LIGHT_ROUNDS`]
 /// rounds of the adaptive mesher's rule,
-/// splitting at the centroid so that no split lands on a line). Returns the meshes, what became
+/// splitting at the centroid so that no split lands on a line). The uniform step before them
+/// stays under where the rounds stop ([`rounds_stop`]) whenever the lines leave room there. Returns the meshes, what became
 /// of the segments passed to the triangulation and the wedge pieces dropped for the budget.
 pub fn discontinuity(
     scene: &Scene,
@@ -830,9 +844,20 @@ pub fn discontinuity(
         Some(_) => least + (budget.saturating_sub(least) as f64 * (1.0 - LIGHT_SHARE)) as usize,
         None => budget,
     };
-    let (mut meshes, cap) = to_budget(scene, first, |i, area, vertices| {
-        mesh_one(&selected, i, &[], area, vertices)
-    });
+    let uniform_step = |most: usize| {
+        to_budget(scene, first, most, |i, area, vertices| {
+            mesh_one(&selected, i, &[], area, vertices)
+        })
+    };
+    let (mut meshes, mut cap) = uniform_step(with_slack(first));
+    // The light rounds stop at `rounds_stop`: where the lines leave room under it but the
+    // uniform step's slack carried it past, the step is redone under it, so that the rounds
+    // still run (interior-20 at 100 000 elements: the lines' coarsest meshing is 92 840, the
+    // step landed at 101 285, and the bake showed less light than at 70 000).
+    let stop = rounds_stop(budget);
+    if refine.is_some() && least < stop && element_count(&meshes) >= stop {
+        (meshes, cap) = uniform_step(stop - 1);
+    }
     if let Some(evaluate) = refine {
         let start = meshes;
         let added;
@@ -851,7 +876,7 @@ pub fn discontinuity(
         // Where the light varies little, the rounds stop short of the budget: the rest refines
         // uniformly, keeping the points added.
         if element_count(&meshes) * 10 < budget * 9 {
-            (meshes, _) = to_budget(scene, budget, |i, area, vertices| {
+            (meshes, _) = to_budget(scene, budget, with_slack(budget), |i, area, vertices| {
                 mesh_one(&selected, i, &added[i], area, vertices + 4 * added[i].len())
             });
         }
@@ -1001,8 +1026,8 @@ pub fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) -> Vec<Re
 /// elements whose error exceeds [`LIGHT_TOLERANCE`] of the brightest vertex, and add a vertex
 /// (`split` of the triangle's corners) to the worst ones, as many as the budget allows;
 /// `rebuild(mesh, points)` remeshes `start[mesh]` with all the points added to it so far.
-/// Stops at 95% of the budget; a round that would overshoot it by more than [`BUDGET_SLACK`]
-/// is undone. Returns the meshes and the points added to each.
+/// Stops at [`rounds_stop`] (95% of the budget); a round that would overshoot it by more than
+/// [`BUDGET_SLACK`] is undone. Returns the meshes and the points added to each.
 ///
 /// An element's error is the larger of
 ///
@@ -1051,7 +1076,7 @@ where
     let mut stale: Vec<usize> = (0..meshes.len()).collect();
     for _ in 0..rounds {
         let total = element_count(&meshes);
-        if total * 20 >= budget * 19 {
+        if total >= rounds_stop(budget) {
             break;
         }
         let mean_area = meshes.iter().map(ReceiverMesh::area).sum::<f64>() / total.max(1) as f64;
