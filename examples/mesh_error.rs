@@ -6,7 +6,10 @@
 //! midpoints). Prints per mesher the elements, the mesh stage's seconds, the RMSE (area-weighted
 //! over the points) as a fraction of the mean exact light over the lit points (those with any
 //! direct light), the same over the lit points alone, and the light shown over the exact light
-//! (the same points): `cargo run --release --example mesh_error -- scene.glb [BUDGET]`.
+//! (the same points); then the same split between up-facing surfaces (ground, floors, roofs)
+//! and the others, and the largest polygon's element sizes (how many slivers it holds):
+//! `cargo run --release --example mesh_error -- scene.glb [BUDGET]` (`ONLY=discontinuity`: that
+//! mesher alone).
 //!
 //! It isolates the mesh: the vertices' values are exact, so every error it measures is what
 //! linear interpolation between them cannot show (a shadow edge across an element, a pool of
@@ -39,7 +42,11 @@ fn main() -> anyhow::Result<()> {
     let budget: Option<usize> = args.next().map(|s| s.parse()).transpose()?;
     let gltf = load::read(Path::new(&path))?;
     println!("{path}");
-    for mesher in [Mesher::Uniform, Mesher::Discontinuity, Mesher::Adaptive] {
+    let meshers: Vec<Mesher> = match std::env::var("ONLY").as_deref() {
+        Ok("discontinuity") => vec![Mesher::Discontinuity],
+        _ => vec![Mesher::Uniform, Mesher::Discontinuity, Mesher::Adaptive],
+    };
+    for mesher in meshers {
         let mut options = BakeOptions {
             budget,
             mesher,
@@ -53,8 +60,11 @@ fn main() -> anyhow::Result<()> {
         let mean = |c: glam::DVec3| c.element_sum() / 3.0;
         // (weight m², shown, exact) per point, W/m².
         let mut samples: Vec<(f64, f64, f64)> = Vec::new();
+        let mut by_class = [(0usize, 0.0f64, 0.0f64); 2];
         for (m, at_vertices) in bake.meshes.iter().zip(&bake.solution.direct) {
             let frame = &scene.polygons[m.polygon].frame;
+            let class = usize::from(frame.n.y > 0.9);
+            let first = samples.len();
             let mut points = Vec::new();
             let mut shown = Vec::new();
             for t in &m.triangles {
@@ -69,21 +79,70 @@ fn main() -> anyhow::Result<()> {
                         m.polygon,
                         &vis,
                     ));
-                    shown.push((a / POINTS.len() as f64, v[0] * w[0] + v[1] * w[1] + v[2] * w[2]));
+                    shown.push((
+                        a / POINTS.len() as f64,
+                        v[0] * w[0] + v[1] * w[1] + v[2] * w[2],
+                    ));
                 }
             }
             let exact = direct.irradiance_points(&points);
-            samples.extend(shown.iter().zip(&exact).map(|(&(w, s), &e)| (w, s, mean(e))));
+            samples.extend(
+                shown
+                    .iter()
+                    .zip(&exact)
+                    .map(|(&(w, s), &e)| (w, s, mean(e))),
+            );
+            by_class[class].0 += m.triangles.len();
+            for s in &samples[first..] {
+                by_class[class].1 += s.0 * (s.1 - s.2).powi(2);
+                by_class[class].2 += s.0;
+            }
+        }
+        // The largest polygon's element areas (usually the ground): how many are slivers, far
+        // below the typical element, and how much of its area they cover.
+        if let Some(m) = bake
+            .meshes
+            .iter()
+            .max_by(|a, b| a.area().total_cmp(&b.area()))
+        {
+            let mut areas: Vec<f64> = m
+                .triangles
+                .iter()
+                .map(|t| {
+                    let p = t.map(|i| m.vertices[i as usize]);
+                    0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs()
+                })
+                .collect();
+            areas.sort_by(f64::total_cmp);
+            let q = |f: f64| areas[((areas.len() - 1) as f64 * f) as usize];
+            let total: f64 = areas.iter().sum();
+            let tiny: Vec<f64> = areas
+                .iter()
+                .copied()
+                .filter(|&a| a < 0.1 * q(0.9))
+                .collect();
+            println!(
+                "    largest polygon {}: {total:.3} units², {} elements, areas at the 10th/50th/90th \
+                 percentile {:.3}/{:.3}/{:.3}; {} under a tenth of the 90th, on {:.1}% of its area",
+                m.polygon,
+                areas.len(),
+                q(0.1),
+                q(0.5),
+                q(0.9),
+                tiny.len(),
+                100.0 * tiny.iter().sum::<f64>() / total
+            );
         }
         let lit: Vec<&(f64, f64, f64)> = samples.iter().filter(|s| s.2 > 0.0).collect();
-        let sum = |it: &mut dyn Iterator<Item = &(f64, f64, f64)>, f: &dyn Fn(&(f64, f64, f64)) -> f64| {
-            it.map(f).sum::<f64>()
-        };
+        let sum =
+            |it: &mut dyn Iterator<Item = &(f64, f64, f64)>,
+             f: &dyn Fn(&(f64, f64, f64)) -> f64| { it.map(f).sum::<f64>() };
         let lit_area = sum(&mut lit.iter().copied(), &|s| s.0);
         let lit_mean = sum(&mut lit.iter().copied(), &|s| s.0 * s.2) / lit_area;
         let area = sum(&mut samples.iter(), &|s| s.0);
         let rmse = (sum(&mut samples.iter(), &|s| s.0 * (s.1 - s.2).powi(2)) / area).sqrt();
-        let rmse_lit = (sum(&mut lit.iter().copied(), &|s| s.0 * (s.1 - s.2).powi(2)) / lit_area).sqrt();
+        let rmse_lit =
+            (sum(&mut lit.iter().copied(), &|s| s.0 * (s.1 - s.2).powi(2)) / lit_area).sqrt();
         let shown = sum(&mut samples.iter(), &|s| s.0 * s.1);
         let exact = sum(&mut samples.iter(), &|s| s.0 * s.2);
         println!(
@@ -94,6 +153,16 @@ fn main() -> anyhow::Result<()> {
             100.0 * rmse_lit / lit_mean,
             shown / exact
         );
+        for (name, (n, e2, a)) in ["other surfaces", "up-facing surfaces"]
+            .iter()
+            .zip(by_class)
+        {
+            println!(
+                "    {name}: {n} elements, {a:.3} units², {:.1}% of the squared error, RMSE there {:.2}%",
+                100.0 * e2 / (rmse * rmse * area),
+                100.0 * (e2 / a).sqrt() / lit_mean
+            );
+        }
     }
     Ok(())
 }
