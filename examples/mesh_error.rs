@@ -117,6 +117,17 @@ fn main() -> anyhow::Result<()> {
             areas.sort_by(f64::total_cmp);
             let q = |f: f64| areas[((areas.len() - 1) as f64 * f) as usize];
             let total: f64 = areas.iter().sum();
+            // Its elements buried under other geometry (the ground under a building): never
+            // seen, so any there are spent for nothing.
+            let frame = &scene.polygons[m.polygon].frame;
+            let buried = m
+                .triangles
+                .iter()
+                .filter(|t| {
+                    let p = t.map(|i| m.vertices[i as usize]);
+                    vis.buried(frame.world_from_plane((p[0] + p[1] + p[2]) / 3.0), frame.n)
+                })
+                .count();
             let tiny: Vec<f64> = areas
                 .iter()
                 .copied()
@@ -124,7 +135,8 @@ fn main() -> anyhow::Result<()> {
                 .collect();
             println!(
                 "    largest polygon {}: {total:.3} units², {} elements, areas at the 10th/50th/90th \
-                 percentile {:.3}/{:.3}/{:.3}; {} under a tenth of the 90th, on {:.1}% of its area",
+                 percentile {:.3}/{:.3}/{:.3}; {} under a tenth of the 90th, on {:.1}% of its area; \
+                 {buried} buried",
                 m.polygon,
                 areas.len(),
                 q(0.1),
