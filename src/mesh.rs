@@ -736,8 +736,9 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 /// varies most across an element or is missed most between its vertices ([`LIGHT_ROUNDS`]
 /// rounds of the adaptive mesher's rule,
 /// splitting at the centroid so that no split lands on a line). The uniform step before them
-/// stays under where the rounds stop ([`rounds_stop`]) whenever the lines leave room there. Returns the meshes, what became
-/// of the segments passed to the triangulation and the wedge pieces dropped for the budget.
+/// stays under where the rounds stop ([`rounds_stop`]) whenever the lines leave room there.
+/// Returns the meshes, what became of the segments passed to the triangulation and the wedge
+/// pieces dropped for the budget.
 pub fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],

@@ -335,9 +335,9 @@
 //!   indirect light and the source limit is tightest; 98% start at a surface node or an
 //!   element, 2% at a cluster. So the clusters are not what costs: the links between
 //!   surfaces are (with the source-uniformity test off for cluster sources, 406 000 links
-//!   instead of 413 000, the same time). Of the splits, the source-uniformity test asks for
-//!   two in three of those between surfaces (the walls' and the ground's radiosity steps at
-//!   the shadow lines), the power bound of cluster ends for most of the others. Tried, to
+//!   instead of 413 000, the same time). Of the splits between surfaces, the source-uniformity
+//!   test asks for two in three (the walls' and the ground's radiosity steps at the shadow
+//!   lines); of those with a cluster end, the power bound asks for two in three. Tried, to
 //!   reach 5x: bounding the source test by how much the point kernel varies over the source's
 //!   bounding sphere (4% fewer links); testing the source's spread about its fitted gradient
 //!   (which the gather applies) instead of about its mean (13% fewer links, 4% less solve
