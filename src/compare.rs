@@ -325,6 +325,114 @@ pub fn mean_lit_irradiance(reference: &ReferenceMap, regions: &[Option<Region>])
         .unwrap_or(0.0)
 }
 
+/// Barycentric weights of the seven points per element where [`mesh_samples`] compares a
+/// mesh's direct light with the exact one: the centroid, the three points at (2/3, 1/6, 1/6)
+/// and the three edge midpoints.
+const MESH_POINTS: [[f64; 3]; 7] = [
+    [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0],
+    [2.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0],
+    [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0],
+    [1.0 / 6.0, 1.0 / 6.0, 2.0 / 3.0],
+    [0.5, 0.5, 0.0],
+    [0.0, 0.5, 0.5],
+    [0.5, 0.0, 0.5],
+];
+
+/// One point of a mesh where [`mesh_samples`] compared the light the lightmap shows with the
+/// exact direct light.
+#[derive(Clone, Copy, Debug)]
+pub struct MeshSample {
+    /// The receiver polygon.
+    pub polygon: usize,
+    /// The area it stands for (scene units²).
+    pub weight: f64,
+    /// What linear interpolation between the element's exact vertex values shows there (W/m²,
+    /// channel mean).
+    pub shown: f64,
+    /// The exact direct irradiance there (W/m², channel mean).
+    pub exact: f64,
+}
+
+/// How well a mesh shows the direct light, with no Monte Carlo reference: at seven points per
+/// element ([`MESH_POINTS`]), what the lightmap's linear interpolation of the exact vertex
+/// values of `bake.solution.direct` shows, against the exact direct light there (`direct`, the
+/// bake's own direct-light evaluator). Points buried under other geometry are left out (no one
+/// sees them, as the reference leaves out buried texels). It isolates the mesh: every error it
+/// measures is what interpolation between exact values cannot show (a shadow edge across an
+/// element, a pool of light between vertices).
+pub fn mesh_samples(bake: &Bake, vis: &Visibility, direct: &Direct<'_>) -> Vec<MeshSample> {
+    let mean = |c: DVec3| c.element_sum() / 3.0;
+    let mut samples = Vec::new();
+    for (m, at_vertices) in bake.meshes.iter().zip(&bake.solution.direct) {
+        let frame = &bake.scene.polygons[m.polygon].frame;
+        let mut points = Vec::new();
+        let mut shown = Vec::new();
+        for t in &m.triangles {
+            let p = t.map(|i| m.vertices[i as usize]);
+            let v = t.map(|i| mean(at_vertices[i as usize]));
+            let a = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs();
+            for w in MESH_POINTS {
+                let at = frame.world_from_plane(p[0] * w[0] + p[1] * w[1] + p[2] * w[2]);
+                if vis.buried(at, frame.n) {
+                    continue;
+                }
+                points.push(SurfacePoint::new(at, frame.n, m.polygon, vis));
+                shown.push((
+                    a / MESH_POINTS.len() as f64,
+                    v[0] * w[0] + v[1] * w[1] + v[2] * w[2],
+                ));
+            }
+        }
+        let exact = direct.irradiance_points(&points);
+        samples.extend(
+            shown
+                .iter()
+                .zip(&exact)
+                .map(|(&(weight, shown), &e)| MeshSample {
+                    polygon: m.polygon,
+                    weight,
+                    shown,
+                    exact: mean(e),
+                }),
+        );
+    }
+    samples
+}
+
+/// The error of a set of [`MeshSample`]s, as fractions of the mean exact light over the lit
+/// points (those with any direct light).
+#[derive(Clone, Copy, Debug)]
+pub struct MeshError {
+    /// Area-weighted RMSE over all points.
+    pub rmse: f64,
+    /// Area-weighted RMSE over the lit points.
+    pub rmse_lit: f64,
+    /// The light shown over the exact light, both integrated over the points.
+    pub shown_over_exact: f64,
+    /// The mean exact light over the lit points (W/m²).
+    pub lit_mean: f64,
+}
+
+/// The error of `samples` (see [`MeshError`]); `None` when no point is lit.
+pub fn mesh_error(samples: &[MeshSample]) -> Option<MeshError> {
+    let sum = |keep: &dyn Fn(&MeshSample) -> bool, f: &dyn Fn(&MeshSample) -> f64| {
+        samples.iter().filter(|s| keep(s)).map(f).sum::<f64>()
+    };
+    let (all, lit) = (|_: &MeshSample| true, |s: &MeshSample| s.exact > 0.0);
+    let lit_area = sum(&lit, &|s| s.weight);
+    let lit_mean = sum(&lit, &|s| s.weight * s.exact) / lit_area;
+    if lit_area <= 0.0 || lit_mean <= 0.0 {
+        return None;
+    }
+    let squared = |s: &MeshSample| s.weight * (s.shown - s.exact).powi(2);
+    Some(MeshError {
+        rmse: (sum(&all, &squared) / sum(&all, &|s| s.weight)).sqrt() / lit_mean,
+        rmse_lit: (sum(&lit, &squared) / lit_area).sqrt() / lit_mean,
+        shown_over_exact: sum(&all, &|s| s.weight * s.shown) / sum(&all, &|s| s.weight * s.exact),
+        lit_mean,
+    })
+}
+
 /// What `penumbra compare` is told.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct CompareOptions {
