@@ -61,6 +61,10 @@ pub struct Segment {
     /// Unoccluded irradiance of the wedge's light at the segment, relative to the brightest
     /// wedge piece of the scene (0..1); 1 for D0.
     pub significance: f64,
+    /// The area light and occluder feature (edge or vertex) of a wedge piece, hashed: the
+    /// pieces that bound one penumbra (the same occluder edge seen from different emitter
+    /// vertices) share it. 0 for D0 lines and punctual lights' lines, which bound none.
+    pub feature: u64,
 }
 
 /// Options of the discontinuity stage.
@@ -119,6 +123,39 @@ struct Wedge {
     generator: Generator,
     /// Polygons that never receive this wedge (the emitter and the occluder feature's own).
     skip: Vec<usize>,
+}
+
+impl Wedge {
+    /// [`Segment::feature`] of the wedge's pieces: FNV-1a over the light and the occluder
+    /// feature's coordinates (an edge's ends in a fixed order), never 0 for an area light.
+    fn feature(&self) -> u64 {
+        let Light::Area(light) = self.light else {
+            return 0;
+        };
+        let mut points = match self.generator {
+            Generator::VertexEdge { a, b, .. } => vec![a, b],
+            Generator::EdgeVertex { w, .. } => vec![w],
+            Generator::DirectionEdge { .. } => return 0,
+        };
+        points.sort_by(|p, q| {
+            p.to_array()
+                .partial_cmp(&q.to_array())
+                .unwrap_or(std::cmp::Ordering::Equal)
+        });
+        let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut eat = |x: u64| {
+            h ^= x;
+            h = h.wrapping_mul(0x0000_0100_0000_01b3);
+        };
+        eat(light as u64);
+        eat(points.len() as u64);
+        for p in points {
+            for c in p.to_array() {
+                eat(c.to_bits());
+            }
+        }
+        h.max(1)
+    }
 }
 
 #[derive(Clone, Copy, Debug)]
@@ -305,6 +342,7 @@ pub fn segments(
                 kind: Kind::D0,
                 event,
                 significance: 1.0,
+                feature: 0,
             });
             event += 1;
             stats.d0 += 1;
@@ -318,6 +356,7 @@ pub fn segments(
             kind: p.kind,
             event: p.event,
             significance: p.significance,
+            feature: p.feature,
         });
     }
     keep_most_significant(&mut out, options.max_pieces, &mut stats);
@@ -387,6 +426,8 @@ struct Piece {
     event: u32,
     /// Unoccluded irradiance of its light at its midpoint (luminance, W/m²).
     significance: f64,
+    /// See [`Segment::feature`].
+    feature: u64,
 }
 
 /// Intersects each wedge with the receivers it reaches and keeps the visible pieces; wedge `k`
@@ -433,6 +474,7 @@ fn trace(
                             kind: w.kind,
                             event: (first_event + k) as u32,
                             significance,
+                            feature: w.feature(),
                         });
                     }
                 }

@@ -113,6 +113,7 @@ fn spade_five_segment_repro_meshes() {
         kind: Kind::Ve,
         event: 0,
         significance: 1.0,
+        feature: 0,
     };
     let segments = vec![
         seg((1.5, 0.5), (1.0, 4.0)),
