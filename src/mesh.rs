@@ -1443,6 +1443,42 @@ mod tests {
     /// times 10 040 / 20 000 = 32) and far too thin for good angles, so its coarsest meshing
     /// takes many more elements than its two triangles, which the floor counts.
     #[test]
+    fn a_penumbra_boundary_leaves_out_where_it_runs_along_its_pair() {
+        // A placed boundary from the origin along +x, and a second one leaving the same point
+        // 3 degrees apart: within the clearance 0.1 of the first for its first 0.1 / sin 3° =
+        // 1.91 units.
+        let mut obstacles = Obstacles::new(DVec2::splat(-10.0), DVec2::splat(10.0), 0.1, 16);
+        obstacles.push(DVec2::ZERO, DVec2::new(8.0, 0.0), 7);
+        let angle = 3f64.to_radians();
+        let end = DVec2::new(angle.cos(), angle.sin()) * 8.0;
+        let pieces = obstacles.apart_from_its_pair(DVec2::ZERO, end, 7);
+        assert_eq!(pieces.len(), 1, "{pieces:?}");
+        // It starts where it is the clearance away from the first (its height above the x
+        // axis), and runs on to its end.
+        let (a, b) = pieces[0];
+        assert!(
+            (a.length() - 0.1 / angle.sin()).abs() < 1e-6,
+            "starts at {a}"
+        );
+        assert!((a.y - 0.1).abs() < 1e-6 && b == end, "{a} {b}");
+        // The boundary of another penumbra, or one opening wider than the angle limit, stays.
+        assert_eq!(
+            obstacles.apart_from_its_pair(DVec2::ZERO, end, 8),
+            vec![(DVec2::ZERO, end)]
+        );
+        let wide = DVec2::new(30f64.to_radians().cos(), 30f64.to_radians().sin()) * 8.0;
+        assert_eq!(
+            obstacles.apart_from_its_pair(DVec2::ZERO, wide, 7),
+            vec![(DVec2::ZERO, wide)]
+        );
+        // A line with no feature (D0, punctual) is never cut.
+        assert_eq!(
+            obstacles.apart_from_its_pair(DVec2::ZERO, end, 0),
+            vec![(DVec2::ZERO, end)]
+        );
+    }
+
+    #[test]
     fn the_geometry_floor_counts_the_angle_refinement_of_a_thin_board() {
         let p = |x: f64, z: f64| DVec3::new(x, 0.0, -z);
         let q = |x: f64, y: f64| DVec3::new(x, y, -50.0);
