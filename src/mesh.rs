@@ -397,8 +397,9 @@ fn keep_clear(a: DVec2, b: DVec2, outline: &[[DVec2; 2]], gap: f64) -> Option<(D
 /// each be tested against every one placed before: quadratic in the wedges).
 struct Obstacles {
     segments: Vec<[DVec2; 2]>,
-    /// [`Segment::feature`] of each segment (0: none).
-    features: Vec<u64>,
+    /// The placed segments of each [`Segment::feature`] (but 0): the boundaries of one
+    /// penumbra.
+    by_feature: std::collections::HashMap<u64, Vec<u32>>,
     lo: DVec2,
     cell: f64,
     dims: usize,
@@ -415,7 +416,7 @@ impl Obstacles {
         let dims = ((size / cell).ceil() as usize).clamp(1, 256);
         Obstacles {
             segments: Vec::new(),
-            features: Vec::new(),
+            by_feature: Default::default(),
             lo,
             cell,
             dims,
@@ -435,7 +436,9 @@ impl Obstacles {
     fn push(&mut self, p: DVec2, q: DVec2, feature: u64) {
         let k = self.segments.len() as u32;
         self.segments.push([p, q]);
-        self.features.push(feature);
+        if feature != 0 {
+            self.by_feature.entry(feature).or_default().push(k);
+        }
         let (x0, y0) = self.cell_of(p.min(q) - DVec2::splat(self.clearance));
         let (x1, y1) = self.cell_of(p.max(q) + DVec2::splat(self.clearance));
         for y in y0..=y1 {
@@ -466,23 +469,11 @@ impl Obstacles {
             return vec![(a, b)];
         }
         let sin_limit = ANGLE_LIMIT_DEG.to_radians().sin();
-        // The placed segments near this one: those of the cells it passes (sampled every half
-        // cell) and of their neighbours.
-        let mut near: Vec<u32> = Vec::new();
-        let steps = (len / (0.5 * self.cell)).ceil().min(1e6) as usize;
-        for k in 0..=steps {
-            let (x, y) = self.cell_of(a + d * (k as f64 / steps.max(1) as f64));
-            for y in y.saturating_sub(1)..=(y + 1).min(self.dims - 1) {
-                for x in x.saturating_sub(1)..=(x + 1).min(self.dims - 1) {
-                    near.extend(&self.buckets[y * self.dims + x]);
-                }
-            }
-        }
-        near.sort_unstable();
-        near.dedup();
-        let mut blocked: Vec<(f64, f64)> = near
+        let Some(pair) = self.by_feature.get(&feature) else {
+            return vec![(a, b)];
+        };
+        let mut blocked: Vec<(f64, f64)> = pair
             .iter()
-            .filter(|&&k| self.features[k as usize] == feature)
             .filter_map(|&k| {
                 let [p, q] = self.segments[k as usize];
                 let e = (q - p).normalize_or_zero();
