@@ -104,7 +104,8 @@ pub struct DmStats {
     /// Constraint pieces spade refused (they would have crossed another; should be 0).
     pub refused: usize,
     /// Wedge pieces left out by the mesher because they run along a stronger line (the
-    /// outline, a D0 line, a stronger wedge piece) within half an element.
+    /// outline, a D0 line, a stronger wedge piece) within half an element, or all along the
+    /// other boundary of their own penumbra.
     pub crowded: usize,
 }
 

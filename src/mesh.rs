@@ -50,7 +50,8 @@ pub struct Lines<'a> {
 pub struct Inserted {
     /// Constraint pieces spade refused (they would have crossed another; should be 0).
     pub refused: usize,
-    /// Wedge segments left out because they run along a stronger line within the clearance.
+    /// Wedge segments left out because they run along a stronger line within the clearance
+    /// (or, all of them, along the other boundary of their own penumbra).
     pub crowded: usize,
 }
 
