@@ -57,8 +57,7 @@ fn main() -> anyhow::Result<()> {
         let at_midpoints = direct.irradiance_points(&midpoints);
         let (mut by_vertices, mut by_midpoints, mut area) = (0.0, 0.0, 0.0);
         for (k, t) in m.triangles.iter().enumerate() {
-            let p = corners(t);
-            let a = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs();
+            let a = m.triangle_area(t);
             by_vertices += a * t
                 .iter()
                 .map(|&i| mean(at_vertices[i as usize]))

@@ -91,14 +91,7 @@ fn main() -> anyhow::Result<()> {
 fn largest_polygon(scene: &Scene, vis: &Visibility, m: &ReceiverMesh) {
     let frame = &scene.polygons[m.polygon].frame;
     let corners = |t: &[u32; 3]| t.map(|i| m.vertices[i as usize]);
-    let mut areas: Vec<f64> = m
-        .triangles
-        .iter()
-        .map(|t| {
-            let p = corners(t);
-            0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs()
-        })
-        .collect();
+    let mut areas: Vec<f64> = m.triangles.iter().map(|t| m.triangle_area(t)).collect();
     if areas.is_empty() {
         return;
     }

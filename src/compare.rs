@@ -370,7 +370,7 @@ pub fn mesh_samples(bake: &Bake, vis: &Visibility, direct: &Direct<'_>) -> Vec<M
         for t in &m.triangles {
             let p = t.map(|i| m.vertices[i as usize]);
             let v = t.map(|i| mean(at_vertices[i as usize]));
-            let a = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs();
+            let a = m.triangle_area(t);
             for w in MESH_POINTS {
                 let at = frame.world_from_plane(p[0] * w[0] + p[1] * w[1] + p[2] * w[2]);
                 if vis.buried(at, frame.n) {

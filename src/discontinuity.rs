@@ -453,6 +453,7 @@ fn trace(
             if skip_unseen && !light_sees_generator(vis, w, extent) {
                 return (out, hidden, 1);
             }
+            let feature = w.feature();
             for r in index.query(&w.hull) {
                 if w.skip.contains(&r)
                     || !index.plane_meets(r, w.origin, w.normal)
@@ -475,7 +476,7 @@ fn trace(
                             kind: w.kind,
                             event: (first_event + k) as u32,
                             significance,
-                            feature: w.feature(),
+                            feature,
                         });
                     }
                 }

@@ -84,12 +84,14 @@ pub struct Constraint {
 impl ReceiverMesh {
     /// Total area of the triangles (scene units²).
     pub fn area(&self) -> f64 {
-        self.triangles.iter().map(|t| tri_area(self, t)).sum()
+        self.triangles.iter().map(|t| self.triangle_area(t)).sum()
     }
-}
 
-fn tri_area(m: &ReceiverMesh, t: &[u32; 3]) -> f64 {
-    crate::geometry::signed_area(&t.map(|i| m.vertices[i as usize]))
+    /// Area of the triangle `t` of this mesh (scene units²; its triangles wind
+    /// counter-clockwise, so it is positive).
+    pub fn triangle_area(&self, t: &[u32; 3]) -> f64 {
+        crate::geometry::signed_area(&t.map(|i| self.vertices[i as usize]))
+    }
 }
 
 /// Minimum angle for quality refinement, degrees.
@@ -1210,7 +1212,7 @@ where
                 let ts: Vec<usize> = (0..m.triangles.len())
                     .filter(|&ti| {
                         centroids[mi][ti].is_none()
-                            && tri_area(m, &m.triangles[ti]) > MISSED_AREA * mean_area
+                            && m.triangle_area(&m.triangles[ti]) > MISSED_AREA * mean_area
                     })
                     .collect();
                 (!ts.is_empty()).then_some((mi, ts))
@@ -1253,7 +1255,7 @@ where
                     - l.iter().fold(f64::MAX, |a, &b| a.min(b));
                 let missed = match centroids[mi].get(ti) {
                     Some(Some(c)) => {
-                        let weight = (tri_area(m, t) / mean_area).max(1.0);
+                        let weight = (m.triangle_area(t) / mean_area).max(1.0);
                         (lum(c) - (l[0] + l[1] + l[2]) / 3.0).abs() * weight
                     }
                     _ => 0.0,
@@ -1376,7 +1378,7 @@ mod tests {
             (450..=525).contains(&n),
             "{n} triangles for a budget of 500"
         );
-        assert!(m.triangles.iter().all(|t| tri_area(m, t) > 0.0));
+        assert!(m.triangles.iter().all(|t| m.triangle_area(t) > 0.0));
     }
 
     /// A pool of light (a paraboloid cap of radius 1.2, zero outside) in the middle of a 4 x 4
@@ -1416,7 +1418,7 @@ mod tests {
             .triangles
             .iter()
             .map(|t| {
-                tri_area(m, t)
+                m.triangle_area(t)
                     * t.iter()
                         .map(|&i| light(m.vertices[i as usize]))
                         .sum::<f64>()

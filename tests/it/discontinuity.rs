@@ -534,8 +534,7 @@ fn shown_over_emitted(b: &Bake) -> f64 {
     let mut shown = 0.0;
     for (m, h) in b.meshes.iter().zip(&b.solution.direct) {
         for t in &m.triangles {
-            let p = t.map(|i| m.vertices[i as usize]);
-            let area = 0.5 * (p[1] - p[0]).perp_dot(p[2] - p[0]).abs();
+            let area = m.triangle_area(t);
             let mean: f64 = t.iter().map(|&i| h[i as usize].element_sum() / 3.0).sum();
             shown += area * mean / 3.0;
         }
