@@ -2,7 +2,9 @@
 //! reference, by region (`penumbra compare`'s measure, and the signed mean error, a bias):
 //! `cargo run --release --example solver_error -- scene.glb [spp] [budget] [hr_tolerance]`
 //! (`RES` and `SS`: lightmap size and sub-samples per texel side; `BY_POLYGON=1`: the bias per
-//! region and polygon; `ONLY=hierarchical` or `ONLY=progressive`: one solver).
+//! region and polygon; `ONLY=hierarchical` or `ONLY=progressive`: one solver; `PATCHES=a,b,..`
+//! and `TOLS=a,b,..`: one bake per progressive patch count and hierarchical tolerance, a
+//! speed/accuracy sweep against the one reference).
 
 use penumbra::compare::{classify, lightmap_error, mean_lit_irradiance};
 use penumbra::reference::{ReferenceOptions, reference_with, texel_layout};
@@ -41,14 +43,39 @@ fn main() -> anyhow::Result<()> {
     let mut bakes = Vec::new();
     // `ONLY=hierarchical` (or `progressive`) in the environment: that solver alone.
     let only = std::env::var("ONLY").unwrap_or_default();
+    // `PATCHES=a,b,..` and `TOLS=a,b,..`: one bake per progressive patch count and per
+    // hierarchical tolerance (a speed/accuracy sweep against the one reference).
+    let list = |k: &str| -> anyhow::Result<Vec<Option<f64>>> {
+        match std::env::var(k) {
+            Ok(v) => v.split(',').map(|x| Ok(Some(x.trim().parse()?))).collect(),
+            Err(_) => Ok(vec![None]),
+        }
+    };
     for solver in [Solver::Progressive, Solver::Hierarchical] {
         if !only.is_empty() && !format!("{solver:?}").eq_ignore_ascii_case(&only) {
             continue;
         }
-        let mut o = options.clone();
-        o.solve.solver = solver;
-        let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
-        bakes.push((solver, b));
+        let settings = match solver {
+            Solver::Progressive => list("PATCHES")?,
+            _ => list("TOLS")?,
+        };
+        for setting in settings {
+            let mut o = options.clone();
+            o.solve.solver = solver;
+            let label = match (solver, setting) {
+                (Solver::Progressive, Some(p)) => {
+                    o.solve.patches = p as usize;
+                    format!("{solver:?} ({p} patches)")
+                }
+                (_, Some(t)) => {
+                    o.solve.hr_tolerance = t;
+                    format!("{solver:?} (tolerance {t:e})")
+                }
+                (_, None) => format!("{solver:?}"),
+            };
+            let b = penumbra::bake(&gltf, &o, &|_, _, _| {})?;
+            bakes.push((label, b));
+        }
     }
     let tmp = std::env::temp_dir().join("penumbra-solver-error.glb");
     let bytes = penumbra::bake::glb_bytes(&gltf, &mut bakes[0].1, options.encoding)?;
@@ -75,7 +102,7 @@ fn main() -> anyhow::Result<()> {
     for (solver, b) in &bakes {
         let (all, by) = lightmap_error(&b.lightmap, &refmap, &regions, scale);
         print!(
-            "{solver:?}: solve {:.2} s, elements {}: all rmse {:.4} max {:.3}",
+            "{solver}: solve {:.2} s, elements {}: all rmse {:.4} max {:.3}",
             b.stats.timings_s.solve, b.stats.elements, all.rmse, all.max
         );
         for (r, e) in by {
