@@ -353,7 +353,14 @@
 //!   (which the gather applies) instead of about its mean (13% fewer links, 4% less solve
 //!   time, but the Cornell box's lit region 0.63% and umbra 0.34% of the lit mean, worse than
 //!   progressive's 0.61% and 0.24%); loosening every limit at receivers brighter than the
-//!   mean direct light, by that ratio (8% fewer links). None is in. Earlier, town-25k:
+//!   mean direct light, by that ratio (8% fewer links). None is in. Each limit loosened 10x
+//!   alone (town-13k speed-up in one `hier_compare` run, against 1.99x; Cornell box lit /
+//!   umbra RMSE, against 0.58 / 0.23%): power 2.20x, 0.58 / 0.24%; variation 2.79x, 1.27 /
+//!   1.19%; source 2.67x, 1.54 / 0.63%; visibility 2.20x, 1.06 / 1.15%. So no one limit is
+//!   the town's cost, and only the power limit is free on the Cornell box (there its umbra
+//!   reaches progressive's 0.24%). A first pass refined 4x or 16x looser (the second, at
+//!   the full radiosity, refines what it left): 7-10% less link time, 7% fewer links, as the
+//!   final pass's oracle decides most of them. Earlier, town-25k:
 //!   indirect 2.7% against 6.0%.
 //! * Scale ladder (`cargo bench --bench ladder`): every rung bakes; solve 5.9-7.4 s on the
 //!   40x40 box grid (progressive: 375 s), 14-15 s on town-100k (147 863 elements;
