@@ -99,10 +99,10 @@ fn main() -> anyhow::Result<()> {
     let texels_per_unit = bakes[0].1.atlas.texels_per_unit as f64;
     let regions = classify(&refmap, 3.0 / texels_per_unit);
     let scale = mean_lit_irradiance(&refmap, &regions);
-    for (solver, b) in &bakes {
+    for (label, b) in &bakes {
         let (all, by) = lightmap_error(&b.lightmap, &refmap, &regions, scale);
         print!(
-            "{solver}: solve {:.2} s, elements {}: all rmse {:.4} max {:.3}",
+            "{label}: solve {:.2} s, elements {}: all rmse {:.4} max {:.3}",
             b.stats.timings_s.solve, b.stats.elements, all.rmse, all.max
         );
         for (r, e) in by {
