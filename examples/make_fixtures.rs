@@ -4,6 +4,7 @@
 //! cargo run --example make_fixtures [OUTPUT_DIR]
 //! cargo run --release --example make_fixtures -- --ladder DIR
 //! cargo run --release --example make_fixtures -- --town TRIANGLES FILE
+//! cargo run --release --example make_fixtures -- --sill-town TRIANGLES FILE
 //! cargo run --release --example make_fixtures -- --tiled-box TILES FILE
 //! cargo run --example make_fixtures -- --box-on-ground FILE
 //! ```
@@ -15,7 +16,9 @@
 //! `--ladder DIR` writes the scale-ladder scenes (`penumbra::fixtures::ladder`, up to several
 //! megabytes each) to `DIR/<rung>.glb` instead; they are generated on demand and not kept in
 //! `fixtures/`. `--town TRIANGLES FILE` writes the ladder's sunlit town at about that many
-//! triangles (`penumbra::fixtures::ladder::town`), e.g. a small one for `penumbra compare`.
+//! triangles (`penumbra::fixtures::ladder::town`), e.g. a small one for `penumbra compare`;
+//! `--sill-town TRIANGLES FILE` the same town with a sill under every window
+//! (`penumbra::fixtures::ladder::sill_town`: many small polygons).
 //! `--tiled-box TILES FILE` writes the box on a floor of TILES x TILES tiles of the seam
 //! pictures (`penumbra::fixtures::tiled_box_on_floor`).
 //! `--box-on-ground FILE` writes the sky's scene (`penumbra::fixtures::box_on_ground`: no light
@@ -28,7 +31,8 @@ fn main() -> std::io::Result<()> {
     let usage = || -> ! {
         eprintln!(
             "usage: make_fixtures [OUTPUT_DIR] | make_fixtures --ladder DIR \
-             | make_fixtures --town TRIANGLES FILE | make_fixtures --interior ROOMS FILE \
+             | make_fixtures --town TRIANGLES FILE | make_fixtures --sill-town TRIANGLES FILE \
+             | make_fixtures --interior ROOMS FILE \
              | make_fixtures --tiled-box TILES FILE \
              | make_fixtures --box-on-ground FILE"
         );
@@ -53,6 +57,7 @@ fn main() -> std::io::Result<()> {
     }
     let generated: Option<fn(usize) -> Vec<u8>> = match args.first().and_then(|a| a.to_str()) {
         Some("--town") => Some(penumbra::fixtures::ladder::town),
+        Some("--sill-town") => Some(penumbra::fixtures::ladder::sill_town),
         Some("--interior") => Some(penumbra::fixtures::ladder::interior),
         Some("--tiled-box") => Some(penumbra::fixtures::tiled_box_on_floor),
         _ => None,
