@@ -3,7 +3,13 @@
 //! vertex irradiance (luminance) between the two, relative to the progressive mean:
 //! `cargo run --release --example hier_compare -- scene.glb [hr_tolerance] [budget]`
 //! (`PATCHES=n` in the environment sets the progressive solver's patch count, `PER_POLYGON=1`
-//! prints the mean indirect light of each polygon).
+//! prints the mean indirect light of each polygon). `REFERENCE=spp` measures both solvers at
+//! the vertices against a Monte Carlo reference (`penumbra reference`'s path tracer at the
+//! bake's own evaluation points): every k-th vertex (about `POINTS`, default 2000) and the 20
+//! where the solvers differ most, the RMSE and bias as fractions of the reference's mean, noise
+//! removed. A vertex is a point, not a texel: this is free of the lightmap's resolution, which
+//! on small polygons (a window sill under one texel) decides the texel errors. `WORST_REF=1`
+//! also lists the 25 sampled vertices farthest from the reference (hierarchical).
 
 use penumbra::light::luminance;
 use penumbra::solve::Solver;
@@ -108,6 +114,9 @@ fn main() -> anyhow::Result<()> {
             mesh.polygon, poly.frame.n, x.x, x.y, x.z
         );
     }
+    if let Ok(spp) = std::env::var("REFERENCE") {
+        vertex_reference(p, h, &diffs, spp.parse()?)?;
+    }
     let p95 = diffs[n / 20].0;
     println!("  95th percentile |dH| {:.4} of the mean H", p95 / mean);
     println!(
@@ -126,5 +135,157 @@ fn main() -> anyhow::Result<()> {
         p.stats.timings_s.solve / h.stats.timings_s.solve,
         p.stats.timings_s.total / h.stats.timings_s.total
     );
+    Ok(())
+}
+
+/// A vertex difference: `(|dH|, mesh, vertex, progressive, hierarchical, direct)` (luminance).
+type Diff = (f64, usize, usize, f64, f64, f64);
+
+/// Both bakes against a Monte Carlo reference at sampled vertices and at the 20 vertices of
+/// `diffs` (sorted, largest first) where they differ most (see the module doc).
+fn vertex_reference(
+    p: &penumbra::Bake,
+    h: &penumbra::Bake,
+    diffs: &[Diff],
+    spp: u32,
+) -> anyhow::Result<()> {
+    use penumbra::reference::{ReferenceOptions, TexelLayout, reference_with};
+    let scene = &p.scene;
+    let vis = penumbra::visibility::Visibility::new(scene);
+    let total: usize = p.meshes.iter().map(|m| m.vertices.len()).sum();
+    let wanted = std::env::var("POINTS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2000usize);
+    let stride = total.div_ceil(wanted.max(1)).max(1);
+    let worst: Vec<(usize, usize)> = diffs.iter().take(20).map(|d| (d.1, d.2)).collect();
+    let mut picked: Vec<(usize, usize)> = Vec::new();
+    let mut k = 0usize;
+    for (m, mesh) in p.meshes.iter().enumerate() {
+        for v in 0..mesh.vertices.len() {
+            if k.is_multiple_of(stride) {
+                picked.push((m, v));
+            }
+            k += 1;
+        }
+    }
+    let sampled = picked.len();
+    picked.extend(&worst);
+    let mut points_of = std::collections::BTreeMap::new();
+    let samples: Vec<Vec<penumbra::light::SurfacePoint>> = picked
+        .iter()
+        .map(|&(m, v)| {
+            let pts = points_of
+                .entry(m)
+                .or_insert_with(|| penumbra::solve::evaluation_points(scene, &vis, &p.meshes[m]));
+            vec![pts[v]]
+        })
+        .collect();
+    let layout = TexelLayout {
+        width: samples.len() as u32,
+        height: 1,
+        supersample: 1,
+        samples,
+    };
+    let options = ReferenceOptions {
+        spp,
+        ..ReferenceOptions::default()
+    };
+    let t = std::time::Instant::now();
+    let r = reference_with(scene, &vis, &layout, &options);
+    println!(
+        "vertex reference: {} vertices ({sampled} sampled, {} where the solvers differ most), {spp} paths each, {:.1} s",
+        picked.len(),
+        worst.len(),
+        t.elapsed().as_secs_f64()
+    );
+    let lum = |b: &penumbra::Bake, m: usize, v: usize| luminance(b.solution.irradiance[m][v]);
+    let measure = |range: std::ops::Range<usize>, label: &str| {
+        let n = range.len() as f64;
+        let mean_ref = range.clone().map(|i| luminance(r.mean[i])).sum::<f64>() / n;
+        let noise = range
+            .clone()
+            .map(|i| luminance(r.std_error[i]).powi(2))
+            .sum::<f64>()
+            / n;
+        for (name, b) in [("progressive", p), ("hierarchical", h)] {
+            let (mut sq, mut bias) = (0.0, 0.0);
+            for i in range.clone() {
+                let (m, v) = picked[i];
+                let d = lum(b, m, v) - luminance(r.mean[i]);
+                sq += d * d;
+                bias += d;
+            }
+            println!(
+                "  {label}: {name} RMSE {:.4}, bias {:+.4} of the reference mean {mean_ref:.4} (noise {:.4})",
+                ((sq / n - noise).max(0.0)).sqrt() / mean_ref,
+                bias / n / mean_ref,
+                noise.sqrt() / mean_ref
+            );
+        }
+    };
+    // The direct light alone (both bakes share it), against the reference without bounces.
+    let direct = reference_with(
+        scene,
+        &vis,
+        &layout,
+        &ReferenceOptions {
+            bounces_max: Some(0),
+            ..options.clone()
+        },
+    );
+    let (mut sq, mut noise, mut mean_ref) = (0.0, 0.0, 0.0);
+    for (i, &(m, v)) in picked.iter().enumerate().take(sampled) {
+        let d = luminance(p.solution.direct[m][v]) - luminance(direct.mean[i]);
+        sq += d * d;
+        noise += luminance(direct.std_error[i]).powi(2);
+        mean_ref += luminance(r.mean[i]);
+    }
+    let n = sampled as f64;
+    println!(
+        "  sampled vertices: direct light RMSE {:.4} of the reference mean (noise {:.4})",
+        ((sq - noise) / n).max(0.0).sqrt() / (mean_ref / n),
+        (noise / n).sqrt() / (mean_ref / n)
+    );
+    measure(0..sampled, "sampled vertices");
+    if std::env::var("WORST_REF").is_ok() {
+        let mut e: Vec<(f64, usize)> = (0..sampled)
+            .map(|i| {
+                let (m, v) = picked[i];
+                ((lum(h, m, v) - luminance(r.mean[i])).abs(), i)
+            })
+            .collect();
+        e.sort_by(|a, b| b.0.total_cmp(&a.0));
+        for &(_, i) in e.iter().take(25) {
+            let (m, v) = picked[i];
+            let mesh = &p.meshes[m];
+            let poly = &scene.polygons[mesh.polygon];
+            let x = poly.frame.world_from_plane(mesh.vertices[v]);
+            println!(
+                "    m {m} area {:.3} n {:.2} at ({:.2},{:.2},{:.2}) tris {}: direct {:.3} prog {:.3} hier {:.3} ref {:.3}",
+                mesh.area(),
+                poly.frame.n,
+                x.x,
+                x.y,
+                x.z,
+                mesh.triangles.len(),
+                luminance(p.solution.direct[m][v]),
+                lum(p, m, v),
+                lum(h, m, v),
+                luminance(r.mean[i])
+            );
+        }
+    }
+    measure(sampled..picked.len(), "most different");
+    for (i, &(m, v)) in picked.iter().enumerate().skip(sampled).take(5) {
+        println!(
+            "  mesh {m} vertex {v}: direct {:.4}, progressive {:.4}, hierarchical {:.4}, reference {:.4} +- {:.4}",
+            luminance(p.solution.direct[m][v]),
+            lum(p, m, v),
+            lum(h, m, v),
+            luminance(r.mean[i]),
+            luminance(r.std_error[i])
+        );
+    }
     Ok(())
 }

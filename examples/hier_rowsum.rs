@@ -4,7 +4,9 @@
 //! [tol] [budget]` (the furnace box when no scene is given). With `BAKE_LINKS=1` in the
 //! environment, the links are about those a bake keeps instead (refined with the reflected
 //! direct light, then with the bake's radiosities averaged per element, at the bake's limits),
-//! so a shortfall of the bake's coarser links shows.
+//! so a shortfall of the bake's coarser links shows. `RES=n`: the bake's lightmap size (128
+//! unless given); `RECEIVER_POLYGON=p`: the links gathered by the first element of polygon `p`
+//! and by its ancestors, with their sources.
 use glam::DVec3;
 use penumbra::light::SurfacePoint;
 use penumbra::solve::hierarchical::{Hierarchy, Limits, MAX_LINKS, PARTIAL_VISIBILITY, VARIATION};
@@ -26,7 +28,14 @@ fn main() -> anyhow::Result<()> {
     let budget: usize = args.next().map(|s| s.parse()).transpose()?.unwrap_or(4000);
     let mut o = BakeOptions {
         budget: Some(budget),
-        resolution: Some(128),
+        // `RES` in the environment: the lightmap size (a scene of many small polygons needs
+        // more than 128 to pack its charts).
+        resolution: Some(
+            std::env::var("RES")
+                .ok()
+                .and_then(|r| r.parse().ok())
+                .unwrap_or(128),
+        ),
         ..Default::default()
     };
     if std::env::var("BAKE_LINKS").is_err() {
@@ -62,6 +71,41 @@ fn main() -> anyhow::Result<()> {
         h.link(&vis, &h.sources(&ones), limits).links
     };
     let got = h.push(&h.gather(&links, &bn));
+    // `RECEIVER_POLYGON=p`: the links gathered by the first element of polygon `p` and by its
+    // ancestors (debug).
+    if let Some(poly) = std::env::var("RECEIVER_POLYGON")
+        .ok()
+        .and_then(|v| v.parse::<usize>().ok())
+    {
+        if let Some(e) = h.elements.iter().position(|e| e.polygon == poly) {
+            let leaf = h.leaf[e];
+            let covers = |n: &penumbra::solve::hierarchical::Node| {
+                (n.lo as usize..n.hi as usize).contains(&e)
+            };
+            let mut sum = 0.0;
+            for l in &links {
+                let r = &h.nodes[l.receiver as usize];
+                if !covers(r) {
+                    continue;
+                }
+                let s = &h.nodes[l.source as usize];
+                sum += l.k;
+                println!(
+                    "  link {} <- {}: receiver polygon {} ({} elements), source polygon {} ({} elements, area {:.2}, centre {:.2}), k {:.4}",
+                    l.receiver,
+                    l.source,
+                    r.polygon as i64,
+                    r.hi - r.lo,
+                    s.polygon as i64,
+                    s.hi - s.lo,
+                    s.area,
+                    s.center,
+                    l.k
+                );
+            }
+            println!("  element {e} (leaf {leaf}): sum of k {sum:.4}");
+        }
+    }
     // Reflecting receivers: the polygons of the hierarchy with reflectance.
     let mut reflects = vec![false; b.scene.polygons.len()];
     for e in &h.elements {

@@ -259,7 +259,11 @@ impl SurfacePoint {
 /// toward the centroid of one of its triangles. A vertex on the polygon's edge then sees a
 /// surface that meets the edge (a wall on the floor) as its limit from inside the polygon,
 /// instead of lying in that surface's plane, where the contour integral and rays degenerate.
-fn evaluation_points(scene: &Scene, vis: &Visibility, mesh: &ReceiverMesh) -> Vec<SurfacePoint> {
+pub fn evaluation_points(
+    scene: &Scene,
+    vis: &Visibility,
+    mesh: &ReceiverMesh,
+) -> Vec<SurfacePoint> {
     let frame = &scene.polygons[mesh.polygon].frame;
     let mut toward = vec![None::<DVec2>; mesh.vertices.len()];
     for t in &mesh.triangles {
