@@ -76,8 +76,9 @@ fn main() -> anyhow::Result<()> {
     if let Some(poly) = std::env::var("RECEIVER_POLYGON")
         .ok()
         .and_then(|v| v.parse::<usize>().ok())
+        && let Some(e) = h.elements.iter().position(|e| e.polygon == poly)
     {
-        if let Some(e) = h.elements.iter().position(|e| e.polygon == poly) {
+        {
             let leaf = h.leaf[e];
             let covers = |n: &penumbra::solve::hierarchical::Node| {
                 (n.lo as usize..n.hi as usize).contains(&e)
@@ -90,6 +91,30 @@ fn main() -> anyhow::Result<()> {
                 }
                 let s = &h.nodes[l.source as usize];
                 sum += l.k;
+                // The element's own transfer from the source's elements: exact form factors
+                // from its centroid, one shadow ray per source element.
+                let el = &h.elements[e];
+                let c = (el.p[0] + el.p[1] + el.p[2]) / 3.0;
+                let at = SurfacePoint::new(c, el.normal, el.polygon, &vis);
+                let mut exact = 0.0;
+                for src in &h.elements[s.lo as usize..s.hi as usize] {
+                    let f = penumbra::geometry::point_polygon_form_factor(c, el.normal, &src.p);
+                    let cs = (src.p[0] + src.p[1] + src.p[2]) / 3.0;
+                    let from = SurfacePoint::new(cs, src.normal, src.polygon, &vis);
+                    if f > 0.0
+                        && src.normal.dot(c - cs) > 0.0
+                        && !vis.occluded_skipping(
+                            at.ray_origin,
+                            from.ray_origin,
+                            [el.polygon, src.polygon],
+                        )
+                    {
+                        exact += f;
+                    }
+                }
+                if (exact - l.k).abs() < 2e-3 {
+                    continue;
+                }
                 println!(
                     "  link {} <- {}: receiver polygon {} ({} elements), source polygon {} ({} elements, area {:.2}, centre {:.2}), k {:.4}",
                     l.receiver,
@@ -102,6 +127,7 @@ fn main() -> anyhow::Result<()> {
                     s.center,
                     l.k
                 );
+                println!("      the element's own: {exact:.4}");
             }
             println!("  element {e} (leaf {leaf}): sum of k {sum:.4}");
         }

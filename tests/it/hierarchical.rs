@@ -434,29 +434,7 @@ fn shadowed_receivers_gather_what_a_brute_force_gather_finds() {
         }
         sum / area
     };
-    let (mut sum, mut area) = (0.0, 0.0);
-    for e in h.elements.iter().filter(|e| shadowed(e)) {
-        let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
-        let at = SurfacePoint::new(c, e.normal, e.polygon, &vis);
-        let mut g = DVec3::ZERO;
-        for (s, bs) in h.elements.iter().zip(&radiosity) {
-            if s.polygon == e.polygon || bs.max_element() <= 0.0 {
-                continue;
-            }
-            let f = point_polygon_form_factor(c, e.normal, &s.p);
-            let cs = (s.p[0] + s.p[1] + s.p[2]) / 3.0;
-            let from = SurfacePoint::new(cs, s.normal, s.polygon, &vis);
-            if f > 0.0
-                && s.normal.dot(c - cs) > 0.0
-                && !vis.occluded_skipping(at.ray_origin, from.ray_origin, [e.polygon, s.polygon])
-            {
-                g += *bs * f;
-            }
-        }
-        sum += e.area * luminance(g);
-        area += e.area;
-    }
-    let reference = sum / area;
+    let reference = brute_force_gather(&h, &vis, &radiosity, shadowed);
     let (scaled, uniform) = (gathered(h.mean_direct()), gathered(0.0));
     eprintln!(
         "shadowed floor: gathered {scaled:.5} (one source limit: {uniform:.5}), brute force {reference:.5}"
@@ -533,4 +511,125 @@ fn ray_cast_row_sum(
         total += e.area;
     }
     sum / total
+}
+
+/// Small faces of every orientation gather their own light: on a town whose windows have
+/// sills (five small faces each, grouped in clusters of many sills), what the links a bake
+/// keeps gather at the sills' faces from the bake's own radiosity, by the way the faces look,
+/// against a brute-force gather (which agrees with the path tracer at the elements' centroids
+/// within 4%: 0.264, 0.160 and 0.138 for the faces looking down, up and sideways). A cluster
+/// receiver pushes what it gathers unchanged to all its surfaces, so a cluster of sills that
+/// received as a whole gave a sill's bottom, facing the street, the mean of faces looking
+/// every way: the faces looking down gathered 46% too little, those looking up 21% too much.
+/// Cluster receivers are split while the irradiance a link may bring is over the variation
+/// limit: within 2%.
+#[test]
+fn small_faces_of_every_orientation_gather_their_own_light() {
+    let mut o = quick();
+    o.budget = None;
+    o.resolution = Some(512);
+    let b = bake(&fixtures::ladder::sill_town(2_500), &o);
+    let vis = Visibility::new(&b.scene);
+    let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
+    let full = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).expect("full");
+    let (radiosity, _) = full.reflected_direct();
+    let kept = bake_links(&h, &vis, &radiosity, h.mean_direct());
+    let b_nodes = h.pull(&radiosity);
+    let gradients = h.gradients(&b_nodes, &h.inverse_moments());
+    let got = h.push(&h.gather_linear(&kept, &b_nodes, &gradients));
+    let small = |e: &Element| b.scene.polygons[e.polygon].area < 0.5;
+    for (name, facing) in [
+        ("down", -DVec3::Y),
+        ("up", DVec3::Y),
+        ("sideways", DVec3::ZERO),
+    ] {
+        let of = |e: &Element| {
+            small(e)
+                && if facing == DVec3::ZERO {
+                    e.normal.y.abs() < 0.5
+                } else {
+                    e.normal.dot(facing) > 0.5
+                }
+        };
+        let (mut sum, mut area) = (0.0, 0.0);
+        for (e, g) in h.elements.iter().zip(&got).filter(|(e, _)| of(e)) {
+            sum += e.area * luminance(*g);
+            area += e.area;
+        }
+        let gathered = sum / area;
+        let reference = brute_force_gather(&h, &vis, &radiosity, of);
+        eprintln!("sill faces facing {name}: gathered {gathered:.5}, brute force {reference:.5}");
+        assert!(
+            (gathered / reference - 1.0).abs() < 0.04,
+            "sill faces facing {name}: gathered {gathered} against {reference}"
+        );
+    }
+}
+
+/// The area-weighted mean irradiance (luminance) that the elements `of` gather from the
+/// element radiosities `radiosity` by brute force: from each receiver's centroid, every other
+/// polygon's element cut into pieces no larger than a quarter of their distance (up to 4^6
+/// pieces), each piece's exact form factor times the visibility of its centroid (one shadow
+/// ray), so a large element that the receiver sees only in part (a wall rising past a sill)
+/// counts its visible part.
+fn brute_force_gather(
+    h: &Hierarchy,
+    vis: &Visibility,
+    radiosity: &[DVec3],
+    of: impl Fn(&Element) -> bool,
+) -> f64 {
+    let (mut sum, mut area) = (0.0, 0.0);
+    for e in h.elements.iter().filter(|e| of(e)) {
+        let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
+        let at = SurfacePoint::new(c, e.normal, e.polygon, vis);
+        let mut g = DVec3::ZERO;
+        for (s, bs) in h.elements.iter().zip(radiosity) {
+            if s.polygon == e.polygon || bs.max_element() <= 0.0 {
+                continue;
+            }
+            let seen = |p: &[DVec3; 3]| {
+                let f = point_polygon_form_factor(c, e.normal, p);
+                let cs = (p[0] + p[1] + p[2]) / 3.0;
+                let from = SurfacePoint::new(cs, s.normal, s.polygon, vis);
+                let visible = s.normal.dot(c - cs) > 0.0
+                    && !vis.occluded_skipping(
+                        at.ray_origin,
+                        from.ray_origin,
+                        [e.polygon, s.polygon],
+                    );
+                if f > 0.0 && visible { f } else { 0.0 }
+            };
+            g += *bs * pieces(s.p, c, 6, &seen);
+        }
+        sum += e.area * luminance(g);
+        area += e.area;
+    }
+    sum / area
+}
+
+/// `f` summed over the pieces of the triangle `p`: cut in four at its edges' midpoints while
+/// its longest edge is over a quarter of its centroid's distance from `c`, `depth` times at
+/// most.
+fn pieces(p: [DVec3; 3], c: DVec3, depth: u32, f: &impl Fn(&[DVec3; 3]) -> f64) -> f64 {
+    let longest = (0..3)
+        .map(|k| p[k].distance(p[(k + 1) % 3]))
+        .fold(0.0, f64::max);
+    let centroid = (p[0] + p[1] + p[2]) / 3.0;
+    if depth == 0 || longest <= 0.25 * centroid.distance(c) {
+        return f(&p);
+    }
+    let m = [
+        (p[0] + p[1]) / 2.0,
+        (p[1] + p[2]) / 2.0,
+        (p[2] + p[0]) / 2.0,
+    ];
+    [
+        [p[0], m[0], m[2]],
+        [m[0], p[1], m[1]],
+        [m[2], m[1], p[2]],
+        [m[0], m[1], m[2]],
+    ]
+    .into_iter()
+    .map(|q| pieces(q, c, depth - 1, f))
+    .sum()
 }
