@@ -323,11 +323,12 @@
 //! more patches: on town-13k (one run against one reference, `examples/solver_error.rs` with
 //! `PATCHES` and `TOLS`, 64 samples, 512² page, 20 092 elements; all / lit / umbra / contact /
 //! indirect, solve seconds), progressive at 1024 patches (its default, 1 480 here) read 8.33 /
-//! 6.28 / 9.57 / 12.82 / 7.08 in 1.38 s, at 4096 patches 6.74 / 5.03 / 9.35 / 11.12 / 2.41 in
-//! 3.99 s, at 16384 patches 6.61 / 5.03 / 9.24 / 10.76 / 2.23 in 31.16 s; this solver at 3e-5
-//! 6.50 / 5.11 / 9.22 / 10.35 / 1.89 in 0.60 s, at 1e-4 6.57 / 5.16 / 9.20 / 10.48 / 2.16 in
-//! 0.31 s, at 3e-4 6.71 / 5.25 / 9.31 / 10.66 / 2.62 in 0.18 s. The lit region's error is the
-//! direct light's texel resolution, which both share.
+//! 6.28 / 9.57 / 12.82 / 7.08 in 1.28 s, at 4096 patches 6.74 / 5.03 / 9.35 / 11.12 / 2.41 in
+//! 3.85 s, at 16384 patches 6.61 / 5.03 / 9.24 / 10.76 / 2.23 in 30.08 s; this solver at 3e-5
+//! 6.49 / 5.11 / 9.22 / 10.28 / 1.89 in 0.61 s, at 1e-4 6.53 / 5.17 / 9.19 / 10.34 / 2.14 in
+//! 0.31 s, at 3e-4 6.66 / 5.25 / 9.30 / 10.49 / 2.51 in 0.19 s. The lit region's error is the
+//! direct light's texel resolution, which both share. (On the town with a sill under every
+//! window, where progressive needs a patch per polygon, default against default: 8.7x.)
 //!
 //! # Status (measured on 2 shared cores, default options)
 //!
