@@ -9,7 +9,9 @@
 //! where the solvers differ most, the RMSE and bias as fractions of the reference's mean, noise
 //! removed. A vertex is a point, not a texel: this is free of the lightmap's resolution, which
 //! on small polygons (a window sill under one texel) decides the texel errors. `WORST_REF=1`
-//! also lists the 25 sampled vertices farthest from the reference (hierarchical).
+//! also lists the 25 sampled vertices farthest from the reference (hierarchical). The share
+//! of the hierarchical squared error at vertices on contact lines and on small polygons (at
+//! most 8 elements) is printed too.
 
 use penumbra::light::luminance;
 use penumbra::solve::Solver;
@@ -283,6 +285,36 @@ fn vertex_reference(
         (noise / n).sqrt() / (mean_ref / n)
     );
     measure(0..sampled, "sampled vertices");
+    // Where the hierarchical error is: vertices on a contact line (an end of a D0 constraint,
+    // either copy of a split vertex) against the others.
+    let on_contact = |m: usize, v: usize| {
+        let mesh = &p.meshes[m];
+        let at = mesh.vertices[v];
+        mesh.constraints
+            .iter()
+            .filter(|c| c.kind == penumbra::discontinuity::Kind::D0)
+            .any(|c| mesh.vertices[c.a as usize] == at || mesh.vertices[c.b as usize] == at)
+    };
+    // And on polygons of at most 8 elements (a sill's face), whose few elements leave the
+    // vertex fit little to go on.
+    let (mut contact, mut sq_contact, mut few, mut sq_few, mut sq_all) =
+        (0usize, 0.0, 0usize, 0.0, 0.0);
+    for (i, &(m, v)) in picked.iter().enumerate().take(sampled) {
+        let d = (lum(h, m, v) - luminance(r.mean[i])).powi(2);
+        sq_all += d;
+        if on_contact(m, v) {
+            contact += 1;
+            sq_contact += d;
+        } else if p.meshes[m].triangles.len() <= 8 {
+            few += 1;
+            sq_few += d;
+        }
+    }
+    println!(
+        "  sampled vertices on a contact line: {contact} of {sampled}, {:.0}% of the hierarchical squared error; elsewhere on polygons of at most 8 elements: {few}, {:.0}%",
+        100.0 * sq_contact / sq_all,
+        100.0 * sq_few / sq_all
+    );
     if std::env::var("WORST_REF").is_ok() {
         let mut e: Vec<(f64, usize)> = (0..sampled)
             .map(|i| {
