@@ -162,7 +162,7 @@
 //!   box-grid-40 3.0 → 4.4 s, box-grid-20 +16%, the other towns +9-18%; box-grid-20's solve
 //!   is still 5.1-5.2x faster than progressive's (two runs of `examples/hier_compare.rs`),
 //!   town-13k's 1.9x. The Cornell box's links are the same (its 16 clusters receive
-//!//!   nothing this test refines).
+//!   nothing this test refines).
 //! * **Source uniformity**: a link gathers `K B̄_s`, the source's *mean* radiosity, so it
 //!   misplaces up to `ΔB_s K̂`, with `ΔB_s` the spread of the source's element radiosities and
 //!   `K̂` the largest point form factor at the receiver's samples (the geometric bound for a
