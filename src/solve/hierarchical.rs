@@ -146,7 +146,7 @@
 //!   links under every limit. Measured on a town with a sill under every window
 //!   ([`crate::fixtures::ladder::sill_town`], 2 500 triangles, `tests/it/hierarchical.rs`),
 //!   what the sills' faces gather from the bake's own radiosity against a brute-force gather
-//!   (which agrees with the path tracer at their centroids within 4%): the faces looking down
+//!   (within 7% of the path tracer's indirect light at their centroids): the faces looking down
 //!   gathered 46% too little, up 21% too much, sideways 20% too little; with this test, within
 //!   2%. (With the source limit in its place, the ten times looser one: 24% too little, 20% too
 //!   much, 14% too little.) Against the path tracer at the vertices (`examples/hier_compare.rs`
