@@ -250,28 +250,36 @@ fn vertex_reference(
         noise += luminance(direct.std_error[i]).powi(2);
         mean_ref += luminance(r.mean[i]);
     }
-    if std::env::var("WORST_REF").is_ok() {
-        let mut e: Vec<(f64, usize)> = (0..sampled)
-            .map(|i| {
-                let (m, v) = picked[i];
-                (
-                    (luminance(p.solution.direct[m][v]) - luminance(direct.mean[i])).abs(),
-                    i,
-                )
-            })
-            .collect();
+    // The sampled vertices by `error`, largest first, and where a vertex is.
+    let worst_by = |error: &dyn Fn(usize) -> f64| {
+        let mut e: Vec<(f64, usize)> = (0..sampled).map(|i| (error(i), i)).collect();
         e.sort_by(|a, b| b.0.total_cmp(&a.0));
-        for &(_, i) in e.iter().take(10) {
+        e.into_iter().map(|(_, i)| i).collect::<Vec<_>>()
+    };
+    let place = |m: usize, v: usize| {
+        let mesh = &p.meshes[m];
+        let poly = &scene.polygons[mesh.polygon];
+        let x = poly.frame.world_from_plane(mesh.vertices[v]);
+        format!(
+            "mesh {m} ({} triangles, area {:.3}) n {:.2} at ({:.2}, {:.2}, {:.2})",
+            mesh.triangles.len(),
+            mesh.area(),
+            poly.frame.n,
+            x.x,
+            x.y,
+            x.z
+        )
+    };
+    if std::env::var("WORST_REF").is_ok() {
+        let off = |i: usize| {
             let (m, v) = picked[i];
-            let mesh = &p.meshes[m];
-            let poly = &scene.polygons[mesh.polygon];
-            let x = poly.frame.world_from_plane(mesh.vertices[v]);
+            (luminance(p.solution.direct[m][v]) - luminance(direct.mean[i])).abs()
+        };
+        for &i in worst_by(&off).iter().take(10) {
+            let (m, v) = picked[i];
             println!(
-                "    direct: mesh {m} n {:.2} at ({:.3},{:.3},{:.3}): bake {:.4} reference {:.4} +- {:.4}",
-                poly.frame.n,
-                x.x,
-                x.y,
-                x.z,
+                "    direct: {}: bake {:.4} reference {:.4} +- {:.4}",
+                place(m, v),
                 luminance(p.solution.direct[m][v]),
                 luminance(direct.mean[i]),
                 luminance(direct.std_error[i])
@@ -316,26 +324,15 @@ fn vertex_reference(
         100.0 * sq_few / sq_all
     );
     if std::env::var("WORST_REF").is_ok() {
-        let mut e: Vec<(f64, usize)> = (0..sampled)
-            .map(|i| {
-                let (m, v) = picked[i];
-                ((lum(h, m, v) - luminance(r.mean[i])).abs(), i)
-            })
-            .collect();
-        e.sort_by(|a, b| b.0.total_cmp(&a.0));
-        for &(_, i) in e.iter().take(25) {
+        let off = |i: usize| {
             let (m, v) = picked[i];
-            let mesh = &p.meshes[m];
-            let poly = &scene.polygons[mesh.polygon];
-            let x = poly.frame.world_from_plane(mesh.vertices[v]);
+            (lum(h, m, v) - luminance(r.mean[i])).abs()
+        };
+        for &i in worst_by(&off).iter().take(25) {
+            let (m, v) = picked[i];
             println!(
-                "    m {m} area {:.3} n {:.2} at ({:.2},{:.2},{:.2}) tris {}: direct {:.3} prog {:.3} hier {:.3} ref {:.3}",
-                mesh.area(),
-                poly.frame.n,
-                x.x,
-                x.y,
-                x.z,
-                mesh.triangles.len(),
+                "    {}: direct {:.3} progressive {:.3} hierarchical {:.3} reference {:.3}",
+                place(m, v),
                 luminance(p.solution.direct[m][v]),
                 lum(p, m, v),
                 lum(h, m, v),
