@@ -160,7 +160,6 @@ fn vertex_reference(
         .and_then(|v| v.parse().ok())
         .unwrap_or(2000usize);
     let stride = total.div_ceil(wanted.max(1)).max(1);
-    let worst: Vec<(usize, usize)> = diffs.iter().take(20).map(|d| (d.1, d.2)).collect();
     let mut picked: Vec<(usize, usize)> = Vec::new();
     let mut k = 0usize;
     // Vertices inside closed geometry (the floor under a box) are never seen, and the path
@@ -173,11 +172,15 @@ fn vertex_reference(
         .iter()
         .map(|m| penumbra::solve::evaluation_points(scene, &vis, m))
         .collect();
+    let is_buried = |m: usize, v: usize| {
+        let at = &points[m][v];
+        vis.buried(at.ray_origin - at.n * vis.epsilon(), at.n)
+    };
     let mut buried = 0usize;
-    for (m, mesh_points) in points.iter().enumerate() {
-        for (v, at) in mesh_points.iter().enumerate() {
+    for (m, mesh) in p.meshes.iter().enumerate() {
+        for v in 0..mesh.vertices.len() {
             if k.is_multiple_of(stride) {
-                if vis.buried(at.ray_origin - at.n * vis.epsilon(), at.n) {
+                if is_buried(m, v) {
                     buried += 1;
                 } else {
                     picked.push((m, v));
@@ -187,6 +190,12 @@ fn vertex_reference(
         }
     }
     let sampled = picked.len();
+    let worst: Vec<(usize, usize)> = diffs
+        .iter()
+        .map(|d| (d.1, d.2))
+        .filter(|&(m, v)| !is_buried(m, v))
+        .take(20)
+        .collect();
     picked.extend(&worst);
     let samples: Vec<Vec<penumbra::light::SurfacePoint>> =
         picked.iter().map(|&(m, v)| vec![points[m][v]]).collect();

@@ -78,59 +78,56 @@ fn main() -> anyhow::Result<()> {
         .and_then(|v| v.parse::<usize>().ok())
         && let Some(e) = h.elements.iter().position(|e| e.polygon == poly)
     {
-        {
-            let leaf = h.leaf[e];
-            let covers = |n: &penumbra::solve::hierarchical::Node| {
-                (n.lo as usize..n.hi as usize).contains(&e)
-            };
-            let mut sum = 0.0;
-            for l in &links {
-                let r = &h.nodes[l.receiver as usize];
-                if !covers(r) {
-                    continue;
-                }
-                let s = &h.nodes[l.source as usize];
-                sum += l.k;
-                // The element's own transfer from the source's elements: exact form factors
-                // from its centroid, one shadow ray per source element.
-                let el = &h.elements[e];
-                let c = (el.p[0] + el.p[1] + el.p[2]) / 3.0;
-                let at = SurfacePoint::new(c, el.normal, el.polygon, &vis);
-                let mut exact = 0.0;
-                for src in &h.elements[s.lo as usize..s.hi as usize] {
-                    let f = penumbra::geometry::point_polygon_form_factor(c, el.normal, &src.p);
-                    let cs = (src.p[0] + src.p[1] + src.p[2]) / 3.0;
-                    let from = SurfacePoint::new(cs, src.normal, src.polygon, &vis);
-                    if f > 0.0
-                        && src.normal.dot(c - cs) > 0.0
-                        && !vis.occluded_skipping(
-                            at.ray_origin,
-                            from.ray_origin,
-                            [el.polygon, src.polygon],
-                        )
-                    {
-                        exact += f;
-                    }
-                }
-                if (exact - l.k).abs() < 2e-3 {
-                    continue;
-                }
-                println!(
-                    "  link {} <- {}: receiver polygon {} ({} elements), source polygon {} ({} elements, area {:.2}, centre {:.2}), k {:.4}",
-                    l.receiver,
-                    l.source,
-                    r.polygon as i64,
-                    r.hi - r.lo,
-                    s.polygon as i64,
-                    s.hi - s.lo,
-                    s.area,
-                    s.center,
-                    l.k
-                );
-                println!("      the element's own: {exact:.4}");
+        let leaf = h.leaf[e];
+        let covers =
+            |n: &penumbra::solve::hierarchical::Node| (n.lo as usize..n.hi as usize).contains(&e);
+        let mut sum = 0.0;
+        for l in &links {
+            let r = &h.nodes[l.receiver as usize];
+            if !covers(r) {
+                continue;
             }
-            println!("  element {e} (leaf {leaf}): sum of k {sum:.4}");
+            let s = &h.nodes[l.source as usize];
+            sum += l.k;
+            // The element's own transfer from the source's elements: exact form factors
+            // from its centroid, one shadow ray per source element.
+            let el = &h.elements[e];
+            let c = (el.p[0] + el.p[1] + el.p[2]) / 3.0;
+            let at = SurfacePoint::new(c, el.normal, el.polygon, &vis);
+            let mut exact = 0.0;
+            for src in &h.elements[s.lo as usize..s.hi as usize] {
+                let f = penumbra::geometry::point_polygon_form_factor(c, el.normal, &src.p);
+                let cs = (src.p[0] + src.p[1] + src.p[2]) / 3.0;
+                let from = SurfacePoint::new(cs, src.normal, src.polygon, &vis);
+                if f > 0.0
+                    && src.normal.dot(c - cs) > 0.0
+                    && !vis.occluded_skipping(
+                        at.ray_origin,
+                        from.ray_origin,
+                        [el.polygon, src.polygon],
+                    )
+                {
+                    exact += f;
+                }
+            }
+            if (exact - l.k).abs() < 2e-3 {
+                continue;
+            }
+            println!(
+                "  link {} <- {}: receiver polygon {} ({} elements), source polygon {} ({} elements, area {:.2}, centre {:.2}), k {:.4}",
+                l.receiver,
+                l.source,
+                r.polygon as i64,
+                r.hi - r.lo,
+                s.polygon as i64,
+                s.hi - s.lo,
+                s.area,
+                s.center,
+                l.k
+            );
+            println!("      the element's own: {exact:.4}");
         }
+        println!("  element {e} (leaf {leaf}): sum of k {sum:.4}");
     }
     // Reflecting receivers: the polygons of the hierarchy with reflectance.
     let mut reflects = vec![false; b.scene.polygons.len()];
