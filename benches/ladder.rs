@@ -21,6 +21,15 @@
 //!   directory, removed at the end).
 //! * `--bin PATH`: the `penumbra` binary (default: the one `cargo bench` builds with this
 //!   bench, `target/release/penumbra`).
+//! * `--real DIR` (or the `PENUMBRA_REAL_SCENES` environment variable): a folder of real
+//!   third-party scenes; `real_city_florence.glb` and `real_city_munich_lamps.glb`, when there,
+//!   join the ladder as the rungs `florence` and `munich-lamps` (skipped when absent).
+//! * `--accuracy SPP`: after each bake, `penumbra reference OUT --spp SPP --against` the bake's
+//!   float lightmap: the RMSE (reference noise removed), bias and noise relative to the mean,
+//!   overall and by region (ground, roof, wall; lit, shadow), as `penumbra reference --against`
+//!   defines them.
+//!
+//! The first rung is `demo`, the shipped `fixtures/cornell-box.glb`.
 //!
 //! Each bake runs `penumbra bake IN OUT --stats stats.json --quiet [--solver S] [ARGS]` with the
 //! default options otherwise; the bench measures the child's wall time and peak resident
@@ -61,6 +70,75 @@ struct Options {
     title: String,
     keep: Option<PathBuf>,
     bin: PathBuf,
+    real: Option<PathBuf>,
+    accuracy: Option<u32>,
+}
+
+/// The folder of real scenes (`--real`), for the file rungs' generators.
+static REAL: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+
+fn read_real(name: &str) -> Vec<u8> {
+    let dir = REAL.get().expect("--real is set before the real rungs run");
+    std::fs::read(dir.join(name)).expect("cannot read the real scene")
+}
+
+fn demo() -> Vec<u8> {
+    std::fs::read(Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/cornell-box.glb"))
+        .expect("cannot read fixtures/cornell-box.glb")
+}
+
+fn florence() -> Vec<u8> {
+    read_real("real_city_florence.glb")
+}
+
+fn munich_lamps() -> Vec<u8> {
+    read_real("real_city_munich_lamps.glb")
+}
+
+/// The rungs that are files: the demo first, the real scenes (in `o.real`, when present) last.
+fn file_rungs(o: &Options) -> (Vec<LadderScene>, Vec<LadderScene>) {
+    let first = vec![LadderScene {
+        name: "demo",
+        description: "the shipped demo: a Cornell box under its area light",
+        triangles: 36,
+        generate: demo,
+    }];
+    let mut last = Vec::new();
+    if let Some(dir) = &o.real {
+        let _ = REAL.set(dir.clone());
+        let real = [
+            (
+                "florence",
+                "real OpenStreetMap city (Florence) under a sun",
+                35_373,
+                "real_city_florence.glb",
+                florence as fn() -> Vec<u8>,
+            ),
+            (
+                "munich-lamps",
+                "real OpenStreetMap city (Munich) under 64 lamp panels",
+                39_064,
+                "real_city_munich_lamps.glb",
+                munich_lamps,
+            ),
+        ];
+        for (name, description, triangles, file, generate) in real {
+            if dir.join(file).is_file() {
+                last.push(LadderScene {
+                    name,
+                    description,
+                    triangles,
+                    generate,
+                });
+            } else {
+                eprintln!(
+                    "{} is absent: rung {name} skipped",
+                    dir.join(file).display()
+                );
+            }
+        }
+    }
+    (first, last)
 }
 
 fn options() -> Options {
@@ -73,6 +151,8 @@ fn options() -> Options {
         title: "Run".into(),
         keep: None,
         bin: PathBuf::from(env!("CARGO_BIN_EXE_penumbra")),
+        real: std::env::var_os("PENUMBRA_REAL_SCENES").map(PathBuf::from),
+        accuracy: None,
     };
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
@@ -100,6 +180,8 @@ fn options() -> Options {
             "--title" => o.title = value(),
             "--keep" => o.keep = Some(PathBuf::from(value())),
             "--bin" => o.bin = PathBuf::from(value()),
+            "--real" => o.real = Some(PathBuf::from(value())),
+            "--accuracy" => o.accuracy = Some(value().parse().expect("--accuracy SPP")),
             _ => {} // `cargo bench` passes --bench; filters are not supported.
         }
     }
@@ -128,11 +210,18 @@ struct Row {
     peak_rss_mib: f64,
     outcome: Outcome,
     stats: Option<Value>,
+    /// `penumbra reference --against`'s `accuracy` (with `--accuracy`).
+    accuracy: Option<Value>,
 }
 
 fn main() {
     let o = options();
-    let all = ladder::ladder();
+    let (first, last) = file_rungs(&o);
+    let all: Vec<LadderScene> = first
+        .into_iter()
+        .chain(ladder::ladder())
+        .chain(last)
+        .collect();
     let rungs: Vec<LadderScene> = if o.scenes.is_empty() {
         all.clone()
     } else {
@@ -218,6 +307,7 @@ fn bake(
     let output = dir.join(format!("{}.baked.glb", rung.name));
     let stats_path = dir.join(format!("{}.stats.json", rung.name));
     let stderr_path = dir.join(format!("{}.stderr.txt", rung.name));
+    let exr_path = dir.join(format!("{}.exr", rung.name));
     let _ = std::fs::remove_file(&stats_path);
     let stderr = std::fs::File::create(&stderr_path).expect("cannot create the stderr file");
     let started = Instant::now();
@@ -228,6 +318,12 @@ fn bake(
         .arg("--stats")
         .arg(&stats_path)
         .arg("--quiet")
+        .args(
+            o.accuracy
+                .map(|_| ["--exr".into(), exr_path.clone()])
+                .into_iter()
+                .flatten(),
+        )
         .args(&o.extra)
         .stdin(Stdio::null())
         .stdout(Stdio::null())
@@ -287,6 +383,10 @@ fn bake(
         .as_ref()
         .and_then(|s| s["triangles"].as_u64())
         .map_or(triangles, |t| t as usize);
+    let accuracy = match (o.accuracy, &outcome) {
+        (Some(spp), Outcome::Ok) => accuracy(o, dir, rung, &output, &exr_path, spp),
+        _ => None,
+    };
     Row {
         name: rung.name,
         description: rung.description,
@@ -296,7 +396,51 @@ fn bake(
         peak_rss_mib,
         outcome,
         stats,
+        accuracy,
     }
+}
+
+/// `penumbra reference BAKED --spp SPP --against EXR`'s accuracy, or `None` when it failed.
+fn accuracy(
+    o: &Options,
+    dir: &Path,
+    rung: &LadderScene,
+    baked: &Path,
+    exr: &Path,
+    spp: u32,
+) -> Option<Value> {
+    let stats = dir.join(format!("{}.reference.json", rung.name));
+    let status = Command::new(&o.bin)
+        .arg("reference")
+        .arg(baked)
+        .arg("--out")
+        .arg(dir.join(format!("{}.reference.exr", rung.name)))
+        .arg("--spp")
+        .arg(spp.to_string())
+        .arg("--against")
+        .arg(exr)
+        .arg("--stats")
+        .arg(&stats)
+        .arg("--quiet")
+        .args(sky_of(&o.extra))
+        .stdin(Stdio::null())
+        .status()
+        .ok()?;
+    if !status.success() {
+        eprintln!("{}: the reference failed ({status})", rung.name);
+        return None;
+    }
+    let json: Value = serde_json::from_slice(&std::fs::read(&stats).ok()?).ok()?;
+    Some(json["accuracy"].clone())
+}
+
+/// The `--sky R,G,B` among the bake's extra arguments, for the reference to match.
+fn sky_of(extra: &[String]) -> Vec<String> {
+    extra
+        .windows(2)
+        .find(|w| w[0] == "--sky")
+        .map(|w| w.to_vec())
+        .unwrap_or_default()
 }
 
 /// The first line of stderr; for a panic, the `panicked at` line and the message after it.
@@ -463,6 +607,48 @@ fn report(
         );
     }
     let _ = writeln!(w);
+
+    // Accuracy.
+    if rows.iter().any(|r| r.accuracy.is_some()) {
+        const REGIONS: [&str; 6] = [
+            "ground-lit",
+            "ground-shadow",
+            "roof-lit",
+            "roof-shadow",
+            "wall-lit",
+            "wall-shadow",
+        ];
+        let _ = writeln!(
+            w,
+            "### Accuracy against `penumbra reference` (RMSE, reference noise removed, % of the mean)\n"
+        );
+        let _ = write!(w, "| scene | RMSE | bias | noise |");
+        for r in REGIONS {
+            let _ = write!(w, " {r} |");
+        }
+        let _ = writeln!(w);
+        let _ = writeln!(w, "|---|--:|--:|--:|{}", "--:|".repeat(REGIONS.len()));
+        let pct = |v: &Value| {
+            v.as_f64()
+                .map_or("-".into(), |x| format!("{:.1}", 100.0 * x))
+        };
+        for r in rows {
+            let Some(a) = &r.accuracy else { continue };
+            let _ = write!(
+                w,
+                "| {} | {} | {} | {} |",
+                r.name,
+                pct(&a["all"]["rmse"]),
+                pct(&a["all"]["bias"]),
+                pct(&a["all"]["noise"])
+            );
+            for g in REGIONS {
+                let _ = write!(w, " {} |", pct(&a["regions"][g]["rmse"]));
+            }
+            let _ = writeln!(w);
+        }
+        let _ = writeln!(w);
+    }
 
     // Counts.
     let _ = writeln!(w, "### Counts\n");

@@ -202,6 +202,7 @@ fn vertex_reference(
     let layout = TexelLayout {
         width: samples.len() as u32,
         height: 1,
+        pages: 1,
         supersample: 1,
         samples,
     };

@@ -26,6 +26,7 @@
 //! `d` is below [`CompareOptions::contact_texels`] texel widths; otherwise *lit* `V > 0.995`,
 //! *umbra* `V < 0.005`, *penumbra* between; *indirect* where no emitter faces the texel at all.
 
+pub mod accuracy;
 pub mod chart;
 pub mod pictures;
 

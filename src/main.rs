@@ -137,6 +137,11 @@ struct ReferenceArgs {
     /// Worker threads [default: all cores]. The output does not depend on it.
     #[arg(long)]
     threads: Option<usize>,
+    /// The bake's float lightmap (`bake --exr`; further pages beside it as the bake names them):
+    /// print its error against the reference, overall and by region (ground, roof, wall; lit,
+    /// shadow), and add it to --stats as `accuracy`.
+    #[arg(long, value_name = "EXR")]
+    against: Option<PathBuf>,
     /// Print nothing on success.
     #[arg(long, short)]
     quiet: bool,
@@ -419,11 +424,24 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
         supersample: args.supersample,
         sky: sky_radiance(args.sky.as_deref())?,
     };
-    let map = pool.install(|| penumbra::reference::reference(&gltf, &options))?;
+    let (map, layout) =
+        pool.install(|| penumbra::reference::reference_and_layout(&gltf, &options))?;
     let mut staged = penumbra::files::Staged::new();
     staged.add(&paths[0], &map.exr_bytes()?)?;
     let summary = map.summary();
     let seconds = start.elapsed().as_secs_f64();
+    let accuracy = match &args.against {
+        Some(exr) => {
+            let bake = penumbra::compare::accuracy::read_lightmap(
+                exr,
+                map.width,
+                map.height,
+                layout.pages,
+            )?;
+            Some(penumbra::compare::accuracy::measure(&bake, &map, &layout))
+        }
+        None => None,
+    };
     if !args.quiet {
         eprintln!(
             "reference {} -> {}: {}x{} lightmap, {} covered texels, {} spp, \
@@ -446,7 +464,20 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
         json["supersample"] = args.supersample.into();
         json["sky"] = options.sky.to_array().to_vec().into();
         json["seconds"] = seconds.into();
+        if let Some(a) = &accuracy {
+            json["accuracy"] = serde_json::to_value(a)?;
+        }
         staged.add(&paths[1], &serde_json::to_vec_pretty(&json)?)?;
+    }
+    if let Some(a) = &accuracy
+        && !args.quiet
+    {
+        use std::io::Write;
+        let _ = write!(
+            std::io::stderr(),
+            "{}",
+            penumbra::compare::accuracy::text(a)
+        );
     }
     staged.commit()?;
     Ok(())

@@ -1029,7 +1029,6 @@ fn line_spacing(scene: &Scene, budget: usize) -> (f64, f64) {
 /// element budget leaves room above it (`bake::element_budget`), and the discontinuity mesher
 /// gives its wedges a share of what is left above it ([`DM_SHARE`]).
 pub fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
-    let (snap, clearance) = line_spacing(scene, budget);
     let d0: Vec<Vec<Segment>> = segments
         .iter()
         .map(|segs| {
@@ -1039,6 +1038,16 @@ pub fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -
                 .collect()
         })
         .collect();
+    lines_floor(scene, &d0, budget)
+}
+
+/// The elements the geometry and every one of `segments` take at `budget`: as
+/// [`geometry_floor`], with the wedge pieces too. The default element budget stays above it
+/// (`bake::element_budget`), so that no line the discontinuity stage kept is dropped for the
+/// budget and the open areas between the lines are refined all the same.
+pub fn lines_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
+    let (snap, clearance) = line_spacing(scene, budget);
+    let d0 = segments;
     let coarsest = element_area(scene, budget) * COARSEST;
     element_count(&mesh_at(scene, coarsest, &|i, area, cap| {
         // As the mesher that asks meshes: the uniform mesher with no lines at all.

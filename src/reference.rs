@@ -172,7 +172,10 @@ impl ReferenceMap {
 #[derive(Clone, Debug)]
 pub struct TexelLayout {
     pub width: u32,
+    /// Height of all pages together, texels.
     pub height: u32,
+    /// Lightmap pages, stacked top to bottom in page order.
+    pub pages: u32,
     /// Sub-samples per texel side.
     pub supersample: u32,
     /// Per texel (row-major, top row first), its covered sub-samples: the world point on the
@@ -346,6 +349,7 @@ pub fn texel_layout(
     // Sub-sample order within a texel follows triangle order; sort by sub-sample is not needed
     // for the estimate, but keep it deterministic (it is: triangles come in scene order).
     Ok(TexelLayout {
+        pages: pages as u32,
         width: w,
         height: h,
         supersample,
@@ -664,6 +668,14 @@ fn cosine_direction(n: DVec3, rng: &mut SplitMix64) -> DVec3 {
 /// file itself, reads the layout with [`texel_layout`], and path-traces every covered texel in
 /// parallel over rows.
 pub fn reference(gltf: &Gltf, options: &ReferenceOptions) -> Result<ReferenceMap> {
+    reference_and_layout(gltf, options).map(|(map, _)| map)
+}
+
+/// [`reference`](fn@reference), with the texel layout it traced (for measures by region).
+pub fn reference_and_layout(
+    gltf: &Gltf,
+    options: &ReferenceOptions,
+) -> Result<(ReferenceMap, TexelLayout)> {
     if !(1..=1_000_000).contains(&options.spp) {
         return Err(Error::Option {
             option: "--spp",
@@ -677,7 +689,8 @@ pub fn reference(gltf: &Gltf, options: &ReferenceOptions) -> Result<ReferenceMap
     let scene = load::scene(gltf)?;
     let vis = Visibility::new(&scene);
     let layout = texel_layout(gltf, &scene, &vis, options.supersample)?;
-    Ok(reference_with(&scene, &vis, &layout, options))
+    let map = reference_with(&scene, &vis, &layout, options);
+    Ok((map, layout))
 }
 
 /// [`reference`](fn@reference) on an already loaded scene and layout.
