@@ -624,13 +624,14 @@ pub struct Budget {
 ///   `texels_per_unit` (the bake passes the atlas's first estimate of its density, so that the
 ///   mesh need not wait for the final packing: within a few percent of the final density),
 /// * [`ELEMENTS_PER_TRIANGLE`] per input triangle,
-/// * [`ELEMENTS_PER_TRIANGLE`] per element the geometry itself takes, `geometry_floor(b)`
-///   ([`mesh::geometry_floor`]; called only for a default budget) at `b`, the larger of the
-///   first two within [`DEFAULT_BUDGET`] and at least the triangle count: thin boards and
-///   walls with doors are refined for their angles, and on a house interior this took more
-///   than 1.5 elements per input triangle, which left the discontinuities no share of the
-///   budget at all. (At the budget it raises to, the floor is a little higher again, so the
-///   lines' share is a little below what 1.5 suggests),
+/// * [`ELEMENTS_PER_TRIANGLE`] per element that the geometry and its discontinuity lines take,
+///   `geometry_floor(b)` (the bake passes [`mesh::lines_floor`]; called only for a default
+///   budget) at `b`, the larger of the first two within [`DEFAULT_BUDGET`] and at least the
+///   triangle count; counted again at the budget it raised to, up to [`FLOOR_PASSES`] times,
+///   since the floor grows with the budget (closer lines crowd each other less). Thin boards
+///   and walls with doors are refined for their angles (on a house interior more than 1.5
+///   elements per input triangle), and a real city's ground holds thousands of lines: below
+///   this the lines are dropped for the budget and the surfaces between them go unrefined,
 ///
 /// within [`DEFAULT_BUDGET`]. Either way at least the input's own triangle count: the mesh can
 /// hardly have fewer elements than the geometry.

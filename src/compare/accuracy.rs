@@ -281,7 +281,8 @@ mod tests {
         assert!((r.regions["roof-shadow"].rmse - 0.25).abs() < 1e-12);
         assert!((r.regions["roof-shadow"].share - 0.25 / 0.26).abs() < 1e-12);
         assert_eq!(r.regions["ground-lit"].rmse, 0.0);
-        assert_eq!(r.regions["wall-shadow"].rmse, 0.0);
+        // Its error is all noise (up to rounding).
+        assert!(r.regions["wall-shadow"].rmse < 1e-6);
         assert_eq!(r.regions.len(), 3);
     }
 }
