@@ -43,6 +43,9 @@ pub struct BakeOptions {
     /// How the output lightmaps the two sides of a double-sided surface (both are solved
     /// either way).
     pub double_sided: DoubleSided,
+    /// Resource limits, and the folders besides the input's own that its URIs may name files
+    /// in ([`load::uri`]).
+    pub load: load::LoadOptions,
 }
 
 /// What the output does with the back side of a double-sided primitive (`--double-sided`).
@@ -93,6 +96,7 @@ impl Default for BakeOptions {
             supersample: 4,
             seams: Seams::Stitch,
             double_sided: DoubleSided::Separate,
+            load: load::LoadOptions::default(),
         }
     }
 }
@@ -423,7 +427,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
 /// chart's outline within a page ([`AtlasOptions`]). The cut triangles go into the output with
 /// interpolated attributes.
 fn scene_for(gltf: &Gltf, options: &BakeOptions) -> Result<(Scene, scene::cut::Cut)> {
-    let mut scene = load::scene(gltf)?;
+    let mut scene = load::scene_limited(gltf, &options.load.limits)?;
     let cut = match (options.texels_per_unit, options.resolution) {
         (Some(tpu), None) => {
             // An atlas too large for any page count is refused before anything is cut.
@@ -815,7 +819,9 @@ pub fn bake_file(
 ) -> Result<Bake> {
     let start = std::time::Instant::now();
     let mut read_time = 0.0;
-    let gltf = stage(&mut read_time, "read", progress, || load::read(input))?;
+    let gltf = stage(&mut read_time, "read", progress, || {
+        load::read_with(input, &options.load)
+    })?;
     let mut named: Vec<(&'static str, &Path)> = vec![("OUT", &outputs.glb)];
     if let Some(exr) = &outputs.exr {
         named.push(("--exr", exr));

@@ -19,7 +19,24 @@ use gltf::mesh::Mode;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+mod limits;
+pub mod uri;
 mod validate;
+
+pub use limits::{
+    DEFAULT_IMAGE_MIB, DEFAULT_IMAGE_SIDE, DEFAULT_INPUT_MIB, DEFAULT_INSTANCES, DEFAULT_NODES,
+    DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, Limits, MIB,
+};
+
+/// What the loader is told: the resource limits, and the folders besides the input's own that
+/// its URIs may name files in.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LoadOptions {
+    pub limits: Limits,
+    /// Folders whose files a URI may name besides the input's own folder (`--allow-outside
+    /// DIR`); see [`uri`].
+    pub allow_outside: Vec<PathBuf>,
+}
 
 /// A parsed glTF file with its buffer data, kept whole so the writer can preserve everything.
 pub struct Gltf {
@@ -32,6 +49,8 @@ pub struct Gltf {
     /// The JSON as written in the file, key order kept: the writer edits this, so everything it
     /// does not touch (extensions, extras, unknown properties) survives as it was.
     pub json: serde_json::Value,
+    /// The limits and folders it was read with; its images are read and decoded with them too.
+    pub options: LoadOptions,
 }
 
 /// Required extensions that change how geometry is stored or instanced, which this loader does
@@ -42,17 +61,36 @@ pub const UNREADABLE_EXTENSIONS: [&str; 3] = [
     "EXT_mesh_gpu_instancing",
 ];
 
-/// Reads and parses a `.glb` or `.gltf` file and all of its buffers.
+/// Reads and parses a `.glb` or `.gltf` file and all of its buffers, with the default
+/// [`LoadOptions`].
 pub fn read(path: &Path) -> Result<Gltf> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Read {
+    read_with(path, &LoadOptions::default())
+}
+
+/// Reads and parses a `.glb` or `.gltf` file and all of its buffers, at most
+/// [`Limits::input_bytes`] from each file.
+pub fn read_with(path: &Path, options: &LoadOptions) -> Result<Gltf> {
+    let file = std::fs::File::open(path).map_err(|source| Error::Read {
         path: path.to_path_buf(),
         source,
     })?;
-    from_bytes(bytes, path)
+    let bytes = uri::read_limited(file, options.limits.input_bytes, "--max-input-mib", path)
+        .map_err(|reason| Error::NotGltf {
+            path: path.to_path_buf(),
+            reason,
+        })?;
+    from_bytes_with(bytes, path, options)
 }
 
-/// Parses glTF bytes; `path` names the file in messages and anchors relative URIs.
+/// Parses glTF bytes with the default [`LoadOptions`]; `path` names the file in messages and
+/// anchors relative URIs.
 pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
+    from_bytes_with(bytes, path, &LoadOptions::default())
+}
+
+/// Parses glTF bytes; `path` names the file in messages and anchors relative URIs, which may
+/// name files only in its folder and `options.allow_outside` ([`uri`]).
+pub fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions) -> Result<Gltf> {
     let not_gltf = |reason: String| Error::NotGltf {
         path: path.to_path_buf(),
         reason,
@@ -80,6 +118,11 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
         item: e.item,
         reason: e.reason,
     })?;
+    limits::check_counts(&json, &options.limits).map_err(|e| Error::BadItem {
+        path: path.to_path_buf(),
+        item: e.item,
+        reason: e.reason,
+    })?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| not_gltf(e.to_string()))?;
     // Extensions whose geometry this loader cannot read: baking the fallback-less data would
     // give garbage, so say so.
@@ -97,6 +140,9 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
     let mut blob = gltf.blob;
     let document = gltf.document;
     let mut buffers = Vec::new();
+    // What the input and its buffer files hold together: each file is read within the limit
+    // that is left.
+    let mut total = bytes.len() as u64;
     for buffer in document.buffers() {
         let item = format!("buffer {}", buffer.index());
         let data = match buffer.source() {
@@ -105,7 +151,18 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
                 item: item.clone(),
                 reason: "refers to the GLB binary chunk, which is missing".into(),
             })?,
-            gltf::buffer::Source::Uri(uri) => read_uri(path, uri, &item)?,
+            gltf::buffer::Source::Uri(uri) => {
+                let left = LoadOptions {
+                    limits: Limits {
+                        input_bytes: options.limits.input_bytes.saturating_sub(total),
+                        ..options.limits.clone()
+                    },
+                    allow_outside: options.allow_outside.clone(),
+                };
+                let data = read_uri(path, uri, &item, &left)?;
+                total += data.len() as u64;
+                data
+            }
         };
         if data.len() < buffer.length() {
             return Err(Error::BadItem {
@@ -125,11 +182,19 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
         document,
         buffers,
         json,
+        options: options.clone(),
     })
 }
 
-/// Reads the bytes behind a URI: a base64 data URI or a file relative to the glTF file.
-pub fn read_uri(gltf_path: &Path, uri: &str, item: &str) -> Result<Vec<u8>> {
+/// Reads the bytes behind a URI: a base64 data URI, or a regular file relative to the glTF
+/// file, inside its folder or `options.allow_outside` ([`uri`]), of at most
+/// [`Limits::input_bytes`].
+pub fn read_uri(
+    gltf_path: &Path,
+    uri: &str,
+    item: &str,
+    options: &LoadOptions,
+) -> Result<Vec<u8>> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest.split_once(";base64,").ok_or_else(|| Error::BadItem {
             path: gltf_path.to_path_buf(),
@@ -145,15 +210,17 @@ pub fn read_uri(gltf_path: &Path, uri: &str, item: &str) -> Result<Vec<u8>> {
             });
     }
     let decoded = percent_decode(uri);
-    let file = gltf_path
-        .parent()
-        .unwrap_or_else(|| Path::new("."))
-        .join(decoded);
-    std::fs::read(&file).map_err(|source| Error::BadItem {
+    let refuse = |reason: String| Error::BadItem {
         path: gltf_path.to_path_buf(),
         item: item.to_string(),
-        reason: format!("cannot read {}: {source}", file.display()),
-    })
+        reason: format!("URI {uri:?} {reason}"),
+    };
+    let confinement = uri::Confinement {
+        allow: &options.allow_outside,
+    };
+    let file = confinement.resolve(gltf_path, &decoded).map_err(refuse)?;
+    let handle = uri::open_regular(&file).map_err(refuse)?;
+    uri::read_limited(handle, options.limits.input_bytes, "--max-input-mib", &file).map_err(refuse)
 }
 
 fn percent_decode(uri: &str) -> String {
@@ -176,6 +243,23 @@ fn percent_decode(uri: &str) -> String {
 }
 
 impl Gltf {
+    /// The bytes behind one of this file's URIs ([`read_uri`] with the options it was read
+    /// with).
+    pub fn uri_bytes(&self, uri: &str, item: &str) -> Result<Vec<u8>> {
+        read_uri(&self.path, uri, item, &self.options)
+    }
+
+    /// Decodes an image within [`Limits::image_side`] and [`Limits::image_bytes`]: `Ok(Err)`
+    /// says why it cannot be decoded (not an image, a format not built in), an error naming
+    /// `item` that it is past a limit.
+    pub fn decode_image(
+        &self,
+        bytes: &[u8],
+        item: &str,
+    ) -> Result<std::result::Result<image::DynamicImage, String>> {
+        limits::decode_image(bytes, &self.options.limits).map_err(|reason| self.bad(item, reason))
+    }
+
     /// Every file a bake of this glTF reads: the file itself, and the external buffers and
     /// images its URIs name (an output must be none of them).
     pub fn files_read(&self) -> Vec<PathBuf> {
@@ -387,8 +471,15 @@ fn read_strided(
 }
 
 /// Loads the static scene: every node of the default scene (or the first scene), with world
-/// transforms, materials, area emitters and punctual lights.
+/// transforms, materials, area emitters and punctual lights, within the limits `gltf` was read
+/// with.
 pub fn scene(gltf: &Gltf) -> Result<Scene> {
+    scene_limited(gltf, &gltf.options.limits)
+}
+
+/// [`scene`] within `limits`: the instances and the triangles are counted as the node graph is
+/// walked, before each primitive's geometry is read.
+pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     let doc = &gltf.document;
     let mut scene = Scene::default();
     let mut textures = TextureMeans::default();
@@ -417,6 +508,7 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
         gscene.nodes().map(|n| (n, DMat4::IDENTITY, 0)).collect();
     stack.reverse();
     let mut lights_seen = 0;
+    let (mut instances, mut triangles) = (0usize, 0usize);
     let mut visited = vec![false; doc.nodes().len()];
     while let Some((node, parent, depth)) = stack.pop() {
         // glTF node graphs are strict trees: a node reached twice is a cycle or a shared child,
@@ -448,6 +540,37 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
                 ));
             } else {
                 for prim in mesh.primitives() {
+                    instances += 1;
+                    triangles = triangles.saturating_add(triangles_at_most(&prim));
+                    let item = || {
+                        format!(
+                            "node {} (mesh {}{} primitive {})",
+                            node.index(),
+                            mesh.index(),
+                            name_suffix(mesh.name()),
+                            prim.index()
+                        )
+                    };
+                    if instances > limits.instances {
+                        return Err(gltf.bad(
+                            item(),
+                            format!(
+                                "the scene places more than {} mesh instances (primitives \
+                                 placed by nodes; --max-instances raises the limit)",
+                                limits.instances
+                            ),
+                        ));
+                    }
+                    if triangles > limits.triangles {
+                        return Err(gltf.bad(
+                            item(),
+                            format!(
+                                "the scene's instances hold more than {} triangles \
+                                 (--max-triangles raises the limit)",
+                                limits.triangles
+                            ),
+                        ));
+                    }
                     add_primitive(
                         gltf,
                         &mut scene,
@@ -685,6 +808,21 @@ fn add_primitive(
     Ok(())
 }
 
+/// The most triangles a primitive can hold, from its accessors' counts (before reading them).
+fn triangles_at_most(prim: &gltf::Primitive) -> usize {
+    let count = match prim.indices() {
+        Some(acc) => acc.count(),
+        None => prim
+            .get(&gltf::Semantic::Positions)
+            .map_or(0, |acc| acc.count()),
+    };
+    match prim.mode() {
+        Mode::Triangles => count / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => count.saturating_sub(2),
+        _ => 0,
+    }
+}
+
 /// Expands strips and fans into a triangle list (glTF winding rules).
 fn triangle_list(mode: Mode, raw: &[u32]) -> Vec<u32> {
     let mut out = Vec::new();
@@ -808,10 +946,10 @@ impl TextureMeans {
         let item = format!("image {index}{}", name_suffix(image.name()));
         let bytes = match image.source() {
             gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, &item)?.to_vec(),
-            gltf::image::Source::Uri { uri, .. } => read_uri(&gltf.path, uri, &item)?,
+            gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, &item)?,
         };
-        let mean = match image::load_from_memory(&bytes) {
-            Ok(img) => {
+        let mean = match gltf.decode_image(&bytes, &item) {
+            Ok(Ok(img)) => {
                 let rgb = img.to_rgb32f();
                 let mut sum = DVec3::ZERO;
                 for p in rgb.pixels() {
@@ -824,12 +962,13 @@ impl TextureMeans {
                 let n = (rgb.width() as f64 * rgb.height() as f64).max(1.0);
                 sum / n
             }
-            Err(e) => {
+            Ok(Err(e)) => {
                 self.warnings.push(format!(
                     "{item}: cannot decode ({e}); its mean colour is taken as white"
                 ));
                 DVec3::ONE
             }
+            Err(e) => return Err(e),
         };
         self.cache.insert(index, mean);
         Ok(mean)
