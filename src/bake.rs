@@ -266,15 +266,21 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             if failed() {
                 return None;
             }
-            let (segments, meshes) = mesh_scene(
-                scene,
-                vis,
-                options,
-                texels_per_unit,
-                traced,
-                &mut stats,
-                progress,
-            );
+            let meshed = catch_mesh_failure(gltf, scene, || {
+                mesh_scene(
+                    scene,
+                    vis,
+                    options,
+                    texels_per_unit,
+                    traced,
+                    &mut stats,
+                    progress,
+                )
+            });
+            let (segments, meshes) = match meshed {
+                Ok(meshed) => meshed,
+                Err(e) => return Some(Err(e)),
+            };
             if meshes.iter().all(|m| m.triangles.is_empty()) {
                 return Some(Err(Error::EmptyScene {
                     path: gltf.path.clone(),
@@ -772,16 +778,46 @@ pub fn meshes(
     if options.budget.is_none() {
         scene_atlas(gltf, &scene, options, &mut |t| texels_per_unit = t)?;
     }
-    let (segments, meshes) = mesh_scene(
-        &scene,
-        &vis,
-        options,
-        texels_per_unit,
-        None,
-        &mut Stats::default(),
-        &|_, _, _| {},
-    );
+    let (segments, meshes) = catch_mesh_failure(gltf, &scene, || {
+        mesh_scene(
+            &scene,
+            &vis,
+            options,
+            texels_per_unit,
+            None,
+            &mut Stats::default(),
+            &|_, _, _| {},
+        )
+    })?;
     Ok((scene, segments, meshes))
+}
+
+/// Runs `f` (the mesh stage), turning a triangulation's panic ([`crate::mesh::MeshFailure`])
+/// into an error that names the polygon and its glTF item. Other panics unwind on.
+fn catch_mesh_failure<R>(gltf: &Gltf, scene: &Scene, f: impl FnOnce() -> R) -> Result<R> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => Ok(r),
+        Err(payload) => match payload.downcast::<crate::mesh::MeshFailure>() {
+            Ok(failure) => {
+                let within = scene
+                    .polygons
+                    .get(failure.polygon)
+                    .and_then(|p| scene.instances.get(p.instance))
+                    .map(|i| format!(" of {}", gltf.instance_item(i)))
+                    .unwrap_or_default();
+                Err(Error::BadItem {
+                    path: gltf.path.clone(),
+                    item: format!("polygon {}{within}", failure.polygon),
+                    reason: format!(
+                        "cannot be meshed: {} (its size may be beyond what f64 meshing holds; \
+                         scale the scene into practical units)",
+                        failure.message
+                    ),
+                })
+            }
+            Err(other) => std::panic::resume_unwind(other),
+        },
+    }
 }
 
 /// Where [`bake_file`] writes: the lightmapped glb, and optionally the float lightmap and the

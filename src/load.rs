@@ -619,12 +619,19 @@ pub const MAX_ALBEDO: f64 = 0.99;
 /// tolerance is relative to it, and the lightmap atlas and the BVH work in f32.
 pub const MAX_EXTENT: f64 = 1e9;
 
+/// The smallest scene a bake takes, in scene units across (the bounding box diagonal): the
+/// irradiance of a punctual light grows as the inverse square of the scale, past what the f32
+/// lightmap holds, and spade's refinement loses precision near f64's smallest numbers. A
+/// micrometre-sized scene (1e-6) bakes.
+pub const MIN_EXTENT: f64 = 1e-9;
+
 /// The largest ratio of the scene's extent to its typical (median) triangle. The geometric
 /// tolerances are about 1e-6 of the extent; past this ratio most triangles would fall below
 /// them and vanish from the bake. A stray vertex far from everything else is the usual cause.
 pub const MAX_EXTENT_RATIO: f64 = 1e6;
 
-/// Refuses scenes whose extent no bake can resolve ([`MAX_EXTENT`], [`MAX_EXTENT_RATIO`]),
+/// Refuses scenes whose extent no bake can resolve ([`MIN_EXTENT`], [`MAX_EXTENT`],
+/// [`MAX_EXTENT_RATIO`]),
 /// naming the vertex farthest from the middle of the scene.
 fn check_extent(gltf: &Gltf, scene: &Scene) -> Result<()> {
     let extent = (scene.bounds_max - scene.bounds_min).length();
@@ -640,6 +647,21 @@ fn check_extent(gltf: &Gltf, scene: &Scene) -> Result<()> {
         .collect();
     if sizes.is_empty() {
         return Ok(()); // nothing to bake: reported as such later
+    }
+    if extent < MIN_EXTENT {
+        let index = gltf
+            .document
+            .default_scene()
+            .or_else(|| gltf.document.scenes().next())
+            .map_or(0, |s| s.index());
+        return Err(gltf.bad(
+            format!("scenes[{index}]"),
+            format!(
+                "the scene spans {extent:.3e} units, less than a bake resolves (at least \
+                 {MIN_EXTENT:e} units across): scale it into practical units, e.g. with a \
+                 root node's scale"
+            ),
+        ));
     }
     let mid = sizes.len() / 2;
     let typical = *sizes.select_nth_unstable_by(mid, f64::total_cmp).1;
