@@ -398,10 +398,16 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         return Err(Error::BadItem {
             path: gltf.path.clone(),
             item: "scene".into(),
-            reason: "the indirect light diverges: surfaces receive more light than they emit, \
-                     which happens where geometry is duplicated (coincident surfaces count twice); \
-                     remove the duplicates"
-                .into(),
+            reason: if solution.irradiance.iter().flatten().any(|h| !h.is_finite()) {
+                "the light received is not finite: an emitter or a light is stronger than f64 \
+                 arithmetic holds"
+                    .into()
+            } else {
+                "the indirect light diverges: surfaces receive more light than they emit, \
+                 which happens where geometry is duplicated (coincident surfaces count twice); \
+                 remove the duplicates"
+                    .into()
+            },
         });
     }
     stats.converged =

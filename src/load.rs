@@ -526,7 +526,7 @@ pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
             return Err(gltf.bad(format!("node {}", node.index()), "transform is not finite"));
         }
         if let Some(light) = node.light() {
-            scene.lights.push(punctual(&light, &world, lights_seen));
+            scene.lights.push(punctual(gltf, &light, &world, lights_seen)?);
             lights_seen += 1;
         }
         if let Some(mesh) = node.mesh() {
@@ -873,22 +873,66 @@ fn triangle_list(mode: Mode, raw: &[u32]) -> Vec<u32> {
     out
 }
 
-fn punctual(light: &gltf::khr_lights_punctual::Light, world: &DMat4, n: usize) -> PunctualLight {
+/// A punctual light placed by a node. Values outside the ranges of `KHR_lights_punctual` are
+/// refused, naming the light: an intensity or colour that is negative or not finite, a range
+/// that is not positive, spot cone angles outside `0 <= inner < outer <= pi/2`. A colour above
+/// 1 is out of the specification's range too, but a well-defined brighter light: it is baked as
+/// given.
+fn punctual(
+    gltf: &Gltf,
+    light: &gltf::khr_lights_punctual::Light,
+    world: &DMat4,
+    n: usize,
+) -> Result<PunctualLight> {
     use gltf::khr_lights_punctual::Kind;
+    let item = format!(
+        "KHR_lights_punctual.lights[{}]{}",
+        light.index(),
+        name_suffix(light.name())
+    );
+    let refuse = |reason: String| Err(gltf.bad(&item, reason));
+    let [r, g, b] = light.color();
+    if ![r, g, b].iter().all(|c| c.is_finite() && *c >= 0.0) {
+        return refuse(format!(
+            "color ({r}, {g}, {b}) must be three finite numbers of at least 0"
+        ));
+    }
+    let watts = light.intensity();
+    if !(watts.is_finite() && watts >= 0.0) {
+        return refuse(format!(
+            "intensity {watts} must be a finite number of at least 0"
+        ));
+    }
+    if let Some(range) = light.range()
+        && !(range.is_finite() && range > 0.0)
+    {
+        return refuse(format!(
+            "range {range} must be a finite number greater than 0"
+        ));
+    }
     let color = DVec3::from_array(light.color().map(|c| c as f64));
-    let intensity = color * light.intensity() as f64;
+    let intensity = color * watts as f64;
     let kind = match light.kind() {
         Kind::Point => LightKind::Point,
         Kind::Directional => LightKind::Directional,
         Kind::Spot {
             inner_cone_angle,
             outer_cone_angle,
-        } => LightKind::Spot {
-            inner_cone: inner_cone_angle as f64,
-            outer_cone: outer_cone_angle as f64,
-        },
+        } => {
+            let (inner, outer) = (inner_cone_angle, outer_cone_angle);
+            if !(inner >= 0.0 && inner < outer && outer <= std::f32::consts::FRAC_PI_2) {
+                return refuse(format!(
+                    "spot innerConeAngle {inner} and outerConeAngle {outer} must satisfy \
+                     0 <= innerConeAngle < outerConeAngle <= pi/2 (radians)"
+                ));
+            }
+            LightKind::Spot {
+                inner_cone: inner as f64,
+                outer_cone: outer as f64,
+            }
+        }
     };
-    PunctualLight {
+    Ok(PunctualLight {
         kind,
         name: light
             .name()
@@ -901,7 +945,7 @@ fn punctual(light: &gltf::khr_lights_punctual::Light, world: &DMat4, n: usize) -
             .unwrap_or(DVec3::NEG_Y),
         intensity,
         range: light.range().map(|r| r as f64),
-    }
+    })
 }
 
 fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Result<Material> {
@@ -911,8 +955,17 @@ fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Res
     if let Some(info) = pbr.base_color_texture() {
         rho *= textures.mean(gltf, &info.texture())?;
     }
-    let mut radiance = DVec3::from_array(m.emissive_factor().map(|c| c as f64))
-        * m.emissive_strength().unwrap_or(1.0) as f64;
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(gltf.bad(
+            format!(
+                "materials[{}] KHR_materials_emissive_strength",
+                m.index().unwrap_or(0)
+            ),
+            format!("emissiveStrength {strength} must be a finite number of at least 0"),
+        ));
+    }
+    let mut radiance = DVec3::from_array(m.emissive_factor().map(|c| c as f64)) * strength as f64;
     if radiance.max_element() > 0.0
         && let Some(info) = m.emissive_texture()
     {
