@@ -189,12 +189,7 @@ pub fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions) -> Re
 /// Reads the bytes behind a URI: a base64 data URI, or a regular file relative to the glTF
 /// file, inside its folder or `options.allow_outside` ([`uri`]), of at most
 /// [`Limits::input_bytes`].
-pub fn read_uri(
-    gltf_path: &Path,
-    uri: &str,
-    item: &str,
-    options: &LoadOptions,
-) -> Result<Vec<u8>> {
+pub fn read_uri(gltf_path: &Path, uri: &str, item: &str, options: &LoadOptions) -> Result<Vec<u8>> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest.split_once(";base64,").ok_or_else(|| Error::BadItem {
             path: gltf_path.to_path_buf(),
@@ -513,10 +508,16 @@ pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     while let Some((node, parent, depth)) = stack.pop() {
         // glTF node graphs are strict trees: a node reached twice is a cycle or a shared child,
         // which would otherwise multiply the work exponentially.
-        if std::mem::replace(&mut visited[node.index()], true) || depth > 1024 {
+        if std::mem::replace(&mut visited[node.index()], true) {
             return Err(gltf.bad(
                 format!("node {}", node.index()),
                 "is reached twice: the node hierarchy is not a tree",
+            ));
+        }
+        if depth > MAX_DEPTH {
+            return Err(gltf.bad(
+                format!("node {}", node.index()),
+                format!("lies deeper than {MAX_DEPTH} levels in the node hierarchy"),
             ));
         }
         let local =
@@ -526,7 +527,9 @@ pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
             return Err(gltf.bad(format!("node {}", node.index()), "transform is not finite"));
         }
         if let Some(light) = node.light() {
-            scene.lights.push(punctual(gltf, &light, &world, lights_seen)?);
+            scene
+                .lights
+                .push(punctual(gltf, &light, &world, lights_seen)?);
             lights_seen += 1;
         }
         if let Some(mesh) = node.mesh() {
@@ -610,6 +613,9 @@ pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     }
     Ok(scene)
 }
+
+/// The deepest a node may lie in the node hierarchy (its root at depth 0).
+pub const MAX_DEPTH: usize = 1024;
 
 /// The largest albedo a surface is given: an albedo of 1 reflects everything it receives, so
 /// the bounces in a closed room never converge.

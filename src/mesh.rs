@@ -136,7 +136,14 @@ pub fn triangulate_with(
     max_area: f64,
     vertex_cap: usize,
 ) -> (ReceiverMesh, Inserted) {
-    in_safe_frame(id, polygon, lines, max_area, vertex_cap, triangulate_in_frame)
+    in_safe_frame(
+        id,
+        polygon,
+        lines,
+        max_area,
+        vertex_cap,
+        triangulate_in_frame,
+    )
 }
 
 /// Polygon extents (bounding box diagonal in the plane, scene units) triangulated as they

@@ -234,9 +234,7 @@ pub fn render_radiance(
                 gltf::image::Source::View { view, .. } => {
                     gltf.view_bytes(&view, "lightmap")?.to_vec()
                 }
-                gltf::image::Source::Uri { uri, .. } => {
-                    gltf.uri_bytes(uri, "lightmap")?
-                }
+                gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, "lightmap")?,
             };
             let encoding = texture_encoding(gltf, texture)?;
             let img = gltf

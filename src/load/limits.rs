@@ -52,7 +52,7 @@ pub const DEFAULT_IMAGE_MIB: u64 = 3072;
 /// Default of [`Limits::nodes`].
 pub const DEFAULT_NODES: usize = 1_000_000;
 /// Default of [`Limits::instances`].
-pub const DEFAULT_INSTANCES: usize = 20_000;
+pub const DEFAULT_INSTANCES: usize = 5_000;
 /// Default of [`Limits::primitives`].
 pub const DEFAULT_PRIMITIVES: usize = 20_000;
 /// Default of [`Limits::triangles`].
@@ -73,11 +73,11 @@ pub(crate) fn decode_image(
             .with_guessed_format()
             .map_err(|e| e.to_string())
     };
-    let (width, height) = match reader().and_then(|r| r.into_dimensions().map_err(|e| e.to_string()))
-    {
-        Ok(size) => size,
-        Err(e) => return Ok(Err(e)),
-    };
+    let (width, height) =
+        match reader().and_then(|r| r.into_dimensions().map_err(|e| e.to_string())) {
+            Ok(size) => size,
+            Err(e) => return Ok(Err(e)),
+        };
     let side = limits.image_side;
     if width > side || height > side {
         return Err(format!(

@@ -109,7 +109,10 @@ impl Confinement<'_> {
             let mut existing = p.to_path_buf();
             let mut rest = Vec::new();
             while !existing.exists() {
-                match (existing.file_name().map(|n| n.to_os_string()), existing.parent()) {
+                match (
+                    existing.file_name().map(|n| n.to_os_string()),
+                    existing.parent(),
+                ) {
                     (Some(n), Some(parent)) => {
                         rest.push(n);
                         existing = parent.to_path_buf();
