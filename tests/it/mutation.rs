@@ -248,20 +248,22 @@ fn mutate_untrusted(rng: &mut Rng, json: &mut Value, bin: &mut Vec<u8>, outside:
             .replace("{secret}", &format!("{outside}/secret.txt"))
             .replace("{outside}", &outside)
     };
-    let root_object = |json: &mut Value, key: &str| {
+    // Appends `value` to the top-level array `key` (made an array if it is not); its index.
+    let push = |json: &mut Value, key: &str, value: Value| {
         if !json[key].is_array() {
             json[key] = json!([]);
         }
-        json[key].as_array_mut().map(|a| a.len()).unwrap_or(0)
+        let array = json[key].as_array_mut().unwrap();
+        array.push(value);
+        array.len() - 1
     };
+    let len = |json: &Value, key: &str| json[key].as_array().map_or(0, Vec::len);
     match rng.below(7) {
         0 => {
             // An image at a bad URI, used as a material's base colour texture.
             let u = uri(rng);
-            let image = root_object(json, "images");
-            json["images"][image] = json!({"uri": u});
-            let texture = root_object(json, "textures");
-            json["textures"][texture] = json!({"source": image});
+            let image = push(json, "images", json!({"uri": u}));
+            let texture = push(json, "textures", json!({"source": image}));
             if let Some(m) = json["materials"].as_array_mut().and_then(|m| m.first_mut())
                 && m.is_object()
             {
@@ -272,12 +274,13 @@ fn mutate_untrusted(rng: &mut Rng, json: &mut Value, bin: &mut Vec<u8>, outside:
         1 => {
             // A buffer at a bad URI: a new one, or the scene's own one.
             let u = uri(rng);
-            let buffer = if rng.below(3) == 0 {
+            let buffer = json!({"uri": u, "byteLength": bin.len().max(1)});
+            let buffer = if rng.below(3) == 0 && len(json, "buffers") > 0 {
+                json["buffers"][0] = buffer;
                 0
             } else {
-                root_object(json, "buffers")
+                push(json, "buffers", buffer)
             };
-            json["buffers"][buffer] = json!({"uri": u, "byteLength": bin.len().max(1)});
             format!("buffers[{buffer}] at {u:?}")
         }
         2 => {
@@ -286,16 +289,20 @@ fn mutate_untrusted(rng: &mut Rng, json: &mut Value, bin: &mut Vec<u8>, outside:
             let png = crate::untrusted::png_bomb(w, h);
             let offset = bin.len();
             bin.extend_from_slice(&png);
-            let view = root_object(json, "bufferViews");
-            json["bufferViews"][view] =
-                json!({"buffer": 0, "byteOffset": offset, "byteLength": png.len()});
+            let view = push(
+                json,
+                "bufferViews",
+                json!({"buffer": 0, "byteOffset": offset, "byteLength": png.len()}),
+            );
             if json["buffers"][0].is_object() {
                 json["buffers"][0]["byteLength"] = json!(bin.len());
             }
-            let image = root_object(json, "images");
-            json["images"][image] = json!({"bufferView": view, "mimeType": "image/png"});
-            let texture = root_object(json, "textures");
-            json["textures"][texture] = json!({"source": image});
+            let image = push(
+                json,
+                "images",
+                json!({"bufferView": view, "mimeType": "image/png"}),
+            );
+            let texture = push(json, "textures", json!({"source": image}));
             if let Some(m) = json["materials"].as_array_mut().and_then(|m| m.first_mut())
                 && m.is_object()
             {
@@ -307,11 +314,15 @@ fn mutate_untrusted(rng: &mut Rng, json: &mut Value, bin: &mut Vec<u8>, outside:
         3 => {
             // The whole scene scaled, or one node.
             let s = SCALES[rng.below(SCALES.len())];
-            let nodes = root_object(json, "nodes");
+            let nodes = len(json, "nodes");
             if rng.below(2) == 0 || nodes == 0 {
                 let roots = json["scenes"][0]["nodes"].clone();
-                json["nodes"][nodes] = json!({"children": roots, "scale": [s, s, s]});
-                json["scenes"][0]["nodes"] = json!([nodes]);
+                let root = push(
+                    json,
+                    "nodes",
+                    json!({"children": roots, "scale": [s, s, s]}),
+                );
+                json["scenes"][0]["nodes"] = json!([root]);
                 format!("scene scaled by {s:e}")
             } else {
                 let n = rng.below(nodes);
@@ -327,7 +338,10 @@ fn mutate_untrusted(rng: &mut Rng, json: &mut Value, bin: &mut Vec<u8>, outside:
             let n = EXPLOSIONS[rng.below(EXPLOSIONS.len())];
             let meshes = json["meshes"].as_array().map_or(0, Vec::len);
             let mesh = rng.below(meshes.max(1));
-            let first = root_object(json, "nodes");
+            let first = len(json, "nodes");
+            if first == 0 {
+                json["nodes"] = json!([]);
+            }
             let side = (n as f64).sqrt().ceil() as usize;
             let nodes = json["nodes"].as_array_mut().unwrap();
             for k in 0..n {
@@ -353,7 +367,10 @@ fn mutate_untrusted(rng: &mut Rng, json: &mut Value, bin: &mut Vec<u8>, outside:
         _ => {
             // A deep chain of nodes, each scaled a little: a tree, but a tall one.
             let n = EXPLOSIONS[rng.below(EXPLOSIONS.len())].min(100_000);
-            let first = root_object(json, "nodes");
+            let first = len(json, "nodes");
+            if first == 0 {
+                json["nodes"] = json!([]);
+            }
             let roots = json["scenes"][0]["nodes"].clone();
             let nodes = json["nodes"].as_array_mut().unwrap();
             for k in 0..n {
