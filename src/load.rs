@@ -75,9 +75,9 @@ pub fn read_with(path: &Path, options: &LoadOptions) -> Result<Gltf> {
         source,
     })?;
     let bytes = uri::read_limited(file, options.limits.input_bytes, "--max-input-mib", path)
-        .map_err(|reason| Error::NotGltf {
+        .map_err(|reason| Error::Read {
             path: path.to_path_buf(),
-            reason,
+            source: std::io::Error::other(reason),
         })?;
     from_bytes_with(bytes, path, options)
 }

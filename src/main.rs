@@ -28,8 +28,8 @@ struct InputArgs {
     /// symbolic links that lead out are refused.
     #[arg(long, value_name = "DIR")]
     allow_outside: Vec<PathBuf>,
-    /// The most the input file and the files it reads (buffers, images) may hold, each and all
-    /// together, MiB.
+    /// The most the input file and each file it reads (buffers, images) may hold, and the input
+    /// with its buffer files together, MiB.
     #[arg(long, value_name = "MIB", default_value_t = penumbra::load::DEFAULT_INPUT_MIB)]
     max_input_mib: u64,
     /// The largest width and height of an image, pixels.

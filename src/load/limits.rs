@@ -6,8 +6,9 @@
 /// of the same name (`--max-...`) that raises or lowers it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Limits {
-    /// The most bytes the input file and every file it reads (buffers, images) may hold, each
-    /// and all together (`--max-input-mib`, in MiB on the command line).
+    /// The most bytes the input file and each file it reads (buffers, images) may hold, and
+    /// the input with its buffer files together (`--max-input-mib`, in MiB on the command
+    /// line).
     pub input_bytes: u64,
     /// The largest width and the largest height of an image, pixels (`--max-image-size`).
     pub image_side: u32,
