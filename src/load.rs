@@ -25,7 +25,7 @@ mod validate;
 
 pub use limits::{
     DEFAULT_IMAGE_MIB, DEFAULT_IMAGE_SIDE, DEFAULT_INPUT_MIB, DEFAULT_INSTANCES, DEFAULT_NODES,
-    DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, Limits, MIB,
+    DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, IMAGES_TOGETHER, Limits, MIB,
 };
 
 /// What the loader is told: the resource limits, and the folders besides the input's own that
@@ -1015,6 +1015,8 @@ fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Res
 struct TextureMeans {
     cache: BTreeMap<usize, DVec3>,
     warnings: Vec<String>,
+    /// Bytes of the images decoded so far, counted as [`Limits::image_bytes`] counts them.
+    decoded: u64,
 }
 
 impl TextureMeans {
@@ -1031,6 +1033,23 @@ impl TextureMeans {
         };
         let mean = match gltf.decode_image(&bytes, &item) {
             Ok(Ok(img)) => {
+                self.decoded += limits::decoded_bytes(img.width(), img.height());
+                let most = gltf
+                    .options
+                    .limits
+                    .image_bytes
+                    .saturating_mul(limits::IMAGES_TOGETHER);
+                if self.decoded > most {
+                    return Err(gltf.bad(
+                        &item,
+                        format!(
+                            "the images decoded so far take more than {} MiB together, {} times \
+                             the limit of one image (--max-image-mib raises it)",
+                            most / MIB,
+                            limits::IMAGES_TOGETHER
+                        ),
+                    ));
+                }
                 let rgb = img.to_rgb32f();
                 let mut sum = DVec3::ZERO;
                 for p in rgb.pixels() {

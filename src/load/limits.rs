@@ -13,7 +13,9 @@ pub struct Limits {
     /// The largest width and the largest height of an image, pixels (`--max-image-size`).
     pub image_side: u32,
     /// The most memory one decoded image may take, bytes, counted as 12 bytes a pixel (the
-    /// linear RGB floats its mean colour is taken from; `--max-image-mib`, in MiB).
+    /// linear RGB floats its mean colour is taken from; `--max-image-mib`, in MiB). All the
+    /// images a bake decodes may take [`IMAGES_TOGETHER`] times it together (one at a time:
+    /// this bounds the time spent decoding).
     pub image_bytes: u64,
     /// The most nodes (`--max-nodes`).
     pub nodes: usize,
@@ -62,6 +64,14 @@ pub const DEFAULT_TRIANGLES: usize = 2_000_000;
 /// Bytes a decoded pixel is counted as against [`Limits::image_bytes`]: three f32 channels.
 const PIXEL_BYTES: u64 = 12;
 
+/// How many times [`Limits::image_bytes`] all the images of a bake may take together.
+pub const IMAGES_TOGETHER: u64 = 8;
+
+/// Bytes a decoded `width` x `height` image is counted as against [`Limits::image_bytes`].
+pub fn decoded_bytes(width: u32, height: u32) -> u64 {
+    u64::from(width) * u64::from(height) * PIXEL_BYTES
+}
+
 /// Decodes an image within `limits`: the outer error says which limit it is past (checked on
 /// the header before anything is decoded, then by the decoder's own allocation limits), the
 /// inner one why it cannot be decoded at all.
@@ -86,7 +96,7 @@ pub(crate) fn decode_image(
              the limit)"
         ));
     }
-    let needed = u64::from(width) * u64::from(height) * PIXEL_BYTES;
+    let needed = decoded_bytes(width, height);
     if needed > limits.image_bytes {
         return Err(format!(
             "is {width} x {height} pixels, which takes {} MiB decoded, more than {} MiB \
