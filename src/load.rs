@@ -25,7 +25,7 @@ mod validate;
 
 pub use limits::{
     DEFAULT_IMAGE_MIB, DEFAULT_IMAGE_SIDE, DEFAULT_INPUT_MIB, DEFAULT_INSTANCES, DEFAULT_NODES,
-    DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, IMAGES_TOGETHER, Limits, MIB,
+    DEFAULT_POLYGONS, DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, IMAGES_TOGETHER, Limits, MIB,
 };
 
 /// What the loader is told: the resource limits, and the folders besides the input's own that
@@ -598,6 +598,16 @@ pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     if scene.instances.iter().any(|i| i.gltf_material.is_none()) {
         scene.warnings.push(format!(
             "primitives without a material use glTF's default white material, baked with albedo {MAX_ALBEDO}"
+        ));
+    }
+    if scene.polygons.len() > limits.polygons {
+        return Err(gltf.bad(
+            "scene",
+            format!(
+                "{} receiver polygons, more than {} (--max-polygons raises the limit)",
+                scene.polygons.len(),
+                limits.polygons
+            ),
         ));
     }
     check_extent(gltf, &scene)?;

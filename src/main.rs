@@ -50,6 +50,9 @@ struct InputArgs {
     /// The most triangles over all mesh instances.
     #[arg(long, value_name = "N", default_value_t = penumbra::load::DEFAULT_TRIANGLES)]
     max_triangles: usize,
+    /// The most receiver polygons (coplanar, edge-connected triangles of one material).
+    #[arg(long, value_name = "N", default_value_t = penumbra::load::DEFAULT_POLYGONS)]
+    max_polygons: usize,
 }
 
 impl InputArgs {
@@ -64,6 +67,7 @@ impl InputArgs {
                 instances: self.max_instances,
                 primitives: self.max_primitives,
                 triangles: self.max_triangles,
+                polygons: self.max_polygons,
             },
             allow_outside: self.allow_outside.clone(),
         }

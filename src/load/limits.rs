@@ -27,6 +27,10 @@ pub struct Limits {
     /// The most triangles over all instances, as their accessors count them before they are
     /// read (`--max-triangles`).
     pub triangles: usize,
+    /// The most receiver polygons (coplanar, edge-connected triangles of one material), counted
+    /// once the scene is built, before any stage that works per polygon: the atlas takes about
+    /// 90 KiB a polygon (`--max-polygons`).
+    pub polygons: usize,
 }
 
 /// One mebibyte, bytes.
@@ -42,6 +46,7 @@ impl Default for Limits {
             instances: DEFAULT_INSTANCES,
             primitives: DEFAULT_PRIMITIVES,
             triangles: DEFAULT_TRIANGLES,
+            polygons: DEFAULT_POLYGONS,
         }
     }
 }
@@ -59,7 +64,9 @@ pub const DEFAULT_INSTANCES: usize = 5_000;
 /// Default of [`Limits::primitives`].
 pub const DEFAULT_PRIMITIVES: usize = 20_000;
 /// Default of [`Limits::triangles`].
-pub const DEFAULT_TRIANGLES: usize = 2_000_000;
+pub const DEFAULT_TRIANGLES: usize = 1_000_000;
+/// Default of [`Limits::polygons`]: about 18 GB of atlas.
+pub const DEFAULT_POLYGONS: usize = 200_000;
 
 /// Bytes a decoded pixel is counted as against [`Limits::image_bytes`]: three f32 channels.
 const PIXEL_BYTES: u64 = 12;

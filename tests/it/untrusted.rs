@@ -454,6 +454,24 @@ fn a_hundred_thousand_primitives_are_refused_early() {
         &["--max-triangles", "50"],
         &["in.glb", "mesh 1", "--max-triangles"],
     );
+    refused(
+        &input,
+        &["--max-polygons", "8"],
+        &["in.glb", "scene", "receiver polygons", "--max-polygons"],
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_node_count_is_limited() {
+    let dir = scratch("nodes");
+    let input = dir.join("in.glb");
+    std::fs::write(&input, instances(20)).unwrap();
+    refused(
+        &input,
+        &["--max-nodes", "10"],
+        &["in.glb", "nodes", "23 nodes, more than 10", "--max-nodes"],
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -603,6 +621,7 @@ fn the_limits_and_allow_outside_are_in_the_help() {
         "--max-instances",
         "--max-primitives",
         "--max-triangles",
+        "--max-polygons",
     ] {
         assert!(help.contains(option), "{option} not in the help:\n{help}");
     }
