@@ -43,6 +43,9 @@ pub struct BakeOptions {
     /// How the output lightmaps the two sides of a double-sided surface (both are solved
     /// either way).
     pub double_sided: DoubleSided,
+    /// Resource limits, and the folders besides the input's own that its URIs may name files
+    /// in ([`load::uri`]).
+    pub load: load::LoadOptions,
 }
 
 /// What the output does with the back side of a double-sided primitive (`--double-sided`).
@@ -93,6 +96,7 @@ impl Default for BakeOptions {
             supersample: 4,
             seams: Seams::Stitch,
             double_sided: DoubleSided::Separate,
+            load: load::LoadOptions::default(),
         }
     }
 }
@@ -263,15 +267,21 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             if failed() {
                 return None;
             }
-            let (segments, meshes) = mesh_scene(
-                scene,
-                vis,
-                options,
-                texels_per_unit,
-                traced,
-                &mut stats,
-                progress,
-            );
+            let meshed = catch_mesh_failure(gltf, scene, || {
+                mesh_scene(
+                    scene,
+                    vis,
+                    options,
+                    texels_per_unit,
+                    traced,
+                    &mut stats,
+                    progress,
+                )
+            });
+            let (segments, meshes) = match meshed {
+                Ok(meshed) => meshed,
+                Err(e) => return Some(Err(e)),
+            };
             if meshes.iter().all(|m| m.triangles.is_empty()) {
                 return Some(Err(Error::EmptyScene {
                     path: gltf.path.clone(),
@@ -389,10 +399,16 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         return Err(Error::BadItem {
             path: gltf.path.clone(),
             item: "scene".into(),
-            reason: "the indirect light diverges: surfaces receive more light than they emit, \
-                     which happens where geometry is duplicated (coincident surfaces count twice); \
-                     remove the duplicates"
-                .into(),
+            reason: if solution.irradiance.iter().flatten().any(|h| !h.is_finite()) {
+                "the light received is not finite: an emitter or a light is stronger than f64 \
+                 arithmetic holds"
+                    .into()
+            } else {
+                "the indirect light diverges: surfaces receive more light than they emit, \
+                 which happens where geometry is duplicated (coincident surfaces count twice); \
+                 remove the duplicates"
+                    .into()
+            },
         });
     }
     stats.converged =
@@ -428,7 +444,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
 /// ([`default_texels_per_unit`]) and charts go onto as many pages as they need. Returns the
 /// options with that density filled in.
 fn scene_for(gltf: &Gltf, options: &BakeOptions) -> Result<(Scene, scene::cut::Cut, BakeOptions)> {
-    let mut scene = load::scene(gltf)?;
+    let mut scene = load::scene_limited(gltf, &options.load.limits)?;
     let mut options = options.clone();
     if options.texels_per_unit.is_none() && options.resolution.is_none() {
         options.texels_per_unit = Some(default_texels_per_unit(&scene));
@@ -823,16 +839,46 @@ pub fn meshes(
     if options.budget.is_none() {
         scene_atlas(gltf, &scene, options, &mut |t| texels_per_unit = t)?;
     }
-    let (segments, meshes) = mesh_scene(
-        &scene,
-        &vis,
-        options,
-        texels_per_unit,
-        None,
-        &mut Stats::default(),
-        &|_, _, _| {},
-    );
+    let (segments, meshes) = catch_mesh_failure(gltf, &scene, || {
+        mesh_scene(
+            &scene,
+            &vis,
+            options,
+            texels_per_unit,
+            None,
+            &mut Stats::default(),
+            &|_, _, _| {},
+        )
+    })?;
     Ok((scene, segments, meshes))
+}
+
+/// Runs `f` (the mesh stage), turning a triangulation's panic ([`crate::mesh::MeshFailure`])
+/// into an error that names the polygon and its glTF item. Other panics unwind on.
+fn catch_mesh_failure<R>(gltf: &Gltf, scene: &Scene, f: impl FnOnce() -> R) -> Result<R> {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)) {
+        Ok(r) => Ok(r),
+        Err(payload) => match payload.downcast::<crate::mesh::MeshFailure>() {
+            Ok(failure) => {
+                let within = scene
+                    .polygons
+                    .get(failure.polygon)
+                    .and_then(|p| scene.instances.get(p.instance))
+                    .map(|i| format!(" of {}", gltf.instance_item(i)))
+                    .unwrap_or_default();
+                Err(Error::BadItem {
+                    path: gltf.path.clone(),
+                    item: format!("polygon {}{within}", failure.polygon),
+                    reason: format!(
+                        "cannot be meshed: {} (its size may be beyond what f64 meshing holds; \
+                         scale the scene into practical units)",
+                        failure.message
+                    ),
+                })
+            }
+            Err(other) => std::panic::resume_unwind(other),
+        },
+    }
 }
 
 /// Where [`bake_file`] writes: the lightmapped glb, and optionally the float lightmap and the
@@ -870,7 +916,9 @@ pub fn bake_file(
 ) -> Result<Bake> {
     let start = std::time::Instant::now();
     let mut read_time = 0.0;
-    let gltf = stage(&mut read_time, "read", progress, || load::read(input))?;
+    let gltf = stage(&mut read_time, "read", progress, || {
+        load::read_with(input, &options.load)
+    })?;
     let mut named: Vec<(&'static str, &Path)> = vec![("OUT", &outputs.glb)];
     if let Some(exr) = &outputs.exr {
         named.push(("--exr", exr));

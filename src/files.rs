@@ -8,6 +8,12 @@
 //!   images), is refused before any work starts. So is one output named twice (`--exr OUT`).
 //! - **Links are followed.** An output path that is a symbolic link is written through: its
 //!   target is replaced and the link stays a link.
+//! - **Only regular files are replaced.** An output that exists must be a regular file (or a
+//!   link to one): a directory, a device (`/dev/null`, `/dev/full`), a FIFO or a socket is
+//!   refused, never replaced by a regular file.
+//! - **Short temporary names.** A temporary file's name keeps at most [`TMP_STEM_BYTES`] bytes
+//!   of its destination's, so it stays within the 255-byte limit of a file name whatever the
+//!   destination's.
 //! - **All or nothing.** Every output is written to a temporary file beside its destination
 //!   ([`Staged::add`]); only when all are written are they renamed into place ([`Staged::commit`]).
 //!   A failure, a panic or a SIGINT/SIGTERM/SIGHUP ([`clean_up_on_signals`]) removes the
@@ -125,6 +131,19 @@ pub fn check_outputs(
                 format!("{} is a directory, not a file", path.display()),
             ));
         }
+        if let Ok(meta) = std::fs::metadata(&target)
+            && !meta.is_file()
+        {
+            return Err(refuse(
+                what,
+                format!(
+                    "{} is {}, not a regular file (penumbra writes a file beside it and renames \
+                     it into place, which would replace it)",
+                    path.display(),
+                    crate::load::uri::kind_of(&meta)
+                ),
+            ));
+        }
         let id = identity(&target).ok_or_else(|| {
             refuse(
                 what,
@@ -183,7 +202,8 @@ impl Staged {
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_else(|| "out".into());
         let tmp = dir.join(format!(
-            ".{name}.penumbra-{}-{}.tmp",
+            ".{}.penumbra-{}-{}.tmp",
+            truncated(&name, TMP_STEM_BYTES),
             std::process::id(),
             self.files.len()
         ));
@@ -224,6 +244,19 @@ impl Drop for Staged {
             files.remove(&tmp);
         }
     }
+}
+
+/// The most bytes of a destination's name that its temporary file's name keeps: with the dot,
+/// the process id and the counter, the name stays well within 255 bytes.
+pub const TMP_STEM_BYTES: usize = 128;
+
+/// The longest prefix of `name` of at most `max` bytes that ends on a character boundary.
+fn truncated(name: &str, max: usize) -> &str {
+    let mut end = name.len().min(max);
+    while !name.is_char_boundary(end) {
+        end -= 1;
+    }
+    &name[..end]
 }
 
 /// Writes `bytes` to `path` through a temporary file and a rename, so a failure never leaves a

@@ -19,7 +19,24 @@ use gltf::mesh::Mode;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
+mod limits;
+pub mod uri;
 mod validate;
+
+pub use limits::{
+    DEFAULT_IMAGE_MIB, DEFAULT_IMAGE_SIDE, DEFAULT_INPUT_MIB, DEFAULT_INSTANCES, DEFAULT_NODES,
+    DEFAULT_POLYGONS, DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, IMAGES_TOGETHER, Limits, MIB,
+};
+
+/// What the loader is told: the resource limits, and the folders besides the input's own that
+/// its URIs may name files in.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct LoadOptions {
+    pub limits: Limits,
+    /// Folders whose files a URI may name besides the input's own folder (`--allow-outside
+    /// DIR`); see [`uri`].
+    pub allow_outside: Vec<PathBuf>,
+}
 
 /// A parsed glTF file with its buffer data, kept whole so the writer can preserve everything.
 pub struct Gltf {
@@ -32,6 +49,8 @@ pub struct Gltf {
     /// The JSON as written in the file, key order kept: the writer edits this, so everything it
     /// does not touch (extensions, extras, unknown properties) survives as it was.
     pub json: serde_json::Value,
+    /// The limits and folders it was read with; its images are read and decoded with them too.
+    pub options: LoadOptions,
 }
 
 /// Required extensions that change how geometry is stored or instanced, which this loader does
@@ -42,17 +61,36 @@ pub const UNREADABLE_EXTENSIONS: [&str; 3] = [
     "EXT_mesh_gpu_instancing",
 ];
 
-/// Reads and parses a `.glb` or `.gltf` file and all of its buffers.
+/// Reads and parses a `.glb` or `.gltf` file and all of its buffers, with the default
+/// [`LoadOptions`].
 pub fn read(path: &Path) -> Result<Gltf> {
-    let bytes = std::fs::read(path).map_err(|source| Error::Read {
+    read_with(path, &LoadOptions::default())
+}
+
+/// Reads and parses a `.glb` or `.gltf` file and all of its buffers, at most
+/// [`Limits::input_bytes`] from each file.
+pub fn read_with(path: &Path, options: &LoadOptions) -> Result<Gltf> {
+    let file = std::fs::File::open(path).map_err(|source| Error::Read {
         path: path.to_path_buf(),
         source,
     })?;
-    from_bytes(bytes, path)
+    let bytes = uri::read_limited(file, options.limits.input_bytes, "--max-input-mib", path)
+        .map_err(|reason| Error::Read {
+            path: path.to_path_buf(),
+            source: std::io::Error::other(reason),
+        })?;
+    from_bytes_with(bytes, path, options)
 }
 
-/// Parses glTF bytes; `path` names the file in messages and anchors relative URIs.
+/// Parses glTF bytes with the default [`LoadOptions`]; `path` names the file in messages and
+/// anchors relative URIs.
 pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
+    from_bytes_with(bytes, path, &LoadOptions::default())
+}
+
+/// Parses glTF bytes; `path` names the file in messages and anchors relative URIs, which may
+/// name files only in its folder and `options.allow_outside` ([`uri`]).
+pub fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions) -> Result<Gltf> {
     let not_gltf = |reason: String| Error::NotGltf {
         path: path.to_path_buf(),
         reason,
@@ -80,6 +118,11 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
         item: e.item,
         reason: e.reason,
     })?;
+    limits::check_counts(&json, &options.limits).map_err(|e| Error::BadItem {
+        path: path.to_path_buf(),
+        item: e.item,
+        reason: e.reason,
+    })?;
     let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| not_gltf(e.to_string()))?;
     // Extensions whose geometry this loader cannot read: baking the fallback-less data would
     // give garbage, so say so.
@@ -97,6 +140,9 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
     let mut blob = gltf.blob;
     let document = gltf.document;
     let mut buffers = Vec::new();
+    // What the input and its buffer files hold together: each file is read within the limit
+    // that is left.
+    let mut total = bytes.len() as u64;
     for buffer in document.buffers() {
         let item = format!("buffer {}", buffer.index());
         let data = match buffer.source() {
@@ -105,7 +151,18 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
                 item: item.clone(),
                 reason: "refers to the GLB binary chunk, which is missing".into(),
             })?,
-            gltf::buffer::Source::Uri(uri) => read_uri(path, uri, &item)?,
+            gltf::buffer::Source::Uri(uri) => {
+                let left = LoadOptions {
+                    limits: Limits {
+                        input_bytes: options.limits.input_bytes.saturating_sub(total),
+                        ..options.limits.clone()
+                    },
+                    allow_outside: options.allow_outside.clone(),
+                };
+                let data = read_uri(path, uri, &item, &left)?;
+                total += data.len() as u64;
+                data
+            }
         };
         if data.len() < buffer.length() {
             return Err(Error::BadItem {
@@ -125,11 +182,14 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
         document,
         buffers,
         json,
+        options: options.clone(),
     })
 }
 
-/// Reads the bytes behind a URI: a base64 data URI or a file relative to the glTF file.
-pub fn read_uri(gltf_path: &Path, uri: &str, item: &str) -> Result<Vec<u8>> {
+/// Reads the bytes behind a URI: a base64 data URI, or a regular file relative to the glTF
+/// file, inside its folder or `options.allow_outside` ([`uri`]), of at most
+/// [`Limits::input_bytes`].
+pub fn read_uri(gltf_path: &Path, uri: &str, item: &str, options: &LoadOptions) -> Result<Vec<u8>> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest.split_once(";base64,").ok_or_else(|| Error::BadItem {
             path: gltf_path.to_path_buf(),
@@ -145,15 +205,17 @@ pub fn read_uri(gltf_path: &Path, uri: &str, item: &str) -> Result<Vec<u8>> {
             });
     }
     let decoded = percent_decode(uri);
-    let file = gltf_path
-        .parent()
-        .unwrap_or_else(|| Path::new("."))
-        .join(decoded);
-    std::fs::read(&file).map_err(|source| Error::BadItem {
+    let refuse = |reason: String| Error::BadItem {
         path: gltf_path.to_path_buf(),
         item: item.to_string(),
-        reason: format!("cannot read {}: {source}", file.display()),
-    })
+        reason: format!("URI {uri:?} {reason}"),
+    };
+    let confinement = uri::Confinement {
+        allow: &options.allow_outside,
+    };
+    let file = confinement.resolve(gltf_path, &decoded).map_err(refuse)?;
+    let handle = uri::open_regular(&file).map_err(refuse)?;
+    uri::read_limited(handle, options.limits.input_bytes, "--max-input-mib", &file).map_err(refuse)
 }
 
 fn percent_decode(uri: &str) -> String {
@@ -176,6 +238,23 @@ fn percent_decode(uri: &str) -> String {
 }
 
 impl Gltf {
+    /// The bytes behind one of this file's URIs ([`read_uri`] with the options it was read
+    /// with).
+    pub fn uri_bytes(&self, uri: &str, item: &str) -> Result<Vec<u8>> {
+        read_uri(&self.path, uri, item, &self.options)
+    }
+
+    /// Decodes an image within [`Limits::image_side`] and [`Limits::image_bytes`]: `Ok(Err)`
+    /// says why it cannot be decoded (not an image, a format not built in), an error naming
+    /// `item` that it is past a limit.
+    pub fn decode_image(
+        &self,
+        bytes: &[u8],
+        item: &str,
+    ) -> Result<std::result::Result<image::DynamicImage, String>> {
+        limits::decode_image(bytes, &self.options.limits).map_err(|reason| self.bad(item, reason))
+    }
+
     /// Every file a bake of this glTF reads: the file itself, and the external buffers and
     /// images its URIs name (an output must be none of them).
     pub fn files_read(&self) -> Vec<PathBuf> {
@@ -387,8 +466,15 @@ fn read_strided(
 }
 
 /// Loads the static scene: every node of the default scene (or the first scene), with world
-/// transforms, materials, area emitters and punctual lights.
+/// transforms, materials, area emitters and punctual lights, within the limits `gltf` was read
+/// with.
 pub fn scene(gltf: &Gltf) -> Result<Scene> {
+    scene_limited(gltf, &gltf.options.limits)
+}
+
+/// [`scene`] within `limits`: the instances and the triangles are counted as the node graph is
+/// walked, before each primitive's geometry is read.
+pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     let doc = &gltf.document;
     let mut scene = Scene::default();
     let mut textures = TextureMeans::default();
@@ -417,14 +503,21 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
         gscene.nodes().map(|n| (n, DMat4::IDENTITY, 0)).collect();
     stack.reverse();
     let mut lights_seen = 0;
+    let (mut instances, mut triangles) = (0usize, 0usize);
     let mut visited = vec![false; doc.nodes().len()];
     while let Some((node, parent, depth)) = stack.pop() {
         // glTF node graphs are strict trees: a node reached twice is a cycle or a shared child,
         // which would otherwise multiply the work exponentially.
-        if std::mem::replace(&mut visited[node.index()], true) || depth > 1024 {
+        if std::mem::replace(&mut visited[node.index()], true) {
             return Err(gltf.bad(
                 format!("node {}", node.index()),
                 "is reached twice: the node hierarchy is not a tree",
+            ));
+        }
+        if depth > MAX_DEPTH {
+            return Err(gltf.bad(
+                format!("node {}", node.index()),
+                format!("lies deeper than {MAX_DEPTH} levels in the node hierarchy"),
             ));
         }
         let local =
@@ -434,7 +527,9 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
             return Err(gltf.bad(format!("node {}", node.index()), "transform is not finite"));
         }
         if let Some(light) = node.light() {
-            scene.lights.push(punctual(&light, &world, lights_seen));
+            scene
+                .lights
+                .push(punctual(gltf, &light, &world, lights_seen)?);
             lights_seen += 1;
         }
         if let Some(mesh) = node.mesh() {
@@ -448,6 +543,37 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
                 ));
             } else {
                 for prim in mesh.primitives() {
+                    instances += 1;
+                    triangles = triangles.saturating_add(triangles_at_most(&prim));
+                    let item = || {
+                        format!(
+                            "node {} (mesh {}{} primitive {})",
+                            node.index(),
+                            mesh.index(),
+                            name_suffix(mesh.name()),
+                            prim.index()
+                        )
+                    };
+                    if instances > limits.instances {
+                        return Err(gltf.bad(
+                            item(),
+                            format!(
+                                "the scene places more than {} mesh instances (primitives \
+                                 placed by nodes; --max-instances raises the limit)",
+                                limits.instances
+                            ),
+                        ));
+                    }
+                    if triangles > limits.triangles {
+                        return Err(gltf.bad(
+                            item(),
+                            format!(
+                                "the scene's instances hold more than {} triangles \
+                                 (--max-triangles raises the limit)",
+                                limits.triangles
+                            ),
+                        ));
+                    }
                     add_primitive(
                         gltf,
                         &mut scene,
@@ -474,6 +600,16 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
             "primitives without a material use glTF's default white material, baked with albedo {MAX_ALBEDO}"
         ));
     }
+    if scene.polygons.len() > limits.polygons {
+        return Err(gltf.bad(
+            "scene",
+            format!(
+                "{} receiver polygons, more than {} (--max-polygons raises the limit)",
+                scene.polygons.len(),
+                limits.polygons
+            ),
+        ));
+    }
     check_extent(gltf, &scene)?;
     let degenerate = scene
         .triangles
@@ -488,6 +624,9 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
     Ok(scene)
 }
 
+/// The deepest a node may lie in the node hierarchy (its root at depth 0).
+pub const MAX_DEPTH: usize = 1024;
+
 /// The largest albedo a surface is given: an albedo of 1 reflects everything it receives, so
 /// the bounces in a closed room never converge.
 pub const MAX_ALBEDO: f64 = 0.99;
@@ -496,12 +635,19 @@ pub const MAX_ALBEDO: f64 = 0.99;
 /// tolerance is relative to it, and the lightmap atlas and the BVH work in f32.
 pub const MAX_EXTENT: f64 = 1e9;
 
+/// The smallest scene a bake takes, in scene units across (the bounding box diagonal): the
+/// irradiance of a punctual light grows as the inverse square of the scale, past what the f32
+/// lightmap holds, and spade's refinement loses precision near f64's smallest numbers. A
+/// micrometre-sized scene (1e-6) bakes.
+pub const MIN_EXTENT: f64 = 1e-9;
+
 /// The largest ratio of the scene's extent to its typical (median) triangle. The geometric
 /// tolerances are about 1e-6 of the extent; past this ratio most triangles would fall below
 /// them and vanish from the bake. A stray vertex far from everything else is the usual cause.
 pub const MAX_EXTENT_RATIO: f64 = 1e6;
 
-/// Refuses scenes whose extent no bake can resolve ([`MAX_EXTENT`], [`MAX_EXTENT_RATIO`]),
+/// Refuses scenes whose extent no bake can resolve ([`MIN_EXTENT`], [`MAX_EXTENT`],
+/// [`MAX_EXTENT_RATIO`]),
 /// naming the vertex farthest from the middle of the scene.
 fn check_extent(gltf: &Gltf, scene: &Scene) -> Result<()> {
     let extent = (scene.bounds_max - scene.bounds_min).length();
@@ -517,6 +663,21 @@ fn check_extent(gltf: &Gltf, scene: &Scene) -> Result<()> {
         .collect();
     if sizes.is_empty() {
         return Ok(()); // nothing to bake: reported as such later
+    }
+    if extent < MIN_EXTENT {
+        let index = gltf
+            .document
+            .default_scene()
+            .or_else(|| gltf.document.scenes().next())
+            .map_or(0, |s| s.index());
+        return Err(gltf.bad(
+            format!("scenes[{index}]"),
+            format!(
+                "the scene spans {extent:.3e} units, less than a bake resolves (at least \
+                 {MIN_EXTENT:e} units across): scale it into practical units, e.g. with a \
+                 root node's scale"
+            ),
+        ));
     }
     let mid = sizes.len() / 2;
     let typical = *sizes.select_nth_unstable_by(mid, f64::total_cmp).1;
@@ -685,6 +846,21 @@ fn add_primitive(
     Ok(())
 }
 
+/// The most triangles a primitive can hold, from its accessors' counts (before reading them).
+fn triangles_at_most(prim: &gltf::Primitive) -> usize {
+    let count = match prim.indices() {
+        Some(acc) => acc.count(),
+        None => prim
+            .get(&gltf::Semantic::Positions)
+            .map_or(0, |acc| acc.count()),
+    };
+    match prim.mode() {
+        Mode::Triangles => count / 3,
+        Mode::TriangleStrip | Mode::TriangleFan => count.saturating_sub(2),
+        _ => 0,
+    }
+}
+
 /// Expands strips and fans into a triangle list (glTF winding rules).
 fn triangle_list(mode: Mode, raw: &[u32]) -> Vec<u32> {
     let mut out = Vec::new();
@@ -713,22 +889,66 @@ fn triangle_list(mode: Mode, raw: &[u32]) -> Vec<u32> {
     out
 }
 
-fn punctual(light: &gltf::khr_lights_punctual::Light, world: &DMat4, n: usize) -> PunctualLight {
+/// A punctual light placed by a node. Values outside the ranges of `KHR_lights_punctual` are
+/// refused, naming the light: an intensity or colour that is negative or not finite, a range
+/// that is not positive, spot cone angles outside `0 <= inner < outer <= pi/2`. A colour above
+/// 1 is out of the specification's range too, but a well-defined brighter light: it is baked as
+/// given.
+fn punctual(
+    gltf: &Gltf,
+    light: &gltf::khr_lights_punctual::Light,
+    world: &DMat4,
+    n: usize,
+) -> Result<PunctualLight> {
     use gltf::khr_lights_punctual::Kind;
+    let item = format!(
+        "KHR_lights_punctual.lights[{}]{}",
+        light.index(),
+        name_suffix(light.name())
+    );
+    let refuse = |reason: String| Err(gltf.bad(&item, reason));
+    let [r, g, b] = light.color();
+    if ![r, g, b].iter().all(|c| c.is_finite() && *c >= 0.0) {
+        return refuse(format!(
+            "color ({r}, {g}, {b}) must be three finite numbers of at least 0"
+        ));
+    }
+    let watts = light.intensity();
+    if !(watts.is_finite() && watts >= 0.0) {
+        return refuse(format!(
+            "intensity {watts} must be a finite number of at least 0"
+        ));
+    }
+    if let Some(range) = light.range()
+        && !(range.is_finite() && range > 0.0)
+    {
+        return refuse(format!(
+            "range {range} must be a finite number greater than 0"
+        ));
+    }
     let color = DVec3::from_array(light.color().map(|c| c as f64));
-    let intensity = color * light.intensity() as f64;
+    let intensity = color * watts as f64;
     let kind = match light.kind() {
         Kind::Point => LightKind::Point,
         Kind::Directional => LightKind::Directional,
         Kind::Spot {
             inner_cone_angle,
             outer_cone_angle,
-        } => LightKind::Spot {
-            inner_cone: inner_cone_angle as f64,
-            outer_cone: outer_cone_angle as f64,
-        },
+        } => {
+            let (inner, outer) = (inner_cone_angle, outer_cone_angle);
+            if !(inner >= 0.0 && inner < outer && outer <= std::f32::consts::FRAC_PI_2) {
+                return refuse(format!(
+                    "spot innerConeAngle {inner} and outerConeAngle {outer} must satisfy \
+                     0 <= innerConeAngle < outerConeAngle <= pi/2 (radians)"
+                ));
+            }
+            LightKind::Spot {
+                inner_cone: inner as f64,
+                outer_cone: outer as f64,
+            }
+        }
     };
-    PunctualLight {
+    Ok(PunctualLight {
         kind,
         name: light
             .name()
@@ -741,7 +961,7 @@ fn punctual(light: &gltf::khr_lights_punctual::Light, world: &DMat4, n: usize) -
             .unwrap_or(DVec3::NEG_Y),
         intensity,
         range: light.range().map(|r| r as f64),
-    }
+    })
 }
 
 fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Result<Material> {
@@ -751,8 +971,17 @@ fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Res
     if let Some(info) = pbr.base_color_texture() {
         rho *= textures.mean(gltf, &info.texture())?;
     }
-    let mut radiance = DVec3::from_array(m.emissive_factor().map(|c| c as f64))
-        * m.emissive_strength().unwrap_or(1.0) as f64;
+    let strength = m.emissive_strength().unwrap_or(1.0);
+    if !(strength.is_finite() && strength >= 0.0) {
+        return Err(gltf.bad(
+            format!(
+                "materials[{}] KHR_materials_emissive_strength",
+                m.index().unwrap_or(0)
+            ),
+            format!("emissiveStrength {strength} must be a finite number of at least 0"),
+        ));
+    }
+    let mut radiance = DVec3::from_array(m.emissive_factor().map(|c| c as f64)) * strength as f64;
     if radiance.max_element() > 0.0
         && let Some(info) = m.emissive_texture()
     {
@@ -796,6 +1025,8 @@ fn material(gltf: &Gltf, m: &gltf::Material, textures: &mut TextureMeans) -> Res
 struct TextureMeans {
     cache: BTreeMap<usize, DVec3>,
     warnings: Vec<String>,
+    /// Bytes of the images decoded so far, counted as [`Limits::image_bytes`] counts them.
+    decoded: u64,
 }
 
 impl TextureMeans {
@@ -808,10 +1039,27 @@ impl TextureMeans {
         let item = format!("image {index}{}", name_suffix(image.name()));
         let bytes = match image.source() {
             gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, &item)?.to_vec(),
-            gltf::image::Source::Uri { uri, .. } => read_uri(&gltf.path, uri, &item)?,
+            gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, &item)?,
         };
-        let mean = match image::load_from_memory(&bytes) {
-            Ok(img) => {
+        let mean = match gltf.decode_image(&bytes, &item) {
+            Ok(Ok(img)) => {
+                self.decoded += limits::decoded_bytes(img.width(), img.height());
+                let most = gltf
+                    .options
+                    .limits
+                    .image_bytes
+                    .saturating_mul(limits::IMAGES_TOGETHER);
+                if self.decoded > most {
+                    return Err(gltf.bad(
+                        &item,
+                        format!(
+                            "the images decoded so far take more than {} MiB together, {} times \
+                             the limit of one image (--max-image-mib raises it)",
+                            most / MIB,
+                            limits::IMAGES_TOGETHER
+                        ),
+                    ));
+                }
                 let rgb = img.to_rgb32f();
                 let mut sum = DVec3::ZERO;
                 for p in rgb.pixels() {
@@ -824,12 +1072,13 @@ impl TextureMeans {
                 let n = (rgb.width() as f64 * rgb.height() as f64).max(1.0);
                 sum / n
             }
-            Err(e) => {
+            Ok(Err(e)) => {
                 self.warnings.push(format!(
                     "{item}: cannot decode ({e}); its mean colour is taken as white"
                 ));
                 DVec3::ONE
             }
+            Err(e) => return Err(e),
         };
         self.cache.insert(index, mean);
         Ok(mean)

@@ -10,6 +10,75 @@ use penumbra::{BakeOptions, OutputFiles, bake_file};
 use std::path::PathBuf;
 use std::sync::Mutex;
 
+/// Prints a line on stderr. A stderr that cannot be written (a full disk, a closed pipe) loses
+/// the message and nothing else: the exit status still tells how the command went.
+macro_rules! say {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($arg)*);
+    }};
+}
+
+/// What a command may read, and how much: the folders a glTF's URIs may name files in besides
+/// its own, and the resource limits (see docs/security.md).
+#[derive(Args)]
+struct InputArgs {
+    /// Also let the glTF's URIs name files in DIR (repeatable). By default a URI may name only
+    /// regular files inside the input's own folder: absolute paths, '..' that climbs out, and
+    /// symbolic links that lead out are refused.
+    #[arg(long, value_name = "DIR")]
+    allow_outside: Vec<PathBuf>,
+    /// The most the input file and each file it reads (buffers, images) may hold, and the input
+    /// with its buffer files together, MiB.
+    #[arg(long, value_name = "MIB", default_value_t = penumbra::load::DEFAULT_INPUT_MIB)]
+    max_input_mib: u64,
+    /// The largest width and height of an image, pixels.
+    #[arg(long, value_name = "PIXELS", default_value_t = penumbra::load::DEFAULT_IMAGE_SIDE)]
+    max_image_size: u32,
+    /// The most memory one decoded image may take, MiB (12 bytes a pixel).
+    #[arg(long, value_name = "MIB", default_value_t = penumbra::load::DEFAULT_IMAGE_MIB)]
+    max_image_mib: u64,
+    /// The most nodes in the file.
+    #[arg(long, value_name = "N", default_value_t = penumbra::load::DEFAULT_NODES)]
+    max_nodes: usize,
+    /// The most mesh instances (primitives placed by the scene's nodes).
+    #[arg(long, value_name = "N", default_value_t = penumbra::load::DEFAULT_INSTANCES)]
+    max_instances: usize,
+    /// The most primitives over all meshes of the file.
+    #[arg(long, value_name = "N", default_value_t = penumbra::load::DEFAULT_PRIMITIVES)]
+    max_primitives: usize,
+    /// The most triangles over all mesh instances.
+    #[arg(long, value_name = "N", default_value_t = penumbra::load::DEFAULT_TRIANGLES)]
+    max_triangles: usize,
+    /// The most receiver polygons (coplanar, edge-connected triangles of one material).
+    #[arg(long, value_name = "N", default_value_t = penumbra::load::DEFAULT_POLYGONS)]
+    max_polygons: usize,
+}
+
+impl InputArgs {
+    fn options(&self) -> penumbra::load::LoadOptions {
+        use penumbra::load::MIB;
+        penumbra::load::LoadOptions {
+            limits: penumbra::load::Limits {
+                input_bytes: self.max_input_mib.saturating_mul(MIB),
+                image_side: self.max_image_size,
+                image_bytes: self.max_image_mib.saturating_mul(MIB),
+                nodes: self.max_nodes,
+                instances: self.max_instances,
+                primitives: self.max_primitives,
+                triangles: self.max_triangles,
+                polygons: self.max_polygons,
+            },
+            allow_outside: self.allow_outside.clone(),
+        }
+    }
+
+    /// Reads the input glTF within these limits.
+    fn read(&self, path: &std::path::Path) -> anyhow::Result<Gltf> {
+        Ok(penumbra::load::read_with(path, &self.options())?)
+    }
+}
+
 /// Discontinuity-meshing radiosity preprocessor and lightmap baker for glTF scenes.
 #[derive(Parser)]
 #[command(version, about)]
@@ -145,6 +214,8 @@ struct ReferenceArgs {
     /// Print nothing on success.
     #[arg(long, short)]
     quiet: bool,
+    #[command(flatten)]
+    input_args: InputArgs,
 }
 
 #[derive(Args)]
@@ -172,6 +243,8 @@ struct MeshArgs {
     /// As for bake: the sky's light drives the mesher's refinement too.
     #[arg(long, value_name = "R,G,B")]
     sky: Option<String>,
+    #[command(flatten)]
+    input_args: InputArgs,
 }
 
 #[derive(Args)]
@@ -204,6 +277,8 @@ struct RenderArgs {
     /// Radiance (W/(m² sr)) shown as white [default: automatic].
     #[arg(long)]
     exposure: Option<f64>,
+    #[command(flatten)]
+    input_args: InputArgs,
 }
 
 #[derive(Args)]
@@ -328,6 +403,8 @@ struct BakeArgs {
     /// No progress bars or warnings on stderr.
     #[arg(long, short)]
     quiet: bool,
+    #[command(flatten)]
+    input_args: InputArgs,
 }
 
 fn main() {
@@ -336,7 +413,7 @@ fn main() {
         .map_err(anyhow::Error::from)
         .and_then(|_| run(cli))
     {
-        eprintln!("error: {e:#}");
+        say!("error: {e:#}");
         std::process::exit(1);
     }
 }
@@ -352,7 +429,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
 }
 
 fn mesh(args: MeshArgs) -> anyhow::Result<()> {
-    let gltf = penumbra::load::read(&args.input)?;
+    let gltf = args.input_args.read(&args.input)?;
     let options = BakeOptions {
         mesher: args.mesher,
         budget: args.budget,
@@ -362,6 +439,7 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
             sky: sky_radiance(args.sky.as_deref())?,
             ..SolveOptions::default()
         },
+        load: args.input_args.options(),
         ..BakeOptions::default()
     };
     let (scene, segments, meshes) = penumbra::bake::meshes(&gltf, &options)?;
@@ -411,7 +489,7 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
 fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
     let start = std::time::Instant::now();
     let pool = pool(args.threads)?;
-    let gltf = penumbra::load::read(&args.input)?;
+    let gltf = args.input_args.read(&args.input)?;
     let mut named = vec![("--out", args.out.as_path())];
     if let Some(stats) = &args.stats {
         named.push(("--stats", stats));
@@ -443,7 +521,7 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
         None => None,
     };
     if !args.quiet {
-        eprintln!(
+        say!(
             "reference {} -> {}: {}x{} lightmap, {} covered texels, {} spp, \
              mean relative standard error {:.4}, {:.2} s",
             args.input.display(),
@@ -516,13 +594,13 @@ fn compare(args: CompareArgs) -> anyhow::Result<()> {
     let quiet = args.quiet;
     let log = |line: &str| {
         if !quiet {
-            eprintln!("{line}");
+            say!("{line}");
         }
     };
     let report = pool
         .install(|| penumbra::compare::compare(&args.input, &args.out, &options, &failure, &log))?;
     if !quiet {
-        eprintln!(
+        say!(
             "compared {} -> {}: {} runs, {:.0} s",
             args.input.display(),
             args.out.display(),
@@ -566,7 +644,7 @@ fn pool(threads: Option<usize>) -> anyhow::Result<rayon::ThreadPool> {
 }
 
 fn render(args: RenderArgs) -> anyhow::Result<()> {
-    let gltf = penumbra::load::read(&args.input)?;
+    let gltf = args.input_args.read(&args.input)?;
     use penumbra::render::Camera;
     let camera = match (&args.eye, &args.look_at, args.camera.as_str()) {
         (Some(eye), Some(target), _) => {
@@ -633,6 +711,7 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         supersample: args.supersample,
         seams: args.seams,
         double_sided: args.double_sided,
+        load: args.input_args.options(),
     };
     let bars = Bars::new(args.quiet);
     let progress = |stage: &str, done: u64, total: u64| bars.update(stage, done, total);
@@ -652,9 +731,9 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
     let result = result?;
     if !args.quiet {
         for w in &result.stats.warnings {
-            eprintln!("warning: {}: {w}", args.input.display());
+            say!("warning: {}: {w}", args.input.display());
         }
-        eprintln!(
+        say!(
             "baked {} -> {}: {} elements, {} lightmap page{} of {}x{}, {:.2} s",
             args.input.display(),
             args.output.display(),

@@ -370,7 +370,7 @@ fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
         .ok_or_else(|| bad(gltf, format!("texture {texture}"), "does not exist"))?;
     let bytes = match tex.source().source() {
         gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, "lightmap")?.to_vec(),
-        gltf::image::Source::Uri { uri, .. } => load::read_uri(&gltf.path, uri, "lightmap")?,
+        gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, "lightmap")?,
     };
     let (w, h) = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()

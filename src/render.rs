@@ -234,13 +234,12 @@ pub fn render_radiance(
                 gltf::image::Source::View { view, .. } => {
                     gltf.view_bytes(&view, "lightmap")?.to_vec()
                 }
-                gltf::image::Source::Uri { uri, .. } => {
-                    load::read_uri(&gltf.path, uri, "lightmap")?
-                }
+                gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, "lightmap")?,
             };
             let encoding = texture_encoding(gltf, texture)?;
-            let img = image::load_from_memory(&bytes)
-                .map_err(|e| bad(format!("texture {texture}"), &e.to_string()))?
+            let img = gltf
+                .decode_image(&bytes, &format!("texture {texture}"))?
+                .map_err(|e| bad(format!("texture {texture}"), &e))?
                 .to_rgb32f();
             e.insert(Lightmap {
                 width: img.width(),

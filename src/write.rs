@@ -161,7 +161,7 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
         let uri = root["images"][i]["uri"].as_str().map(str::to_string);
         if let Some(uri) = uri {
             let item = format!("image {i}");
-            let data = crate::load::read_uri(&gltf.path, &uri, &item)?;
+            let data = gltf.uri_bytes(&uri, &item)?;
             let mime = if data.starts_with(&[0x89, b'P', b'N', b'G']) {
                 "image/png"
             } else if data.starts_with(&[0xFF, 0xD8]) {

@@ -19,6 +19,7 @@ mod reference;
 mod seams;
 mod sky;
 mod stability;
+mod untrusted;
 
 use penumbra::load::{self, Gltf};
 use penumbra::stats::Progress;
