@@ -334,6 +334,18 @@ mod tests {
     }
 
     #[test]
+    fn temporary_names_stay_short() {
+        assert_eq!(truncated("abc", 2), "ab");
+        // Never inside a character: "é" is two bytes.
+        assert_eq!(truncated("aé", 2), "a");
+        let dir = scratch("long-name");
+        let long = dir.join(format!("{}.glb", "é".repeat(125)));
+        write_atomically(&long, b"x").unwrap();
+        assert_eq!(std::fs::read(&long).unwrap(), b"x");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
     fn staged_outputs_appear_together_or_not_at_all() {
         let dir = scratch("staged");
         let a = dir.join("a.bin");

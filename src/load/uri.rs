@@ -231,3 +231,53 @@ pub fn size_text(bytes: u64) -> String {
         format!("{bytes} bytes")
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dots_that_stay_inside_do_not_climb_out() {
+        assert!(!climbs_out(Path::new("a/../b.bin")));
+        assert!(!climbs_out(Path::new("./a/b.bin")));
+        assert!(climbs_out(Path::new("../b.bin")));
+        assert!(climbs_out(Path::new("a/../../b.bin")));
+    }
+
+    #[test]
+    fn only_regular_files_inside_the_folder_resolve() {
+        let dir = std::env::temp_dir().join(format!("penumbra-uri-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let inside = dir.join("in");
+        std::fs::create_dir_all(inside.join("a")).unwrap();
+        std::fs::write(inside.join("b.bin"), b"b").unwrap();
+        std::fs::write(dir.join("secret.bin"), b"s").unwrap();
+        let gltf = inside.join("scene.gltf");
+        let none = Confinement { allow: &[] };
+        let canonical = std::fs::canonicalize(inside.join("b.bin")).unwrap();
+        assert_eq!(none.resolve(&gltf, "b.bin").unwrap(), canonical);
+        assert_eq!(none.resolve(&gltf, "a/../b.bin").unwrap(), canonical);
+        let e = none.resolve(&gltf, "../secret.bin").unwrap_err();
+        assert!(e.contains("climbs out"), "{e}");
+        let secret = dir.join("secret.bin");
+        let e = none.resolve(&gltf, secret.to_str().unwrap()).unwrap_err();
+        assert!(e.contains("absolute path"), "{e}");
+        let e = none.resolve(&gltf, "a").unwrap_err();
+        assert!(e.contains("a directory"), "{e}");
+        // Allowed on purpose: the parent folder.
+        let allow = [dir.clone()];
+        let wide = Confinement { allow: &allow };
+        assert!(wide.resolve(&gltf, "../secret.bin").is_ok());
+        assert!(wide.resolve(&gltf, secret.to_str().unwrap()).is_ok());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn a_read_stops_past_the_limit() {
+        let endless = std::io::repeat(7);
+        let e = read_limited(endless, 1000, "--max-input-mib", Path::new("x")).unwrap_err();
+        assert!(e.contains("more than 1000 bytes"), "{e}");
+        let ok = read_limited(&[1u8, 2, 3][..], 3, "--max-input-mib", Path::new("x")).unwrap();
+        assert_eq!(ok, [1, 2, 3]);
+    }
+}
