@@ -102,6 +102,13 @@ compile_error!(
 /// 47 s flat / 157 s bumpy; 2000: 3.0 s / 9.5 s; 1000: 1.0 s / 4.5 s; 500: 0.6 s / 2.5 s.
 pub const TRIANGLES_PER_CHART: f64 = 1000.0;
 
+/// Triangles whose area is below this fraction of the whole input's are left out of the
+/// charts, as degenerate ones are: at the largest density [`check_density`] allows, such a
+/// triangle covers under half a texel. xatlas parameterizes some of these specks (a real city's
+/// 0.1 mm needles left by its source triangulation) as a line and scales that line up to the
+/// largest chart it allows, a whole page long, which failed a 39k-triangle city's atlas.
+const SPECK_AREA: f64 = 1e-9;
+
 /// With a fixed density, a chart's outline is at most `2 x BOUNDARY_MARGIN` page sides (xatlas
 /// `maxBoundaryLength`), so that it fits on one page.
 const BOUNDARY_MARGIN: f64 = 0.8;
@@ -387,7 +394,13 @@ pub fn pack_estimating(
         if input.indices.is_empty() {
             continue;
         }
+        // Specks below a texel at any density are left out of the charts (UV (0, 0), as the
+        // degenerate ones): see `SPECK_AREA`.
+        let ignore: Vec<bool> = triangle_areas(input)
+            .map(|a| a < SPECK_AREA * stats.area)
+            .collect();
         let decl = xatlas_rs::MeshDecl {
+            face_ignore_data: if ignore.contains(&true) { &ignore } else { &[] },
             vertex_count: input.positions.len() as u32,
             vertex_position_data: positions_as_bytes(input.positions),
             vertex_position_stride: 12,
@@ -774,6 +787,21 @@ struct InputStats {
     area: f64,
 }
 
+/// The area of each triangle of `input`, in its units².
+fn triangle_areas<'a>(input: &'a AtlasInput<'_>) -> impl Iterator<Item = f64> + 'a {
+    input.indices.chunks_exact(3).map(|tri| {
+        let [a, b, c] = [0, 1, 2].map(|k| input.positions[tri[k] as usize].map(f64::from));
+        let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+        let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
+        let n = [
+            e1[1] * e2[2] - e1[2] * e2[1],
+            e1[2] * e2[0] - e1[0] * e2[2],
+            e1[0] * e2[1] - e1[1] * e2[0],
+        ];
+        0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt()
+    })
+}
+
 /// Checks every input mesh, and sums their triangles and surface area.
 fn check_inputs(inputs: &[AtlasInput<'_>]) -> Result<InputStats, AtlasError> {
     let mut stats = InputStats {
@@ -824,17 +852,7 @@ fn check_inputs(inputs: &[AtlasInput<'_>]) -> Result<InputStats, AtlasError> {
                 i / 3
             )));
         }
-        for tri in input.indices.chunks_exact(3) {
-            let [a, b, c] = [0, 1, 2].map(|k| input.positions[tri[k] as usize].map(f64::from));
-            let e1 = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
-            let e2 = [c[0] - a[0], c[1] - a[1], c[2] - a[2]];
-            let n = [
-                e1[1] * e2[2] - e1[2] * e2[1],
-                e1[2] * e2[0] - e1[0] * e2[2],
-                e1[0] * e2[1] - e1[1] * e2[0],
-            ];
-            stats.area += 0.5 * (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
-        }
+        stats.area += triangle_areas(input).sum::<f64>();
         stats.triangles += input.indices.len() / 3;
     }
     Ok(stats)
@@ -1864,6 +1882,31 @@ mod tests {
         );
         assert!(atlas.meshes[3].uv.iter().all(|&uv| uv == [0.0, 0.0]));
         assert_eq!(atlas.meshes[3].indices.len(), 6);
+    }
+
+    /// A speck (here one of a real city's 0.1 mm needles, in the units the bake hands the atlas:
+    /// the scene scaled to 1000 units²) is left out of the charts with UV (0, 0); charted,
+    /// xatlas drew it as a line a page long and the atlas refused the scene.
+    #[test]
+    fn specks_are_left_out_of_the_charts() {
+        let mut meshes = vec![quad(-15.0, 0.0, -15.0, 31.6, 31.6)];
+        meshes.push(TestMesh {
+            positions: vec![
+                [2.6446366, -0.43683144, 1.4284033],
+                [2.6437597, -0.4320338, 1.4275247],
+                [2.6436608, -0.4320338, 1.4276116],
+            ],
+            indices: vec![0, 1, 2],
+        });
+        let inputs = inputs(&meshes);
+        let speck = triangle_areas(&inputs[1]).sum::<f64>();
+        let total = check_inputs(&inputs).unwrap().area;
+        assert!(speck > f64::from(f32::EPSILON) && speck < SPECK_AREA * total);
+        let atlas = pack(&inputs, &options(Some(10.0), None, 4)).unwrap();
+        check_mapping(&inputs, &atlas);
+        check_charts(&atlas);
+        assert!(atlas.meshes[1].uv.iter().all(|&uv| uv == [0.0, 0.0]));
+        assert!(atlas.meshes[0].uv.iter().any(|&uv| uv != [0.0, 0.0]));
     }
 
     #[test]
