@@ -630,8 +630,6 @@ pub struct Budget {
     pub elements: usize,
     /// `--budget`, `lightmap texels`, `input triangles`, `geometry`, `minimum` or `maximum`.
     pub from: &'static str,
-    /// The geometry's floor when it was counted: the budget it was counted at, and the count.
-    pub floor: Option<(usize, usize)>,
 }
 
 /// The element budget: `requested` (`--budget`) if given, else the largest of
@@ -668,7 +666,6 @@ pub fn element_budget(
             (b, from)
         }
     };
-    let mut floor = None;
     let (elements, from) = match requested {
         Some(b) => (b, "--budget"),
         None => {
@@ -688,7 +685,6 @@ pub fn element_budget(
             let (mut at, mut chosen) = (b.max(triangles), (b, from));
             for _ in 0..FLOOR_PASSES {
                 let count = geometry_floor(at);
-                floor = Some((at, count));
                 let geometry = count as f64 * ELEMENTS_PER_TRIANGLE;
                 if geometry <= chosen.0 as f64 {
                     break;
@@ -706,14 +702,9 @@ pub fn element_budget(
         Budget {
             elements: triangles,
             from: "input triangles",
-            floor,
         }
     } else {
-        Budget {
-            elements,
-            from,
-            floor,
-        }
+        Budget { elements, from }
     }
 }
 
@@ -757,9 +748,6 @@ fn mesh_scene(
     });
     stats.budget = budget.elements;
     stats.budget_from = budget.from.into();
-    // The discontinuity mesher's floor is the geometry's alone; the default budget's counts
-    // the lines too (it is above it, so the mesher need not count its own).
-    let floor = None;
     let budget = budget.elements;
     let t = &mut stats.timings_s;
     match options.mesher {
@@ -778,7 +766,7 @@ fn mesh_scene(
                 crate::solve::direct_light(scene, vis, &direct, meshes, &|_, _, _| {})
             };
             let (meshes, inserted, dropped) = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::discontinuity(scene, &segments, budget, floor, Some(&evaluate))
+                mesh::discontinuity(scene, &segments, budget, Some(&evaluate))
             });
             dm_stats.refused = inserted.refused;
             dm_stats.crowded = inserted.crowded;
