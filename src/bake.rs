@@ -622,7 +622,7 @@ const FLOOR_PASSES: usize = 3;
 /// Bounds of the default element budget (elements). The minimum is what a small closed room
 /// needs: the shipped Cornell box measured 1.55% RMSE against the reference at 4 600 elements
 /// (0.91% at 20 000, for about three times the solve).
-pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 5_000..=250_000;
+pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 5_000..=1_000_000;
 
 /// The element budget of a bake, and what chose it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

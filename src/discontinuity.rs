@@ -50,6 +50,14 @@ pub enum Kind {
     Punctual,
 }
 
+impl Kind {
+    /// A jump in the light (a contact, a punctual light's hard shadow): it cannot be
+    /// interpolated across, so the mesher always keeps it and values its vertices per side.
+    pub fn is_jump(self) -> bool {
+        matches!(self, Kind::D0 | Kind::Punctual)
+    }
+}
+
 /// A discontinuity segment on one receiver polygon, in its plane coordinates.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Segment {

@@ -211,6 +211,11 @@ struct ReferenceArgs {
     /// shadow), and add it to --stats as `accuracy`.
     #[arg(long, value_name = "EXR")]
     against: Option<PathBuf>,
+    /// With --against: write the error per texel as OpenEXR (red: relative error, bake minus
+    /// reference, over the mean; green: the reference's direct-light visibility, -1 for none;
+    /// blue: surface class 0 ground, 1 roof, 2 wall, -1 uncovered).
+    #[arg(long, value_name = "EXR", requires = "against")]
+    error_map: Option<PathBuf>,
     /// Print nothing on success.
     #[arg(long, short)]
     quiet: bool,
@@ -494,6 +499,9 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
     if let Some(stats) = &args.stats {
         named.push(("--stats", stats));
     }
+    if let Some(map) = &args.error_map {
+        named.push(("--error-map", map));
+    }
     let paths = check_outputs(&gltf, &named)?;
     let options = penumbra::reference::ReferenceOptions {
         spp: args.spp,
@@ -516,7 +524,14 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
                 map.height,
                 layout.pages,
             )?;
-            Some(penumbra::compare::accuracy::measure(&bake, &map, &layout))
+            let report = penumbra::compare::accuracy::measure(&bake, &map, &layout);
+            if args.error_map.is_some() {
+                let texels =
+                    penumbra::compare::accuracy::error_map(&bake, &map, &layout, report.mean);
+                let bytes = penumbra::write::exr_bytes(&texels, map.width, map.height)?;
+                staged.add(paths.last().expect("--error-map is named"), &bytes)?;
+            }
+            Some(report)
         }
         None => None,
     };

@@ -176,14 +176,18 @@ fn triangulate_in_frame(
     // outside the polygon, which refinement splits without end.
     let outline = merge_collinear(&polygon.boundary);
     let gap = (0.05 * max_area.max(0.0).sqrt()).max(tol * 10.0);
+    let jump_gap = gap.min(tol * 10.0);
     // Tags: `None` for the outline, the segment's kind and event otherwise.
     type Tagged = (DVec2, DVec2, Option<(Kind, u32)>);
     let mut input: Vec<Tagged> = outline.iter().map(|[a, b]| (*a, *b, None)).collect();
-    // D0 lines first, then the wedges strongest first, each kept clear of what went before.
+    // The jumps in the light first (D0 contacts, punctual lights' hard shadows: never left
+    // out, they cannot be interpolated), then the wedges strongest first, each kept clear of
+    // what went before.
+    let jumps = Kind::is_jump;
     let mut order: Vec<&Segment> = segments.iter().collect();
     order.sort_by(|s, t| {
-        (t.kind == Kind::D0)
-            .cmp(&(s.kind == Kind::D0))
+        jumps(t.kind)
+            .cmp(&jumps(s.kind))
             .then(t.significance.total_cmp(&s.significance))
     });
     let mut obstacles = Obstacles::new(lo, hi, clearance, order.len() + outline.len());
@@ -192,7 +196,7 @@ fn triangulate_in_frame(
     }
     let mut crowded = 0;
     for s in order {
-        let pieces = if s.kind == Kind::D0 {
+        let pieces = if jumps(s.kind) {
             vec![(s.a, s.b)]
         } else if obstacles.along(s.a, s.b) {
             Vec::new()
@@ -203,7 +207,14 @@ fn triangulate_in_frame(
             crowded += 1;
         }
         for (a, b) in pieces {
-            if let Some((a, b)) = keep_clear(a, b, &outline, gap) {
+            // A hard shadow line kept beside the outline costs a row of thin elements; one left
+            // out, or pulled away from it, lets the outline's vertices carry the other side's
+            // light over whole elements (a roof's strip of shadow along its parapet darkened
+            // it all). A contact line there mostly bounds a buried strip (a wall's foot on a
+            // floor that runs under it), where the thin row would buy nothing.
+            let punctual = s.kind == Kind::Punctual;
+            let gap = if punctual { jump_gap } else { gap };
+            if let Some((a, b)) = keep_clear(a, b, &outline, gap, punctual) {
                 input.push((a, b, Some((s.kind, s.event))));
                 obstacles.push(a, b, s.feature);
             }
@@ -311,7 +322,6 @@ fn triangulate_in_frame(
     // an occluder's edge touches the receiver (a box corner on the floor) the umbra and
     // penumbra lines start at the contact, the penumbra there is zero wide, and one vertex
     // value cannot be both the lit and the shadowed limit.
-    let jumps = |k: Kind| matches!(k, Kind::D0 | Kind::Punctual);
     let mut on_jump = vec![false; mesh.vertices.len()];
     for c in mesh.constraints.iter().filter(|c| jumps(c.kind)) {
         on_jump[c.a as usize] = true;
@@ -386,9 +396,21 @@ fn merge_collinear(boundary: &[[DVec2; 2]]) -> Vec<[DVec2; 2]> {
     out
 }
 
-/// The part of segment `a-b` kept at least `gap` away from the outline (its ends are pulled in
-/// along the segment), or `None` when little is left or it runs along the outline.
-fn keep_clear(a: DVec2, b: DVec2, outline: &[[DVec2; 2]], gap: f64) -> Option<(DVec2, DVec2)> {
+/// Segment `a-b` made safe to insert beside the outline. With `onto` (a hard shadow line), an
+/// end within `gap` of the outline is moved onto it along the segment's own line (the
+/// arrangement then splits the outline edge there, a clean T-junction); where the line does
+/// not reach the outline within `2 gap` (it runs along it near a corner), or without `onto`,
+/// the end is pulled in to at least `gap` from the outline. `None` when little is left or the
+/// segment runs along the outline. An end a hair off the outline would leave spade a sliver
+/// face that refinement splits without end; a shadow line pulled away from the outline leaves
+/// elements that straddle the jump and smear it over their whole width.
+fn keep_clear(
+    a: DVec2,
+    b: DVec2,
+    outline: &[[DVec2; 2]],
+    gap: f64,
+    onto: bool,
+) -> Option<(DVec2, DVec2)> {
     let len = a.distance(b);
     if len <= 3.0 * gap {
         return None;
@@ -401,6 +423,34 @@ fn keep_clear(a: DVec2, b: DVec2, outline: &[[DVec2; 2]], gap: f64) -> Option<(D
     {
         return None;
     }
+    let near = |x: DVec2| {
+        outline
+            .iter()
+            .any(|[p, q]| dist_to_segment(x, *p, *q) < gap)
+    };
+    // The nearest crossing of the line `x + t dir` with the outline for t in -gap..2 gap, and
+    // the outward normal of the edge crossed.
+    let snap = |x: DVec2, dir: DVec2| -> Option<(f64, DVec2)> {
+        let mut best: Option<(f64, DVec2)> = None;
+        for [p, q] in outline {
+            let e = *q - *p;
+            let den = dir.perp_dot(e);
+            if den.abs() <= 1e-12 * e.length() {
+                continue;
+            }
+            let w = *p - x;
+            let t = w.perp_dot(e) / den;
+            let s = w.perp_dot(dir) / den;
+            if (-1e-9..=1.0 + 1e-9).contains(&s)
+                && (-gap..=2.0 * gap).contains(&t)
+                && best.is_none_or(|(b, _)| t.abs() < b.abs())
+            {
+                let e = e.normalize();
+                best = Some((t, DVec2::new(e.y, -e.x)));
+            }
+        }
+        best
+    };
     let pull = |x: DVec2, dir: DVec2| -> f64 {
         let mut t: f64 = 0.0;
         for [p, q] in outline {
@@ -413,12 +463,38 @@ fn keep_clear(a: DVec2, b: DVec2, outline: &[[DVec2; 2]], gap: f64) -> Option<(D
         }
         t
     };
-    let ta = pull(a, u);
-    let tb = pull(b, -u);
-    if ta + tb >= len - gap {
+    // Each end where it goes: onto the outline (onto its vertex, where one is within `gap`:
+    // a shadow line leaves its building's corner, and a point a hair beside the corner would
+    // leave a tiny edge that refinement chases), or pulled in.
+    let corner = |x: DVec2| -> DVec2 {
+        outline
+            .iter()
+            .map(|[p, _]| *p)
+            .filter(|p| p.distance(x) < gap)
+            .min_by(|p, q| p.distance(x).total_cmp(&q.distance(x)))
+            .unwrap_or(x)
+    };
+    // A point put on an outline edge is rounded a hair to either side of it; inside, it would
+    // leave spade's convex hull a zero-area face outside the polygon (refined without end),
+    // so it goes a hair outside, where the outline only bends through it.
+    let hair = 1e-9 * outline.iter().map(|[p, q]| p.distance(*q)).sum::<f64>();
+    let end = |x: DVec2, inward: DVec2| -> (DVec2, f64) {
+        if !near(x) {
+            (x, 0.0)
+        } else if let Some((t, out)) = snap(x, -inward).filter(|_| onto) {
+            let on = x - inward * t;
+            let c = corner(on);
+            (if c == on { on + out * hair } else { c }, 0.0)
+        } else {
+            let t = pull(x, inward);
+            (x + inward * t, t)
+        }
+    };
+    let ((a, ta), (b, tb)) = (end(a, u), end(b, -u));
+    if ta + tb >= len - gap || a.distance(b) <= gap {
         return None;
     }
-    Some((a + u * ta, b - u * tb))
+    Some((a, b))
 }
 
 /// The segments already placed in a polygon's plane, bucketed in a uniform grid so that
@@ -1397,6 +1473,57 @@ mod tests {
             ],
             vec![0, 1, 2, 0, 2, 3],
         )
+    }
+
+    /// The unit square's outline, counter-clockwise (inside on the left).
+    fn unit_square() -> Vec<[DVec2; 2]> {
+        let c = [
+            DVec2::new(0.0, 0.0),
+            DVec2::new(1.0, 0.0),
+            DVec2::new(1.0, 1.0),
+            DVec2::new(0.0, 1.0),
+        ];
+        (0..4).map(|i| [c[i], c[(i + 1) % 4]]).collect()
+    }
+
+    #[test]
+    fn segment_ends_near_the_outline_go_onto_it() {
+        let outline = unit_square();
+        let gap = 0.05;
+        // Ends 1e-12 and 0.03 from the bottom and top edges, crossing at 60 degrees: both go
+        // onto the edges along the segment's line, a hair outside.
+        let (a, b) = (
+            DVec2::new(0.3, 1e-12),
+            DVec2::new(0.3 + 0.97 / 3f64.sqrt(), 0.97),
+        );
+        let (a2, b2) = keep_clear(a, b, &outline, gap, true).expect("kept");
+        assert!(a2.y <= 0.0 && a2.y > -1e-8, "{a2}");
+        assert!(b2.y >= 1.0 && b2.y < 1.0 + 1e-8, "{b2}");
+        let dir = (b - a).normalize();
+        assert!((a2 - a).perp_dot(dir).abs() < 1e-8 && (b2 - a).perp_dot(dir).abs() < 1e-8);
+        // An end 0.01 from a corner goes onto the corner.
+        let (_, c) = keep_clear(
+            DVec2::new(0.5, 0.5),
+            DVec2::new(0.99, 0.992),
+            &outline,
+            gap,
+            true,
+        )
+        .expect("kept");
+        assert_eq!(c, DVec2::new(1.0, 1.0));
+        // An end far from the outline stays; a segment along an edge is left out.
+        let (p, _) = keep_clear(DVec2::new(0.5, 0.5), b, &outline, gap, true).expect("kept");
+        assert_eq!(p, DVec2::new(0.5, 0.5));
+        assert!(
+            keep_clear(
+                DVec2::new(0.1, 0.02),
+                DVec2::new(0.9, 0.03),
+                &outline,
+                gap,
+                true
+            )
+            .is_none()
+        );
     }
 
     #[test]

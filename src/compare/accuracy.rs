@@ -163,6 +163,35 @@ pub fn measure(bake: &[DVec3], reference: &ReferenceMap, layout: &TexelLayout) -
     }
 }
 
+/// A per-texel picture of [`measure`]'s inputs, for finding where the error is: red is the
+/// relative error `(bake - reference) / E` (channel means, `E` the report's mean, reference
+/// noise not removed), green the reference's direct-light visibility (-1 where it has none),
+/// blue the surface class (0 ground, 1 roof, 2 wall; -1 uncovered, and then red is 0).
+pub fn error_map(
+    bake: &[DVec3],
+    reference: &ReferenceMap,
+    layout: &TexelLayout,
+    mean: f64,
+) -> Vec<DVec3> {
+    surface_classes(layout)
+        .iter()
+        .enumerate()
+        .map(|(i, class)| {
+            let Some(class) = class else {
+                return DVec3::new(0.0, -1.0, -1.0);
+            };
+            let error = (bake[i] - reference.mean[i]).element_sum() / 3.0 / mean;
+            let visibility = reference.visibility[i].map_or(-1.0, f64::from);
+            let class = match *class {
+                "ground" => 0.0,
+                "roof" => 1.0,
+                _ => 2.0,
+            };
+            DVec3::new(error, visibility, class)
+        })
+        .collect()
+}
+
 /// Reads a bake's float lightmap: `path` (page 0) and, for a lightmap of `pages` pages, the
 /// page files beside it ([`crate::bake::exr_page_path`]), stacked top to bottom as
 /// [`crate::reference::texel_layout`] stacks the pages. Each page must be `width` x

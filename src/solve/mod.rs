@@ -256,29 +256,36 @@ impl SurfacePoint {
 }
 
 /// Where each mesh vertex is evaluated: the vertex as a [`SurfacePoint::near_edge`], pulled
-/// toward the centroid of one of its triangles. A vertex on the polygon's edge then sees a
-/// surface that meets the edge (a wall on the floor) as its limit from inside the polygon,
-/// instead of lying in that surface's plane, where the contour integral and rays degenerate.
+/// into the middle of its fan of triangles (the sum of their angles' bisectors there, each
+/// weighted by its angle). A vertex on the polygon's edge then sees a surface that meets the
+/// edge (a wall on the floor) as its limit from inside the polygon, instead of lying in that
+/// surface's plane, where the contour integral and rays degenerate; a copy of a vertex on a
+/// cut (a contact or hard shadow line, split per side) goes straight into its own side, even
+/// where its triangles are slivers along the line (toward one of their centroids it went
+/// nearly along the line, and its shadow ray grazed past the occluder's edge).
 pub fn evaluation_points(
     scene: &Scene,
     vis: &Visibility,
     mesh: &ReceiverMesh,
 ) -> Vec<SurfacePoint> {
     let frame = &scene.polygons[mesh.polygon].frame;
-    let mut toward = vec![None::<DVec2>; mesh.vertices.len()];
+    // Per vertex, the sum over its triangles of the bisector of the triangle's angle there,
+    // weighted by that angle: the direction into the middle of the vertex's fan.
+    let mut toward = vec![DVec2::ZERO; mesh.vertices.len()];
     for t in &mesh.triangles {
-        let c = t.iter().map(|&i| mesh.vertices[i as usize]).sum::<DVec2>() / 3.0;
-        for &i in t {
-            toward[i as usize].get_or_insert(c);
+        for k in 0..3 {
+            let v = mesh.vertices[t[k] as usize];
+            let a = (mesh.vertices[t[(k + 1) % 3] as usize] - v).normalize_or_zero();
+            let b = (mesh.vertices[t[(k + 2) % 3] as usize] - v).normalize_or_zero();
+            let angle = a.angle_to(b).abs();
+            toward[t[k] as usize] += (a + b).normalize_or_zero() * angle;
         }
     }
     mesh.vertices
         .iter()
         .zip(&toward)
-        .map(|(&v, c)| {
-            let d = c
-                .map(|c| (c - v).normalize_or_zero())
-                .unwrap_or(DVec2::ZERO);
+        .map(|(&v, d)| {
+            let d = d.normalize_or_zero();
             let inward = frame.u * d.x + frame.v * d.y;
             SurfacePoint::near_edge(
                 frame.world_from_plane(v),

@@ -596,9 +596,11 @@ fn at_scale_the_discontinuity_mesh_shows_the_direct_light_better_than_uniform_me
     // Not only on the Cornell box: a 6 000-triangle town under the sun and 20x20 boxes under an
     // area light, at 20 000 elements. `compare::mesh_samples` compares what the lightmap shows
     // inside every element with the exact direct light there (`examples/mesh_error.rs`).
-    // Measured RMSE, uniform against discontinuity: town 12.1% against 7.8% of the lit mean,
-    // box grid 26.8% against 18.9%. (Under 256 small street lamps it is not so: README, "Each
-    // mesher's direct light on the ladder".)
+    // Measured RMSE, uniform against discontinuity: town 12.1% against 10.2% of the lit mean,
+    // box grid 26.8% against 18.9%. The town's sun shadow lines all stay in the mesh, beside
+    // the outline too, where each costs a row of thin elements out of the fixed budget (at the
+    // default budget, which grows with the lines, they cost nothing elsewhere). (Under 256
+    // small street lamps it is not so: docs/accuracy.md.)
     use penumbra::compare::{mesh_error, mesh_samples};
     use penumbra::solve::Direct;
     use penumbra::visibility::Visibility;
@@ -621,7 +623,7 @@ fn at_scale_the_discontinuity_mesh_shows_the_direct_light_better_than_uniform_me
         };
         let (uniform, dm) = (error(Mesher::Uniform), error(Mesher::Discontinuity));
         assert!(
-            dm.rmse < 0.8 * uniform.rmse,
+            dm.rmse < 0.9 * uniform.rmse,
             "{name}: discontinuity {:.2}% against uniform {:.2}% of the lit mean",
             100.0 * dm.rmse,
             100.0 * uniform.rmse
@@ -632,4 +634,82 @@ fn at_scale_the_discontinuity_mesh_shows_the_direct_light_better_than_uniform_me
             dm.shown_over_exact
         );
     }
+}
+
+/// A floor [-4, 4] x [-2, 2] under a sun travelling along (0, -1, 0.5), and beside its z = -2
+/// edge (not on it) a wall 0.2 m high at z in [-2.4, -2.05], longer than the floor: its shadow is a strip
+/// 5 cm wide along the floor's edge, z in [-2, -1.95].
+fn floor_with_a_strip_of_shadow() -> Vec<u8> {
+    let mut g = GlbBuilder::new();
+    let grey = g.add_material(Material::diffuse("grey", [0.5; 3]));
+    g.add_mesh_node(
+        "floor",
+        &fixtures::horizontal_rect([-4.0, 4.0], [-2.0, 2.0], 0.0, true),
+        grey,
+    );
+    let top = [
+        [-5.0, 0.2, -2.4],
+        [-5.0, 0.2, -2.05],
+        [5.0, 0.2, -2.05],
+        [5.0, 0.2, -2.4],
+    ];
+    g.add_mesh_node("wall", &fixtures::block(top, -0.5, false), grey);
+    let light = g.add_light(fixtures::Light::directional("sun", 1.0));
+    g.add_node(
+        fixtures::Node::new("sun")
+            .with_transform(fixtures::Transform::look_to(
+                [0.0, 4.0, -4.0],
+                [0.0, -1.0, 0.5],
+                [0.0, 0.0, 1.0],
+            ))
+            .with_light(light),
+    );
+    g.to_glb()
+}
+
+/// A punctual light's shadow line closer to the outline than an element is wide stays in the
+/// mesh, from outline to outline, with its vertices valued per side: left out (or pulled away
+/// from the outline), it let the outline's shadowed vertices darken the lit floor over whole
+/// elements (on a real city, roofs with a strip of shadow along their parapet bake dark).
+/// At a budget of 40 elements the floor's elements are about 1 m wide, twenty times the strip.
+#[test]
+fn a_shadow_strip_along_the_outline_does_not_darken_the_lit_side() {
+    let mut o = dm();
+    o.solve.bounces = Some(0);
+    o.budget = Some(40);
+    let b = crate::bake(&floor_with_a_strip_of_shadow(), &o);
+    let f = floor(&b);
+    let m = b.meshes.iter().position(|m| m.polygon == f).unwrap();
+    let (mesh, frame) = (&b.meshes[m], &b.scene.polygons[f].frame);
+    let h = &b.solution.irradiance[m];
+    let world = |v: u32| frame.world_from_plane(mesh.vertices[v as usize]);
+    let lit = h
+        .iter()
+        .zip(0..)
+        .filter(|(_, v)| world(*v).z > -1.9)
+        .map(|(h, _)| h.x)
+        .fold(0.0, f64::max);
+    assert!(lit > 0.0);
+    let (mut worst, mut in_strip) = (0.0_f64, 0);
+    for t in &mesh.triangles {
+        let c = t.iter().map(|&v| world(v)).sum::<DVec3>() / 3.0;
+        if c.z > -1.95 {
+            for &v in t {
+                worst = worst.max((h[v as usize].x - lit).abs() / lit);
+            }
+        } else {
+            in_strip += 1;
+            for &v in t {
+                let x = h[v as usize].x;
+                assert!(
+                    x < 1e-6 * lit,
+                    "light in the strip: {x} of {lit} at {}",
+                    world(v)
+                );
+            }
+        }
+    }
+    assert!(in_strip >= 2, "{in_strip} elements in the strip of shadow");
+    // The lit floor is uniform: the exact light at every vertex, to rounding.
+    assert!(worst < 1e-6, "the lit side is off by {worst} of its light");
 }
