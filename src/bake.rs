@@ -621,7 +621,8 @@ const FLOOR_PASSES: usize = 3;
 
 /// Bounds of the default element budget (elements). The minimum is what a small closed room
 /// needs: the shipped Cornell box measured 1.55% RMSE against the reference at 4 600 elements
-/// (0.91% at 20 000, for about three times the solve).
+/// (0.91% at 20 000, for about three times the solve). The maximum leaves room for a real city's
+/// hard shadow lines, all kept: Florence's 35 373 triangles take 458 109 elements.
 pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 5_000..=1_000_000;
 
 /// The element budget of a bake, and what chose it.
@@ -1047,7 +1048,8 @@ mod tests {
         let (near, _, from) = budget(1_000);
         assert!(near && from == "lightmap texels", "{:?}", budget(1_000));
         assert_eq!(budget(40_000), (false, 60_000, "geometry"));
-        assert_eq!(budget(200_000), (false, 250_000, "maximum"));
+        assert_eq!(budget(200_000), (false, 300_000, "geometry"));
+        assert_eq!(budget(800_000), (false, 1_000_000, "maximum"));
         // A budget given is the budget: the geometry is not meshed for it.
         let given = element_budget(&scene, Some(5_000), texels_per_unit, |_| {
             panic!("meshed the geometry for a given budget")
