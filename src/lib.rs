@@ -49,7 +49,8 @@ pub mod lightmap;
 // The lightmapped glb.
 pub mod write;
 
-// Shared physics, used by several stages (depend on nothing but `scene`'s plain data).
+// Shared physics and small utilities, used by several stages (they depend on nothing but
+// `scene`'s plain data).
 
 // Form factors by Lambert's contour formula, polygon clipping, convex pieces, areas,
 // barycentrics, a bucket grid of 2D boxes.
@@ -57,6 +58,12 @@ pub mod geometry;
 
 // Receiving points, area emitters, the punctual light model, luminance.
 pub mod light;
+
+// The sRGB transfer curves.
+pub mod color;
+
+// SplitMix64, the one pseudo-random generator (the reference, generated scenes, tests).
+pub mod rng;
 
 // The pipeline driver and its bookkeeping.
 

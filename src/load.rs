@@ -10,6 +10,7 @@
 //! closed primitive ([`crate::scene::Instance::is_closed`]: a box with all its faces) gets no back: its back
 //! is inside the volume, which many exporters mark double-sided by default.
 
+use crate::color::srgb_to_linear;
 use crate::error::{Error, Result};
 use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side};
 use base64::Engine;
@@ -1082,14 +1083,5 @@ impl TextureMeans {
         };
         self.cache.insert(index, mean);
         Ok(mean)
-    }
-}
-
-/// The sRGB electro-optical transfer function (IEC 61966-2-1), value in 0..1.
-pub fn srgb_to_linear(c: f64) -> f64 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
     }
 }

@@ -54,7 +54,9 @@
 //! result does not depend on the thread count.
 
 use crate::error::{Error, Result};
+use crate::light::luminance;
 use crate::load::{self, Gltf};
+use crate::rng::{SplitMix64, mix64};
 use crate::scene::Scene;
 use crate::solve::{self, SurfacePoint};
 use crate::visibility::Visibility;
@@ -387,26 +389,6 @@ fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
     Ok((w, h))
 }
 
-/// SplitMix64 (Steele, Lea & Flood 2014): a small, fast generator, one stream per texel.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        mix64(self.0)
-    }
-    /// Uniform in [0, 1).
-    fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
-fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
-}
-
 /// One area emitter for next-event estimation: its triangles with a cumulative area table.
 struct Emitter {
     polygon: usize,
@@ -648,11 +630,6 @@ impl Default for Probe {
             nearest: f64::INFINITY,
         }
     }
-}
-
-/// Rec. 709 luminance of linear RGB.
-fn luminance(c: DVec3) -> f64 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
 /// A cosine-weighted direction about the unit normal `n` (pdf `cos(theta) / pi`).

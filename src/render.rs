@@ -320,7 +320,7 @@ pub fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> imag
     for (i, c) in radiance.iter().enumerate() {
         let v = (*c / scale)
             .to_array()
-            .map(|x| (linear_to_srgb(x.clamp(0.0, 1.0)) * 255.0).round() as u8);
+            .map(|x| (crate::color::linear_to_srgb(x.clamp(0.0, 1.0)) * 255.0).round() as u8);
         img.put_pixel(i as u32 % width, i as u32 / width, image::Rgb(v));
     }
     img
@@ -340,23 +340,4 @@ pub fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
     }
     let texel_uv = uv * DVec2::new(w as f64, h as f64);
     crate::lightmap::seams::Footprint::at(map.width, map.height, page, texel_uv).sample(&map.texels)
-}
-
-/// The sRGB opto-electronic transfer function (IEC 61966-2-1), value in \[0, 1\].
-pub fn linear_to_srgb(c: f64) -> f64 {
-    if c <= 0.0031308 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-/// The sRGB electro-optical transfer function (IEC 61966-2-1), the inverse of
-/// [`linear_to_srgb`]: encoded value in \[0, 1\] to linear.
-pub fn srgb_to_linear(e: f64) -> f64 {
-    if e <= 0.04045 {
-        e / 12.92
-    } else {
-        ((e + 0.055) / 1.055).powf(2.4)
-    }
 }

@@ -562,26 +562,20 @@ mod tests {
     use super::*;
     use crate::scene::{Instance, Material};
 
-    /// A small deterministic generator (SplitMix64) for test inputs.
-    pub(crate) struct SplitMix(pub u64);
-    impl SplitMix {
-        pub fn next_f64(&mut self) -> f64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-        }
-        pub fn vec(&mut self, lo: f64, hi: f64) -> DVec3 {
-            DVec3::new(
-                lo + (hi - lo) * self.next_f64(),
-                lo + (hi - lo) * self.next_f64(),
-                lo + (hi - lo) * self.next_f64(),
-            )
+    use crate::rng::SplitMix64;
+
+    /// A point uniform in the cube `[lo, hi)³`.
+    trait RandomVec {
+        fn vec(&mut self, lo: f64, hi: f64) -> DVec3;
+    }
+
+    impl RandomVec for SplitMix64 {
+        fn vec(&mut self, lo: f64, hi: f64) -> DVec3 {
+            DVec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
         }
     }
 
-    fn random_scene(rng: &mut SplitMix, n: usize, offset: DVec3) -> Scene {
+    fn random_scene(rng: &mut SplitMix64, n: usize, offset: DVec3) -> Scene {
         let mut scene = Scene::default();
         scene.materials.push(Material {
             name: "m".into(),
@@ -599,7 +593,7 @@ mod tests {
     #[test]
     fn bvh_agrees_with_brute_force_on_random_rays() {
         for offset in [DVec3::ZERO, DVec3::new(1e4, -3e4, 2e4)] {
-            let mut rng = SplitMix(7);
+            let mut rng = SplitMix64(7);
             let scene = random_scene(&mut rng, 300, offset);
             let vis = Visibility::new(&scene);
             let mut hits = 0;
@@ -629,7 +623,7 @@ mod tests {
 
     #[test]
     fn box_query_agrees_with_brute_force() {
-        let mut rng = SplitMix(3);
+        let mut rng = SplitMix64(3);
         let scene = random_scene(&mut rng, 400, DVec3::new(50.0, 0.0, -20.0));
         let vis = Visibility::new(&scene);
         let mut total = 0;
@@ -646,7 +640,7 @@ mod tests {
 
     #[test]
     fn recording_keeps_answers_and_the_rays_as_cast() {
-        let mut rng = SplitMix(11);
+        let mut rng = SplitMix64(11);
         let offset = DVec3::new(300.0, 20.0, -40.0);
         let scene = random_scene(&mut rng, 200, offset);
         let vis = Visibility::new(&scene);
@@ -744,7 +738,7 @@ mod tests {
 
     #[test]
     fn of_two_coincident_sides_the_ray_meets_the_one_facing_it() {
-        let mut rng = SplitMix(5);
+        let mut rng = SplitMix64(5);
         for back_first in [false, true] {
             let scene = back_to_back(back_first);
             let vis = Visibility::new(&scene);
@@ -779,7 +773,7 @@ mod tests {
     #[test]
     fn near_origin_hits_are_found() {
         // A ray starting just above a plate must hit it when pointed at it: the CWBVH trap.
-        let mut rng = SplitMix(1);
+        let mut rng = SplitMix64(1);
         let scene = random_scene(&mut rng, 50, DVec3::ZERO);
         let vis = Visibility::new(&scene);
         for t in &scene.triangles {

@@ -3,12 +3,12 @@
 //! Sans, bundled by the `dejavu` crate, so PNGs draw the same on any machine).
 
 use super::Region;
+use crate::color::{linear_to_srgb, srgb_to_linear};
 use crate::error::{Error, Result};
 use crate::geometry::barycentric_2d;
 use crate::lightmap::{self, Lightmap, Locator};
 use crate::mesh::ReceiverMesh;
 use crate::reference::ReferenceMap;
-use crate::render::linear_to_srgb;
 use crate::scene::{Polygon, point_in_triangle};
 use glam::{DVec2, DVec3};
 use image::RgbImage;
@@ -27,14 +27,6 @@ pub fn register_font() -> Result<()> {
         Ok(())
     } else {
         Err(Error::Image("cannot load the bundled font".into()))
-    }
-}
-
-fn srgb_to_linear(c: f64) -> f64 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
     }
 }
 

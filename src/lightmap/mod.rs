@@ -135,7 +135,7 @@ impl Encoding {
     /// Linear value (0..1) to encoded value (0..1).
     pub fn encode(self, v: f64) -> f64 {
         match self {
-            Encoding::Srgb => crate::render::linear_to_srgb(v),
+            Encoding::Srgb => crate::color::linear_to_srgb(v),
             Encoding::Linear => v,
         }
     }
@@ -143,7 +143,7 @@ impl Encoding {
     /// Encoded value (0..1, i.e. code / 255) to linear value (0..1).
     pub fn decode(self, e: f64) -> f64 {
         match self {
-            Encoding::Srgb => crate::render::srgb_to_linear(e),
+            Encoding::Srgb => crate::color::srgb_to_linear(e),
             Encoding::Linear => e,
         }
     }

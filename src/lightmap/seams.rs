@@ -593,10 +593,8 @@ mod tests {
 
     /// A deterministic value in [0, 1) for `i` (SplitMix64's finaliser).
     fn noise(i: u64) -> f64 {
-        let mut z = i.wrapping_add(1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        use crate::rng::{GAMMA, mix64, unit_f64};
+        unit_f64(mix64(i.wrapping_add(1).wrapping_mul(GAMMA)))
     }
 
     #[test]

@@ -35,6 +35,7 @@
 use crate::error::Error;
 use crate::geometry::box_corners;
 use crate::light::{SurfacePoint, radical_inverse2};
+use crate::rng::{GAMMA, unit_f64};
 use crate::scene::Scene;
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
@@ -221,8 +222,7 @@ fn point_shift(p: DVec3) -> DVec2 {
     let h = fmix(
         p.x.to_bits() ^ fmix(p.y.to_bits() ^ fmix(p.z.to_bits()).rotate_left(17)).rotate_left(31),
     );
-    let unit = |bits: u64| (bits >> 11) as f64 / (1u64 << 53) as f64;
-    DVec2::new(unit(h), unit(fmix(h ^ 0x9E37_79B9_7F4A_7C15)))
+    DVec2::new(unit_f64(h), unit_f64(fmix(h ^ GAMMA)))
 }
 
 /// Checks a sky radiance: three finite, non-negative numbers. The reason when not.

@@ -16,8 +16,8 @@
 //! files, and a folder beside it a file with a random marker: the marker must never be in the
 //! output or the messages. `PENUMBRA_MUTANT_CLASSES=untrusted` makes every mutant one of them.
 
-use crate::Rng;
 use crate::output::split_glb;
+use crate::{Below, Rng};
 use penumbra::fixtures;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
