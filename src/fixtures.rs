@@ -52,13 +52,6 @@ const UNSIGNED_SHORT: u32 = 5123;
 const UNSIGNED_INT: u32 = 5125;
 const FLOAT: u32 = 5126;
 
-/// glb magic `glTF`, little-endian.
-const GLB_MAGIC: u32 = 0x4654_6C67;
-/// glb chunk type `JSON`.
-const CHUNK_JSON: u32 = 0x4E4F_534A;
-/// glb chunk type `BIN\0`.
-const CHUNK_BIN: u32 = 0x004E_4942;
-
 /// Name of the glTF extension for emitted radiance above 1.
 pub const KHR_MATERIALS_EMISSIVE_STRENGTH: &str = "KHR_materials_emissive_strength";
 /// Name of the glTF extension for point, spot and directional lights.
@@ -870,34 +863,9 @@ impl GlbBuilder {
         Value::Object(root)
     }
 
-    /// Writes the scene as a glb: the 12-byte header (`glTF`, version 2, total length), the
-    /// JSON chunk padded with spaces to a multiple of 4 bytes, then (when there is any
-    /// geometry) the BIN chunk padded with zeros to a multiple of 4 bytes.
+    /// Writes the scene as a glb ([`crate::write::to_glb`]).
     pub fn to_glb(&self) -> Vec<u8> {
-        let mut json = serde_json::to_vec(&self.to_json()).expect("JSON serialisation cannot fail");
-        while !json.len().is_multiple_of(4) {
-            json.push(b' ');
-        }
-        let mut bin = self.bin.clone();
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let mut total = 12 + 8 + json.len();
-        if !bin.is_empty() {
-            total += 8 + bin.len();
-        }
-        let total = u32::try_from(total).expect("glb larger than 4 GiB");
-        let mut out = Vec::with_capacity(total as usize);
-        for word in [GLB_MAGIC, 2, total, json.len() as u32, CHUNK_JSON] {
-            out.extend_from_slice(&word.to_le_bytes());
-        }
-        out.extend_from_slice(&json);
-        if !bin.is_empty() {
-            out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-            out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
-            out.extend_from_slice(&bin);
-        }
-        out
+        crate::write::to_glb(&self.to_json(), self.bin.clone()).expect("glb larger than 4 GiB")
     }
 
     /// Writes one primitive's accessors; returns the primitive's JSON.
@@ -1723,6 +1691,7 @@ pub fn all() -> Vec<(&'static str, Vec<u8>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::write::{CHUNK_BIN, CHUNK_JSON};
 
     fn parse(glb: &[u8]) -> gltf::Gltf {
         gltf::Gltf::from_slice(glb).expect("fixture must parse")

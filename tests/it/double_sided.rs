@@ -40,7 +40,7 @@ fn mirrored_shelf() -> Vec<u8> {
             node["scale"] = serde_json::json!([-1.0, 1.0, 1.0]);
         }
     }
-    penumbra::write::to_glb(&root, g.buffers[0].clone())
+    penumbra::write::to_glb(&root, g.buffers[0].clone()).unwrap()
 }
 
 /// Bakes `bytes` to a scratch file and reads the output back.
@@ -477,7 +477,7 @@ fn one_sided_panels() -> Vec<u8> {
     for m in root["materials"].as_array_mut().unwrap() {
         m.as_object_mut().unwrap().remove("doubleSided");
     }
-    penumbra::write::to_glb(&root, g.buffers[0].clone())
+    penumbra::write::to_glb(&root, g.buffers[0].clone()).unwrap()
 }
 
 /// The discontinuity stage is not fooled by the two sides back to back: the same wedges (the
@@ -651,7 +651,7 @@ fn under_a_double_sided_box_the_floor_is_not_buried() {
     for m in root["materials"].as_array_mut().unwrap() {
         m["doubleSided"] = Value::Bool(true);
     }
-    let double = penumbra::write::to_glb(&root, g.buffers[0].clone());
+    let double = penumbra::write::to_glb(&root, g.buffers[0].clone()).unwrap();
     let under = DVec3::new(0.1, 0.0, 0.2);
     for (bytes, buried) in [(fixtures::box_on_floor(), true), (double, false)] {
         let scene = load::scene(&crate::parse(&bytes, "box.glb")).unwrap();

@@ -12,7 +12,7 @@ fn edit(bytes: &[u8], f: impl FnOnce(&mut Value, &mut Vec<u8>)) -> Vec<u8> {
     if let Some(b) = json["buffers"].get_mut(0) {
         b["byteLength"] = json!(bin.len());
     }
-    penumbra::write::to_glb(&json, bin)
+    penumbra::write::to_glb(&json, bin).unwrap()
 }
 
 /// Appends `data` to the binary chunk as a new buffer view; returns its index.
