@@ -1,10 +1,10 @@
 //! An independent Monte Carlo reference for a baked lightmap: per texel, the irradiance `H`
 //! (W/m², linear RGB, without albedo) at the texel's surface points, estimated by path tracing.
 //!
-//! It reads only the baked glb: the lightmap layout (each lightmapped primitive's `TEXCOORD_1`
-//! and the size of its `MOZ_lightmap` image) and the geometry, through [`load::scene`] and the
-//! [`Visibility`] BVH. It uses no receiver mesh and no radiosity solution, so it checks the
-//! baker from outside.
+//! It reads only the baked glb: the lightmap layout (each lightmapped primitive's UV set that
+//! `MOZ_lightmap.texCoord` names, and the size of its `MOZ_lightmap` image) and the geometry,
+//! through [`load::scene`] and the [`Visibility`] BVH. It uses no receiver mesh and no radiosity
+//! solution, so it checks the baker from outside.
 //!
 //! The estimator solves the rendering equation (Kajiya 1986, "The rendering equation",
 //! SIGGRAPH) for Lambertian surfaces in its irradiance form:
@@ -60,8 +60,8 @@ use crate::rng::{SplitMix64, mix64};
 use crate::scene::Scene;
 use crate::solve::{self, SurfacePoint};
 use crate::visibility::Visibility;
+use crate::write::binding::{self, Binding};
 use glam::{DVec2, DVec3};
-use gltf::accessor::Dimensions;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::path::Path;
@@ -200,8 +200,9 @@ fn bad(gltf: &Gltf, item: String, reason: &str) -> Error {
     }
 }
 
-/// Reads the lightmap layout of a baked glb: the `TEXCOORD_1` triangles of every primitive
-/// whose material has `MOZ_lightmap`, rasterized into the grid of the lightmap image with `n x n`
+/// Reads the lightmap layout of a baked glb: the lightmap UV triangles (the set that
+/// `MOZ_lightmap.texCoord` names, [`binding::binding`]) of every primitive whose material has
+/// `MOZ_lightmap`, rasterized into the grid of the lightmap image with `n x n`
 /// sub-samples per texel, as the bake does. `scene` must be `load::scene(gltf)` and `vis` its
 /// BVH (for the rays' start points). All lightmapped materials must share one lightmap size. A
 /// multi-page lightmap (textures with `extras.penumbra.page`, see [`crate::write`]) gives one
@@ -226,29 +227,16 @@ pub fn texel_layout(
     let mut page_texture: std::collections::BTreeMap<usize, usize> = Default::default();
     let mut sizes = std::collections::BTreeMap::new();
     for inst in &scene.instances {
-        let prim = gltf
-            .document
-            .meshes()
-            .nth(inst.mesh)
-            .and_then(|m| m.primitives().nth(inst.primitive))
-            .ok_or_else(|| bad(gltf, format!("mesh {}", inst.mesh), "missing primitive"))?;
-        let Some(moz) = inst
-            .gltf_material
-            .and_then(|m| gltf.json["materials"][m]["extensions"]["MOZ_lightmap"].as_object())
+        let Some(Binding {
+            tex_coord,
+            uv,
+            texture,
+            ..
+        }) = binding::binding(gltf, inst)?
         else {
             continue;
         };
-        let set = moz.get("texCoord").and_then(|v| v.as_u64()).unwrap_or(1) as u32;
         let item = format!("mesh {} primitive {}", inst.mesh, inst.primitive);
-        let acc = prim
-            .get(&gltf::Semantic::TexCoords(set))
-            .ok_or_else(|| bad(gltf, item.clone(), "MOZ_lightmap without its TEXCOORD set"))?;
-        let flat = gltf.read_floats(&acc, Dimensions::Vec2)?;
-        let uv: Vec<DVec2> = flat
-            .chunks_exact(2)
-            .map(|c| DVec2::new(c[0], c[1]))
-            .collect();
-        let texture = moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize;
         let dims = match sizes.get(&texture) {
             Some(&d) => d,
             None => {
@@ -265,7 +253,7 @@ pub fn texel_layout(
             ));
         }
         size = Some(dims);
-        let page = crate::render::texture_page(gltf, texture);
+        let page = binding::texture_page(gltf, texture);
         if *page_texture.entry(page).or_insert(texture) != texture {
             return Err(bad(
                 gltf,
@@ -280,7 +268,8 @@ pub fn texel_layout(
             }
             let ids = &inst.indices[3 * k..3 * k + 3];
             if ids.iter().any(|&i| i as usize >= uv.len()) {
-                return Err(bad(gltf, item, "TEXCOORD_1 is shorter than POSITION"));
+                let reason = format!("TEXCOORD_{tex_coord} is shorter than POSITION");
+                return Err(bad(gltf, item, &reason));
             }
             tris.push((ids_to_uv(ids, &uv), t, page));
         }
@@ -365,15 +354,7 @@ fn ids_to_uv(ids: &[u32], uv: &[DVec2]) -> [DVec2; 3] {
 
 /// Width and height of a texture's image (decoded header only).
 fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
-    let tex = gltf
-        .document
-        .textures()
-        .nth(texture)
-        .ok_or_else(|| bad(gltf, format!("texture {texture}"), "does not exist"))?;
-    let bytes = match tex.source().source() {
-        gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, "lightmap")?.to_vec(),
-        gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, "lightmap")?,
-    };
+    let bytes = binding::texture_bytes(gltf, texture)?;
     let (w, h) = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| bad(gltf, format!("texture {texture}"), &e.to_string()))?

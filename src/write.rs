@@ -26,7 +26,9 @@
 //! attributes, remapped through the atlas's vertex cross-reference. A mesh placed by several
 //! nodes is copied so that each placement has its own lightmap space. The bytes are built here;
 //! [`crate::files`] writes them (temporary file, then rename), so a failure never leaves a half
-//! file.
+//! file. [`binding`] reads the lightmap binding back from a written file.
+
+pub mod binding;
 
 use crate::atlas::{Atlas, AtlasMesh};
 use crate::error::{Error, Result};
