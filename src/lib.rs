@@ -73,8 +73,11 @@ pub mod bake;
 // Errors.
 pub mod error;
 
-// `--stats` and progress.
+// `--stats`: per-stage times and counts.
 pub mod stats;
+
+// The progress callback.
+pub mod progress;
 
 // Output files: never the input, written together or not at all, cleaned up on signals.
 pub mod files;

@@ -1,11 +1,9 @@
 //! Run statistics (`--stats FILE`): per-stage wall times and the counts of every stage.
 //! Field names are stable; later stages add fields.
 
+use crate::progress::Progress;
 use serde::Serialize;
 use std::time::Instant;
-
-/// Progress callback: `(stage, done, total)`. Called from worker threads.
-pub type Progress<'a> = dyn Fn(&str, u64, u64) + Sync + 'a;
 
 /// Wall time of each stage, seconds, in pipeline order. The atlas packs on a thread of its own
 /// while the discontinuity, mesh and solve stages run (xatlas packs on one core), so the

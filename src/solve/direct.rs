@@ -702,7 +702,7 @@ pub fn direct_light(
     vis: &Visibility,
     direct: &Direct<'_>,
     meshes: &[ReceiverMesh],
-    progress: &crate::stats::Progress<'_>,
+    progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let done = AtomicU64::new(0);

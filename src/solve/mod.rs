@@ -23,33 +23,34 @@
 //!
 //! * **Classic radiosity** (`--solver matrix`, [`matrix`]): the same patches and final gather,
 //!   but every pair's form factor in a matrix and the system solved by Gauss-Seidel
-//!   ([`gauss_seidel`](mod@gauss_seidel)).
+//!   ([`matrix::sweeps`]).
 //! * **Form factors** of the patch solvers (`--form-factors`, [`form_factors`]): closed form
 //!   (the default), ray cast (Wallace et al. 1989), or hemicube ([`hemicube`]; Cohen and
 //!   Greenberg 1985), which also carries the area emitters' light.
 //!
 //! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
-//! indirect light: patches, progressive refinement, final gather), `matrix.rs` (classic
-//! radiosity), `gauss_seidel.rs` (its iteration, also the progressive solver's test oracle),
-//! `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`; the sky's
+//! indirect light: progressive refinement, final gather), `matrix.rs` (classic radiosity and
+//! its Gauss-Seidel iteration, also the progressive solver's test oracle), `patches.rs` (the
+//! patches and the linear system these two share), `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`; the sky's
 //! direct light in `sky.rs`. [`radiosity`] is
 //! the entry point: the direct light, then the indirect solver. The shared physics (form
 //! factors, emitters, the punctual light model) is in [`crate::geometry`] and [`crate::light`].
 
 pub mod direct;
 pub mod form_factors;
-pub mod gauss_seidel;
 pub mod hemicube;
 pub mod hierarchical;
 pub mod lightcuts;
 pub mod matrix;
+pub mod patches;
 pub mod progressive;
 pub mod sky;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
-pub use form_factors::FormFactors;
-pub use gauss_seidel::gauss_seidel;
-pub use progressive::{Patch, patches, point_patch_form_factor, progressive};
+pub use form_factors::{FormFactors, point_patch_form_factor};
+pub use matrix::gauss_seidel;
+pub use patches::{Patch, patches};
+pub use progressive::progressive;
 // The receiving point and the area emitter are shared physics; re-exported for the solver's
 // users.
 pub use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint};
@@ -298,7 +299,7 @@ pub fn radiosity(
     vis: &Visibility,
     meshes: &[ReceiverMesh],
     options: &SolveOptions,
-    progress: &crate::stats::Progress<'_>,
+    progress: &crate::progress::Progress<'_>,
 ) -> Solution {
     let mut direct = Direct::with_options(scene, vis, options);
     let mut stats = SolveStats {

@@ -22,7 +22,7 @@ mod stability;
 mod untrusted;
 
 use penumbra::load::{self, Gltf};
-use penumbra::stats::Progress;
+use penumbra::progress::Progress;
 use penumbra::{Bake, BakeOptions};
 use std::path::{Path, PathBuf};
 
