@@ -106,7 +106,8 @@ impl Shaft {
     pub fn hull(points: &[DVec3]) -> Shaft {
         let c = points.iter().copied().sum::<DVec3>() / points.len().max(1) as f64;
         let scale = points.iter().map(|q| q.distance(c)).fold(0.0, f64::max);
-        let tol = 1e-9 * scale;
+        // Coincidence to rounding, relative to the points' own size.
+        let tol = crate::scene::tolerance::COINCIDENT * scale;
         let mut planes: Vec<(DVec3, DVec3)> = Vec::new();
         let m = points.len();
         for i in 0..m {
@@ -114,6 +115,8 @@ impl Shaft {
                 for k in j + 1..m {
                     let nrm = (points[j] - points[i]).cross(points[k] - points[i]);
                     let len = nrm.length();
+                    // An area, so squared scale: a triple this close to collinear has a
+                    // normal of rounding noise.
                     if len <= 1e-12 * scale * scale {
                         continue;
                     }

@@ -43,8 +43,9 @@ impl SurfacePoint {
     }
 
     /// A point on or near a polygon's edge: `inward` is the unit in-plane direction into the
-    /// polygon. Form factors are evaluated `1e-6` of the scene extent (`extent`, scene units)
-    /// inside, rays start `4 epsilon` inside and `2 epsilon` off the surface.
+    /// polygon. Form factors are evaluated [`crate::scene::tolerance::INPUT`] of the scene extent
+    /// (`extent`, scene units) inside, rays start `4 epsilon` inside and `2 epsilon` off the
+    /// surface.
     pub fn near_edge_with_epsilon(
         p: DVec3,
         n: DVec3,
@@ -55,7 +56,7 @@ impl SurfacePoint {
     ) -> SurfacePoint {
         let e = epsilon;
         SurfacePoint {
-            p: p + inward * (1e-6 * extent),
+            p: p + inward * (crate::scene::tolerance::INPUT * extent),
             n,
             ray_origin: p + inward * (4.0 * e) + n * (2.0 * e),
             polygon,

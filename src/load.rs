@@ -643,7 +643,7 @@ pub const MAX_EXTENT: f64 = 1e9;
 pub const MIN_EXTENT: f64 = 1e-9;
 
 /// The largest ratio of the scene's extent to its typical (median) triangle. The geometric
-/// tolerances are about 1e-6 of the extent; past this ratio most triangles would fall below
+/// tolerances of input geometry are 1e-6 of the extent ([`crate::scene::tolerance::INPUT`]); past this ratio most triangles would fall below
 /// them and vanish from the bake. A stray vertex far from everything else is the usual cause.
 pub const MAX_EXTENT_RATIO: f64 = 1e6;
 

@@ -29,8 +29,8 @@
 //!   ray both add `L_e cos(theta_x) / (p_l + p_b)`, which is at most `pi L_e`. Plain
 //!   next-event estimation (weight `L_e cos cos / r² · A`, emission never added at hits) is
 //!   unbiased too, but near the edge where two emitting faces meet (the furnace's corners) its
-//!   variance grows without bound and the sample variance no longer measures the error: its
-//!   reported standard error was several times too small there. Nothing is counted twice: the
+//!   variance grows without bound and the sample variance does not measure the error: the
+//!   standard error it reports there is several times too small. Nothing is counted twice: the
 //!   weights of the two strategies sum to 1. Where no hemisphere ray is traced (the last
 //!   vertex under `bounces_max`, e.g. `Some(0)`: direct light only), the light sample takes the
 //!   full weight.

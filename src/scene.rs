@@ -9,6 +9,25 @@ use std::collections::BTreeMap;
 
 pub mod cut;
 
+/// The geometric tolerances of every stage, as fractions of [`Scene::extent`] (times it: scene
+/// units), so a scene bakes alike at any size. Three levels, by the rounding each must absorb:
+pub mod tolerance {
+    /// Points computed along different paths that stand for the same point (a texel corner
+    /// found again, a box flat in one axis): f64 rounds each operation to about 1e-16 of the
+    /// magnitudes involved, so 1e-9 leaves room for millions of operations and is still far
+    /// below any modelled feature.
+    pub const COINCIDENT: f64 = 1e-9;
+    /// Input geometry that stands for the same point or plane (the triangles of one planar
+    /// polygon, a point set in from an edge): glTF stores coordinates as f32, rounded to about
+    /// 6e-8 of their magnitude, so 1e-6 is above that with a margin of about 16. A typical
+    /// triangle is larger than this ([`crate::load::MAX_EXTENT_RATIO`]).
+    pub const INPUT: f64 = 1e-6;
+    /// How far rays start off their surfaces and stop short of their targets
+    /// ([`crate::visibility::Visibility::epsilon`]): the BVH intersects in f32, about 1e-7 of
+    /// the extent, and 1e-5 is a hundred times that.
+    pub const RAY: f64 = 1e-5;
+}
+
 /// A Lambertian surface material.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
@@ -422,7 +441,7 @@ impl Scene {
                 edges.entry((a.min(b), a.max(b))).or_default().push(t);
             }
         }
-        let tol = 1e-6 * self.extent().max(1e-12);
+        let tol = tolerance::INPUT * self.extent().max(1e-12);
         let mut assigned = vec![false; range.len()];
         let mut new_polygons = Vec::new();
         for seed in range.clone() {

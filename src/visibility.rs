@@ -51,7 +51,8 @@ pub struct Visibility {
 /// Hits within this many [`Visibility::epsilon`] of each other are a tie, which the face
 /// facing the ray wins (see [`Visibility::first_hit`]). Coincident triangles are met at
 /// distances that differ by the f32 rounding of the intersection, about 1e-7 of the scene's
-/// extent; epsilon is 1e-5 of it, so the window is 1e-6 of the extent.
+/// extent; epsilon is [`crate::scene::tolerance::RAY`] = 1e-5 of it, so the window is 1e-6 of
+/// the extent.
 pub const TIE: f64 = 0.1;
 
 /// Slanted rays of [`Visibility::buried`], besides the one along the normal.
@@ -115,12 +116,12 @@ impl Visibility {
             ids,
             polygons,
             center,
-            eps: 1e-5 * scene.extent(),
+            eps: crate::scene::tolerance::RAY * scene.extent(),
         }
     }
 
     /// The distance used to keep rays off the surfaces they start and end on (scene units):
-    /// 1e-5 of the scene's bounding-box diagonal.
+    /// [`crate::scene::tolerance::RAY`] of the scene's bounding-box diagonal.
     pub fn epsilon(&self) -> f64 {
         self.eps
     }

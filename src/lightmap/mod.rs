@@ -374,7 +374,7 @@ pub fn rasterize(
                 // sub-samples; one whose corners differ (a contact line crosses it) tests every
                 // sub-sample.
                 let mut hint = None;
-                let same = 1e-9 * scene.extent();
+                let same = crate::scene::tolerance::COINCIDENT * scene.extent();
                 let mut corner_buried = |cx: usize, cy: usize| {
                     let p = world(DVec2::new(cx as f64, cy as f64));
                     let c = &mut corner[(cy - y_lo) * cw + cx];

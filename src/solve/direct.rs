@@ -601,7 +601,8 @@ impl ClusterTree {
             one_normal &= points[i].n == n0;
         }
         let extent = (hi - lo).max_element();
-        let flat = hi.z - lo.z <= 1e-9 * extent;
+        // Flat to rounding, relative to the points' own extent.
+        let flat = hi.z - lo.z <= crate::scene::tolerance::COINCIDENT * extent;
         let corners = (0..if flat { 4 } else { 8 })
             .map(|k| {
                 let x = if k & 1 == 0 { lo.x } else { hi.x };

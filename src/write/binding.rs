@@ -67,8 +67,8 @@ pub fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
     }))
 }
 
-/// The encoding of a lightmap texture, from its `extras.penumbra.encoding` (absent: linear, as
-/// files written before the field existed). An unknown name is an error.
+/// The encoding of a lightmap texture, from its `extras.penumbra.encoding` (absent: linear, the
+/// plain reading of 8-bit values). An unknown name is an error.
 pub fn texture_encoding(gltf: &Gltf, texture: usize) -> Result<Encoding> {
     match gltf.json["textures"][texture]["extras"]["penumbra"]["encoding"].as_str() {
         None => Ok(Encoding::Linear),
