@@ -146,20 +146,21 @@ impl Shaft {
     }
 
     /// Adds the half-space `normal·(x - point) <= 0` (`normal` unit and outward).
-    pub fn with_plane(mut self, normal: DVec3, point: DVec3) -> Shaft {
+    pub(crate) fn with_plane(mut self, normal: DVec3, point: DVec3) -> Shaft {
         self.planes.push((normal, point));
         self
     }
 
     /// True when the convex polygon `vertices` lies entirely outside the region (beyond one of
     /// its planes by more than the tolerance). False does not mean it intersects.
-    pub fn excludes(&self, vertices: &[DVec3]) -> bool {
+    pub(crate) fn excludes(&self, vertices: &[DVec3]) -> bool {
         self.planes
             .iter()
             .any(|(n, p)| vertices.iter().all(|v| n.dot(*v - *p) > self.tol))
     }
 
-    pub fn plane_count(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn plane_count(&self) -> usize {
         self.planes.len()
     }
 

@@ -495,7 +495,7 @@ pub const DEFAULT_TEXELS: std::ops::RangeInclusive<f64> = 262_144.0..=16_777_216
 /// `--texels-per-unit` nor `--resolution`: [`TEXELS_PER_TRIANGLE`] texels per triangle within
 /// [`DEFAULT_TEXELS`], spread over the scene's surface area. Rounded to f32 as the atlas takes
 /// it.
-pub fn default_texels_per_unit(scene: &Scene) -> f32 {
+pub(crate) fn default_texels_per_unit(scene: &Scene) -> f32 {
     let area: f64 = scene.triangles.iter().map(|t| t.area()).sum();
     let texels = (scene.triangles.len() as f64 * TEXELS_PER_TRIANGLE)
         .clamp(*DEFAULT_TEXELS.start(), *DEFAULT_TEXELS.end());
@@ -645,7 +645,7 @@ pub struct Budget {
 ///
 /// within [`DEFAULT_BUDGET`]. Either way at least the input's own triangle count: the mesh can
 /// hardly have fewer elements than the geometry.
-pub fn element_budget(
+pub(crate) fn element_budget(
     scene: &Scene,
     requested: Option<usize>,
     texels_per_unit: f64,
@@ -961,7 +961,7 @@ pub fn bake_file(
 /// Where `--exr FILE` puts page `page` (>= 1) of a multi-page lightmap: next to `FILE`, its
 /// stem plus `-<page>`, same extension (`light.exr` → `light-1.exr`, `light-2.exr`, ...).
 /// Page 0 is `FILE` itself.
-pub fn exr_page_path(exr: &Path, page: u32) -> PathBuf {
+pub(crate) fn exr_page_path(exr: &Path, page: u32) -> PathBuf {
     let stem = exr
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

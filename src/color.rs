@@ -2,7 +2,7 @@
 //! rendered pictures and to decode base-colour textures and lightmaps.
 
 /// The sRGB opto-electronic transfer function: linear value in \[0, 1\] to encoded value.
-pub fn linear_to_srgb(c: f64) -> f64 {
+pub(crate) fn linear_to_srgb(c: f64) -> f64 {
     if c <= 0.0031308 {
         12.92 * c
     } else {

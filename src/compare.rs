@@ -1623,7 +1623,7 @@ fn scene_summary(s: &SceneReport) -> String {
 }
 
 /// `report.md`: the findings and every run, for the scene and the failure sweep.
-pub fn markdown(report: &Report) -> String {
+pub(crate) fn markdown(report: &Report) -> String {
     use std::fmt::Write;
     let s = &report.scene;
     let mut md = String::new();

@@ -79,7 +79,7 @@ pub struct TriangleMesh {
 
 impl TriangleMesh {
     /// Number of triangles (`indices.len() / 3`).
-    pub fn triangle_count(&self) -> usize {
+    pub(crate) fn triangle_count(&self) -> usize {
         self.indices.len() / 3
     }
 
@@ -142,7 +142,8 @@ impl TriangleMesh {
     }
 
     /// Geometric normal of triangle `t` (unit; from the winding, not the vertex normals).
-    pub fn face_normal(&self, t: usize) -> [f64; 3] {
+    #[cfg(test)]
+    pub(crate) fn face_normal(&self, t: usize) -> [f64; 3] {
         let [a, b, c] =
             [0, 1, 2].map(|k| DVec3::from(self.positions[self.indices[3 * t + k] as usize]));
         (b - a).cross(c - a).normalize().into()
@@ -302,7 +303,7 @@ impl Material {
     /// Splits the emitted radiance `L_e` into glTF's `emissiveFactor` (each component in
     /// `[0, 1]`) and `emissiveStrength` (`>= 1`, unitless multiplier) with
     /// `factor * strength = L_e`: strength is `max(L_e)` when that exceeds 1, else 1.
-    pub fn emissive_factor_and_strength(&self) -> ([f64; 3], f64) {
+    pub(crate) fn emissive_factor_and_strength(&self) -> ([f64; 3], f64) {
         let m = self.emission.iter().copied().fold(0.0, f64::max);
         if m > 1.0 {
             (self.emission.map(|c| c / m), m)
@@ -552,7 +553,7 @@ impl Transform {
     }
 
     /// Translation (metres) and rotation, unit scale.
-    pub fn translation_rotation(t: [f64; 3], rotation: DQuat) -> Self {
+    pub(crate) fn translation_rotation(t: [f64; 3], rotation: DQuat) -> Self {
         Transform::Trs {
             translation: t.into(),
             rotation,
@@ -654,19 +655,19 @@ impl Node {
     }
 
     /// Returns the node with the given children (node indices).
-    pub fn with_children(mut self, children: &[usize]) -> Self {
+    pub(crate) fn with_children(mut self, children: &[usize]) -> Self {
         self.children = children.to_vec();
         self
     }
 
     /// Returns the node drawing mesh `mesh`.
-    pub fn with_mesh(mut self, mesh: usize) -> Self {
+    pub(crate) fn with_mesh(mut self, mesh: usize) -> Self {
         self.mesh = Some(mesh);
         self
     }
 
     /// Returns the node carrying camera `camera`.
-    pub fn with_camera(mut self, camera: usize) -> Self {
+    pub(crate) fn with_camera(mut self, camera: usize) -> Self {
         self.camera = Some(camera);
         self
     }
@@ -722,7 +723,7 @@ impl GlbBuilder {
     /// # Panics
     /// If a primitive is empty, has an index out of range or an index count not a multiple of
     /// 3, has attribute arrays of the wrong length, or names an unknown material.
-    pub fn add_mesh(&mut self, name: &str, primitives: &[(&TriangleMesh, usize)]) -> usize {
+    pub(crate) fn add_mesh(&mut self, name: &str, primitives: &[(&TriangleMesh, usize)]) -> usize {
         assert!(!primitives.is_empty(), "mesh {name:?} has no primitives");
         let mut prims = Vec::new();
         for &(geometry, material) in primitives {
@@ -746,7 +747,7 @@ impl GlbBuilder {
     }
 
     /// Adds a perspective camera; returns its index. Place it with a node.
-    pub fn add_camera(&mut self, camera: PerspectiveCamera) -> usize {
+    pub(crate) fn add_camera(&mut self, camera: PerspectiveCamera) -> usize {
         self.cameras.push(camera);
         self.cameras.len() - 1
     }
@@ -797,7 +798,7 @@ impl GlbBuilder {
     }
 
     /// The extensions this scene uses, sorted (what `extensionsUsed` will list).
-    pub fn extensions_used(&self) -> Vec<&'static str> {
+    pub(crate) fn extensions_used(&self) -> Vec<&'static str> {
         let mut used = BTreeSet::new();
         if !self.lights.is_empty() {
             used.insert(KHR_LIGHTS_PUNCTUAL);
@@ -810,7 +811,7 @@ impl GlbBuilder {
 
     /// The glTF JSON document (what [`GlbBuilder::to_glb`] writes in its JSON chunk). Empty
     /// top-level arrays are omitted, as glTF requires.
-    pub fn to_json(&self) -> Value {
+    pub(crate) fn to_json(&self) -> Value {
         let mut root = Map::new();
         root.insert(
             "asset".into(),
@@ -1449,7 +1450,7 @@ pub fn box_on_ground_open_sky(p: DVec3, n: DVec3) -> f64 {
 
 /// The furnace test: [`furnace_box_with`]`(0.5, 1.0)`, so the radiosity is `B = 2` W/m²
 /// everywhere.
-pub fn furnace_box() -> Vec<u8> {
+pub(crate) fn furnace_box() -> Vec<u8> {
     furnace_box_with(0.5, 1.0)
 }
 

@@ -33,7 +33,7 @@ pub const NO_POLYGON: usize = usize::MAX;
 impl SurfacePoint {
     /// A point inside a surface: rays start `2 epsilon` along the normal (`epsilon`: the ray
     /// offset of the scene's BVH, scene units).
-    pub fn with_epsilon(p: DVec3, n: DVec3, polygon: usize, epsilon: f64) -> SurfacePoint {
+    pub(crate) fn with_epsilon(p: DVec3, n: DVec3, polygon: usize, epsilon: f64) -> SurfacePoint {
         SurfacePoint {
             p,
             n,
@@ -46,7 +46,7 @@ impl SurfacePoint {
     /// polygon. Form factors are evaluated [`crate::scene::tolerance::INPUT`] of the scene extent
     /// (`extent`, scene units) inside, rays start `4 epsilon` inside and `2 epsilon` off the
     /// surface.
-    pub fn near_edge_with_epsilon(
+    pub(crate) fn near_edge_with_epsilon(
         p: DVec3,
         n: DVec3,
         inward: DVec3,
@@ -136,12 +136,12 @@ impl EmitterShape {
 
     /// Occluders no farther than this in front of the emitter's plane (scene units) are taken
     /// to lie in it, and never block it.
-    pub fn plane_tolerance(&self) -> f64 {
+    pub(crate) fn plane_tolerance(&self) -> f64 {
         1e-9 * self.size
     }
 
     /// The hull's corners in world space.
-    pub fn hull_world(&self) -> Vec<DVec3> {
+    pub(crate) fn hull_world(&self) -> Vec<DVec3> {
         self.hull
             .iter()
             .map(|q| self.frame.world_from_plane(*q))
@@ -183,7 +183,7 @@ pub struct AreaEmitter {
 }
 
 /// The radical inverse in base 2 (van der Corput), the second Hammersley coordinate, in [0, 1).
-pub fn radical_inverse2(mut i: u32) -> f64 {
+pub(crate) fn radical_inverse2(mut i: u32) -> f64 {
     i = i.reverse_bits();
     i as f64 / 4294967296.0
 }
@@ -275,7 +275,7 @@ impl AreaEmitter {
 ///
 /// The one model of punctual light: the direct light, the Monte Carlo reference and the
 /// discontinuity ranking all use it.
-pub fn punctual_unoccluded(light: &PunctualLight, p: DVec3, n: DVec3) -> Option<DVec3> {
+pub(crate) fn punctual_unoccluded(light: &PunctualLight, p: DVec3, n: DVec3) -> Option<DVec3> {
     match light.kind {
         LightKind::Directional => {
             let cos = n.dot(-light.direction);

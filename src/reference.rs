@@ -136,7 +136,7 @@ pub struct ReferenceSummary {
 impl ReferenceMap {
     /// Relative standard error of texel `i` (`sum_c stderr_c / sum_c mean_c`), `None` when its
     /// mean is 0 or it is uncovered.
-    pub fn relative_std_error(&self, i: usize) -> Option<f64> {
+    pub(crate) fn relative_std_error(&self, i: usize) -> Option<f64> {
         let m = self.mean[i].element_sum();
         (self.coverage[i] > 0.0 && m > 0.0).then(|| self.std_error[i].element_sum() / m)
     }
@@ -164,7 +164,7 @@ impl ReferenceMap {
     }
 
     /// Writes `mean` (H, W/m², linear RGB) as OpenEXR, atomically.
-    pub fn write_exr(&self, path: &Path) -> Result<()> {
+    pub(crate) fn write_exr(&self, path: &Path) -> Result<()> {
         crate::files::write_atomically(path, &self.exr_bytes()?)
     }
 }

@@ -250,7 +250,7 @@ pub fn render_radiance(
 
 /// The exposure of [`render`]'s automatic mode: the 97th percentile of the luminance of what
 /// was hit maps to 0.9.
-pub fn auto_exposure(radiance: &[DVec3]) -> f64 {
+pub(crate) fn auto_exposure(radiance: &[DVec3]) -> f64 {
     let mut lum: Vec<f64> = radiance
         .iter()
         .map(|c| crate::light::luminance(*c))
@@ -261,7 +261,7 @@ pub fn auto_exposure(radiance: &[DVec3]) -> f64 {
 }
 
 /// Linear RGB divided by `scale`, clamped and sRGB-encoded to 8 bits.
-pub fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> image::RgbImage {
+pub(crate) fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> image::RgbImage {
     let mut img = image::RgbImage::new(width, height);
     for (i, c) in radiance.iter().enumerate() {
         let v = (*c / scale)
@@ -274,12 +274,12 @@ pub fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> imag
 
 /// Bilinear sample of a float map (its first page) at normalized UV with clamp-to-edge, as the
 /// output's sampler says.
-pub fn sample_map(map: &Lightmap, uv: DVec2) -> DVec3 {
+pub(crate) fn sample_map(map: &Lightmap, uv: DVec2) -> DVec3 {
     sample_page(map, 0, uv)
 }
 
 /// [`sample_map`] on page `page` of a multi-page map (black when the map has no such page).
-pub fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
+pub(crate) fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
     let (w, h) = (map.width as usize, map.height as usize);
     if w == 0 || h == 0 || map.texels.len() < (page + 1) * w * h {
         return DVec3::ZERO;

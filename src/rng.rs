@@ -31,14 +31,14 @@ impl SplitMix64 {
 /// SplitMix64's finaliser (Stafford's "Mix13" variant of MurmurHash3's): a bijection of 64-bit
 /// words in which each input bit changes each output bit with probability about 1/2; also a
 /// hash for seeding one stream per item.
-pub fn mix64(mut z: u64) -> u64 {
+pub(crate) fn mix64(mut z: u64) -> u64 {
     z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
     z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
     z ^ (z >> 31)
 }
 
 /// The top 53 bits of `bits` as a value uniform in \[0, 1).
-pub fn unit_f64(bits: u64) -> f64 {
+pub(crate) fn unit_f64(bits: u64) -> f64 {
     (bits >> 11) as f64 / (1u64 << 53) as f64
 }
 

@@ -41,7 +41,7 @@ pub struct Material {
 
 impl Material {
     /// True when the material emits light.
-    pub fn is_emitter(&self) -> bool {
+    pub(crate) fn is_emitter(&self) -> bool {
         self.radiance.max_element() > 0.0
     }
 }
@@ -134,7 +134,7 @@ impl Polygon {
 }
 
 /// Inside-or-on test of a 2D point against a triangle, with a small relative tolerance.
-pub fn point_in_triangle(q: DVec2, t: &[DVec2; 3]) -> bool {
+pub(crate) fn point_in_triangle(q: DVec2, t: &[DVec2; 3]) -> bool {
     let area2 = (t[1] - t[0]).perp_dot(t[2] - t[0]);
     if area2 == 0.0 {
         return false;
@@ -239,7 +239,7 @@ impl Instance {
     }
 
     /// Number of the primitive's own glTF vertices (the first ones of `positions_world`).
-    pub fn source_vertices(&self) -> usize {
+    pub(crate) fn source_vertices(&self) -> usize {
         self.positions_world.len() - self.derived.len()
     }
 
@@ -278,7 +278,7 @@ impl Instance {
 
     /// The back side of this (front) instance: the same vertices, every triangle's second and
     /// third corner swapped.
-    pub fn back_side(&self) -> Instance {
+    pub(crate) fn back_side(&self) -> Instance {
         let mut indices = self.indices.clone();
         for t in indices.chunks_exact_mut(3) {
             t.swap(1, 2);
@@ -341,7 +341,7 @@ impl Scene {
     }
 
     /// True when the scene has at least one area emitter or punctual light.
-    pub fn has_light(&self) -> bool {
+    pub(crate) fn has_light(&self) -> bool {
         !self.lights.is_empty() || self.emitters().next().is_some()
     }
 
@@ -365,7 +365,7 @@ impl Scene {
     }
 
     /// True when triangle `t` is on the back side of a double-sided primitive.
-    pub fn is_back(&self, t: usize) -> bool {
+    pub(crate) fn is_back(&self, t: usize) -> bool {
         self.instances[self.triangles[t].instance].side == Side::Back
     }
 
@@ -376,14 +376,14 @@ impl Scene {
 
     /// The polygon on the other side of polygon `p` of a double-sided surface (the polygon of
     /// its first triangle's twin), if any.
-    pub fn twin_polygon(&self, p: usize) -> Option<usize> {
+    pub(crate) fn twin_polygon(&self, p: usize) -> Option<usize> {
         self.twin_triangle(*self.polygons[p].triangles.first()?)
             .and_then(|t| self.triangles[t].polygon)
     }
 
     /// Appends an instance's triangles and groups them into polygons. `positions_world` and
     /// `indices` describe a triangle list; `material` indexes [`Scene::materials`].
-    pub fn add_instance(&mut self, mut instance: Instance, material: usize) {
+    pub(crate) fn add_instance(&mut self, mut instance: Instance, material: usize) {
         let id = self.instances.len();
         instance.first_triangle = self.triangles.len();
         let first = self.triangles.len();

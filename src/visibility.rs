@@ -340,7 +340,8 @@ impl Visibility {
     }
 
     /// Brute force [`Visibility::triangles_overlapping`] (for tests).
-    pub fn triangles_overlapping_brute_force(&self, min: DVec3, max: DVec3) -> Vec<usize> {
+    #[cfg(test)]
+    pub(crate) fn triangles_overlapping_brute_force(&self, min: DVec3, max: DVec3) -> Vec<usize> {
         let pad = DVec3::splat(self.eps);
         let query = Aabb::new(
             Vec3A::from((min - self.center - pad).as_vec3()),
@@ -358,7 +359,13 @@ impl Visibility {
     }
 
     /// Brute force closest hit over all triangles (for tests).
-    pub fn first_hit_brute_force(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit> {
+    #[cfg(test)]
+    pub(crate) fn first_hit_brute_force(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        tmax: f64,
+    ) -> Option<Hit> {
         let ray = self.ray(origin, dir, self.eps, tmax);
         let d = Vec3A::from(dir.as_vec3());
         let mut best: Option<(f64, usize)> = None;

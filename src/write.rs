@@ -835,7 +835,7 @@ fn glb_length(json: usize, bin: usize) -> Result<u32> {
 }
 
 /// Encodes 8-bit RGB as PNG.
-pub fn png_bytes(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
+pub(crate) fn png_bytes(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
     use image::ImageEncoder;
     let mut png = Vec::new();
     image::codecs::png::PngEncoder::new(&mut png)

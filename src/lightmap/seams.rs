@@ -537,7 +537,7 @@ pub struct SeamStats {
 /// `stitch` is set, stitches them and re-dilates the padding from the covered and the
 /// stitched texels, so that the padding and every mipmap level agree with the stitched
 /// values.
-pub fn stitch_seams(
+pub(crate) fn stitch_seams(
     map: &mut Lightmap,
     scene: &Scene,
     vis: &Visibility,

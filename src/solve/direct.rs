@@ -182,7 +182,7 @@ impl<'a> Direct<'a> {
 
     /// Leaves the area emitters out: the direct light is then the punctual lights' alone (the
     /// hemicube form factors carry the area emitters, [`super::form_factors`]).
-    pub fn drop_area_emitters(&mut self) {
+    pub(crate) fn drop_area_emitters(&mut self) {
         self.emitters.clear();
         self.per_emitter.clear();
         self.tree = LightTree::default();

@@ -137,7 +137,7 @@ fn piece_form_factor(
 /// Ray-cast form factor from the receiving point `at` to `patch` (Wallace, Elmquist, Haines
 /// 1989, their equation for a disk of area `dA` at distance `r`): the patch split into
 /// [`RAYCAST_SAMPLES`] equal sub-triangles, each a disk at its centroid. Adds the rays cast.
-pub fn raycast_form_factor(
+pub(crate) fn raycast_form_factor(
     vis: &Visibility,
     at: &SurfacePoint,
     patch: &Patch,
@@ -223,7 +223,7 @@ impl<'a> Kernel<'a> {
     }
 
     /// The hemicube's counters (`None` for the other methods).
-    pub fn hemicube_stats(&self) -> Option<HemicubeStats> {
+    pub(crate) fn hemicube_stats(&self) -> Option<HemicubeStats> {
         self.hemicube.as_ref().map(|h| HemicubeStats {
             resolution: h.resolution(),
             cells: h.cells(),
@@ -289,7 +289,7 @@ impl<'a> Kernel<'a> {
     }
 
     /// The receiving point at the centroid of patch `i`.
-    pub fn centroid_point(&self, i: usize) -> SurfacePoint {
+    pub(crate) fn centroid_point(&self, i: usize) -> SurfacePoint {
         let r = &self.patches[i];
         SurfacePoint::new(r.centroid, r.normal, r.polygon, self.vis)
     }
@@ -299,7 +299,7 @@ impl<'a> Kernel<'a> {
     /// The hemicube renders one hemicube at `i`'s centroid and uses reciprocity,
     /// `F_ji = F_ij A_i / A_j`, capped at 1 (Cohen, Chen, Wallace, Greenberg 1988); the others
     /// evaluate every receiver in parallel.
-    pub fn shoot(&self, i: usize) -> Vec<(f64, u64)> {
+    pub(crate) fn shoot(&self, i: usize) -> Vec<(f64, u64)> {
         match &self.hemicube {
             Some(hc) => {
                 let src = &self.patches[i];

@@ -50,7 +50,7 @@ pub fn bytes(n: usize) -> u64 {
 }
 
 /// The most patches whose matrix fits in `limit_mib` MiB.
-pub fn max_patches(limit_mib: u64) -> usize {
+pub(crate) fn max_patches(limit_mib: u64) -> usize {
     let entries = limit_mib.saturating_mul(1 << 20) / BYTES_PER_ENTRY;
     let mut n = (entries as f64).sqrt() as u64;
     while n * n > entries {
@@ -63,7 +63,7 @@ pub fn max_patches(limit_mib: u64) -> usize {
 }
 
 /// Refuses `n` patches whose matrix exceeds `limit_mib` MiB, with the sizes and what to do.
-pub fn check_memory(n: usize, limit_mib: u64) -> Result<(), String> {
+pub(crate) fn check_memory(n: usize, limit_mib: u64) -> Result<(), String> {
     if bytes(n) <= limit_mib.saturating_mul(1 << 20) {
         return Ok(());
     }

@@ -244,7 +244,7 @@ impl SurfacePoint {
     /// A point on or near a polygon's edge: `inward` is the unit in-plane direction into the
     /// polygon. Form factors are evaluated [`crate::scene::tolerance::INPUT`] of the scene
     /// extent inside, rays start `4 epsilon` inside and `2 epsilon` off the surface.
-    pub fn near_edge(
+    pub(crate) fn near_edge(
         p: DVec3,
         n: DVec3,
         inward: DVec3,

@@ -156,7 +156,12 @@ impl Sky {
 
     /// Adds the sky's irradiance `pi L_sky V` (W/m²) of each of `points` to `h`; counts the
     /// points, rays and time.
-    pub fn add_irradiance(&self, vis: &Visibility, points: &[SurfacePoint], h: &mut [DVec3]) {
+    pub(crate) fn add_irradiance(
+        &self,
+        vis: &Visibility,
+        points: &[SurfacePoint],
+        h: &mut [DVec3],
+    ) {
         let start = Instant::now();
         let (mut open, mut rays) = (0, 0);
         for (at, h) in points.iter().zip(h) {
@@ -195,7 +200,7 @@ impl Sky {
 /// Shirley and Chiu's concentric map from the unit square to the unit disk (JGT 1997): the
 /// square's concentric squares go to concentric circles, so strata stay compact and areas keep
 /// their proportions (uniform in, uniform out).
-pub fn concentric_disk(u: DVec2) -> DVec2 {
+pub(crate) fn concentric_disk(u: DVec2) -> DVec2 {
     let a = 2.0 * u.x - 1.0;
     let b = 2.0 * u.y - 1.0;
     if a == 0.0 && b == 0.0 {
@@ -226,7 +231,7 @@ fn point_shift(p: DVec3) -> DVec2 {
 }
 
 /// Checks a sky radiance: three finite, non-negative numbers. The reason when not.
-pub fn check_radiance(radiance: DVec3) -> Result<(), String> {
+pub(crate) fn check_radiance(radiance: DVec3) -> Result<(), String> {
     if radiance.is_finite() && radiance.min_element() >= 0.0 {
         Ok(())
     } else {

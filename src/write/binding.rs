@@ -26,7 +26,7 @@ pub struct Binding {
 
 /// The lightmap binding of a scene instance's primitive: `None` when its material has no
 /// `MOZ_lightmap`; an error when the primitive lacks the UV set the extension names.
-pub fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
+pub(crate) fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
     let Some(moz) = inst
         .gltf_material
         .and_then(|m| gltf.json["materials"][m]["extensions"]["MOZ_lightmap"].as_object())
@@ -69,7 +69,7 @@ pub fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
 
 /// The encoding of a lightmap texture, from its `extras.penumbra.encoding` (absent: linear, the
 /// plain reading of 8-bit values). An unknown name is an error.
-pub fn texture_encoding(gltf: &Gltf, texture: usize) -> Result<Encoding> {
+pub(crate) fn texture_encoding(gltf: &Gltf, texture: usize) -> Result<Encoding> {
     match gltf.json["textures"][texture]["extras"]["penumbra"]["encoding"].as_str() {
         None => Ok(Encoding::Linear),
         Some(name) => Encoding::from_name(name).ok_or_else(|| {
@@ -81,14 +81,14 @@ pub fn texture_encoding(gltf: &Gltf, texture: usize) -> Result<Encoding> {
 }
 
 /// The page of a lightmap texture, from its `extras.penumbra.page` (absent: 0).
-pub fn texture_page(gltf: &Gltf, texture: usize) -> usize {
+pub(crate) fn texture_page(gltf: &Gltf, texture: usize) -> usize {
     gltf.json["textures"][texture]["extras"]["penumbra"]["page"]
         .as_u64()
         .unwrap_or(0) as usize
 }
 
 /// The encoded image bytes of a texture's source (embedded or a file beside the glTF).
-pub fn texture_bytes(gltf: &Gltf, texture: usize) -> Result<Vec<u8>> {
+pub(crate) fn texture_bytes(gltf: &Gltf, texture: usize) -> Result<Vec<u8>> {
     let tex = gltf
         .document
         .textures()
