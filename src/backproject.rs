@@ -55,7 +55,7 @@ pub struct OccluderPiece {
 pub struct Occluders {
     pub pieces: Vec<OccluderPiece>,
     /// The piece each scene triangle belongs to (`u32::MAX`: none, a degenerate triangle).
-    pub piece_of_triangle: Vec<u32>,
+    pub(crate) piece_of_triangle: Vec<u32>,
 }
 
 impl Occluders {
@@ -177,7 +177,7 @@ impl Shaft {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Limits {
     /// Occluders whose clipped projection has area.
-    pub max_occluders: usize,
+    pub(crate) max_occluders: usize,
     /// Convex pieces of the visible emitter part at any time.
     pub max_pieces: usize,
 }

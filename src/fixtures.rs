@@ -267,7 +267,7 @@ pub struct Material {
     pub name: String,
     /// Diffuse reflectance, linear RGB, each in `[0, 1]` (`pbrMetallicRoughness.baseColorFactor`,
     /// alpha 1).
-    pub base_color: [f64; 3],
+    pub(crate) base_color: [f64; 3],
     /// Emitted radiance `L_e`, linear RGB, W/(m² sr), each `>= 0`; all zero for a non-emitter.
     /// Written as `emissiveFactor` times `KHR_materials_emissive_strength` (see
     /// [`Material::emissive_factor_and_strength`]).
@@ -361,13 +361,13 @@ pub struct PerspectiveCamera {
     /// Camera name.
     pub name: String,
     /// Vertical field of view, radians, in `(0, π)`.
-    pub yfov: f64,
+    pub(crate) yfov: f64,
     /// Width / height of the view; `None` leaves it to the viewport.
-    pub aspect_ratio: Option<f64>,
+    pub(crate) aspect_ratio: Option<f64>,
     /// Near clipping distance, metres, `> 0`.
-    pub znear: f64,
+    pub(crate) znear: f64,
     /// Far clipping distance, metres, `> znear`; `None` for an infinite projection.
-    pub zfar: Option<f64>,
+    pub(crate) zfar: Option<f64>,
 }
 
 impl PerspectiveCamera {
@@ -628,7 +628,7 @@ pub struct Node {
     /// Node name.
     pub name: String,
     /// Local transform (parent-from-local).
-    pub transform: Transform,
+    pub(crate) transform: Transform,
     /// Indices of child nodes (each added earlier, each with only this parent).
     pub children: Vec<usize>,
     /// Index of the mesh drawn at this node, from [`GlbBuilder::add_mesh`].

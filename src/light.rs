@@ -76,7 +76,7 @@ pub struct EmitterShape {
     /// Convex pieces, counter-clockwise in `frame` coordinates (seen from the front).
     pub pieces: Vec<Vec<DVec2>>,
     /// The pieces in world space.
-    pub pieces_world: Vec<Vec<DVec3>>,
+    pub(crate) pieces_world: Vec<Vec<DVec3>>,
     /// Convex hull of all pieces, counter-clockwise.
     pub hull: Vec<DVec2>,
     /// Area, scene units².

@@ -117,7 +117,7 @@ pub struct ReferenceMap {
     /// Per texel, the shortest distance to another surface along its first-bounce hemisphere
     /// rays (scene units; infinite when no ray hit, or no hemisphere rays were traced because
     /// `bounces_max` is `Some(0)`). Small values mark contact regions.
-    pub nearest_surface: Vec<f32>,
+    pub(crate) nearest_surface: Vec<f32>,
 }
 
 /// A summary of a [`ReferenceMap`] (the `--stats` JSON of `penumbra reference`).
@@ -130,7 +130,7 @@ pub struct ReferenceSummary {
     /// `sum_c stderr_c / sum_c mean_c` (channel sums).
     pub mean_relative_std_error: f64,
     /// Largest relative standard error of a texel.
-    pub max_relative_std_error: f64,
+    pub(crate) max_relative_std_error: f64,
 }
 
 impl ReferenceMap {

@@ -23,11 +23,11 @@ use std::collections::BTreeMap;
 pub struct Camera {
     pub eye: DVec3,
     /// Unit vectors: forward (view direction), up and right.
-    pub forward: DVec3,
+    pub(crate) forward: DVec3,
     pub up: DVec3,
     pub right: DVec3,
     /// Vertical field of view, radians.
-    pub yfov: f64,
+    pub(crate) yfov: f64,
 }
 
 impl Camera {

@@ -58,7 +58,7 @@ pub struct Triangle {
     /// Index into [`Scene::instances`].
     pub instance: usize,
     /// Index of the triangle within its instance's index list (`indices[3k..3k+3]`).
-    pub local_index: usize,
+    pub(crate) local_index: usize,
     /// Index into [`Scene::polygons`], or `None` for degenerate triangles, which receive nothing.
     pub polygon: Option<usize>,
 }
@@ -194,7 +194,7 @@ pub struct Instance {
     /// Primitive index within the mesh.
     pub primitive: usize,
     /// glTF material index, if the primitive has one.
-    pub gltf_material: Option<usize>,
+    pub(crate) gltf_material: Option<usize>,
     /// Vertex positions in world space (the primitive's vertices, one per glTF vertex).
     pub positions_world: Vec<DVec3>,
     /// Triangle list over `positions_world` (strips and fans expanded, winding fixed for mirrors).

@@ -45,7 +45,7 @@ pub struct Stats {
     /// The element budget the meshers aimed at, and what chose it (`--budget`, `lightmap texels`,
     /// `input triangles`, `geometry`, `minimum` or `maximum`; see `bake::element_budget`).
     pub budget: usize,
-    pub budget_from: String,
+    pub(crate) budget_from: String,
     pub elements: usize,
     pub vertices: usize,
     /// Discontinuity meshing counters (only with `--mesher discontinuity`).
@@ -60,10 +60,10 @@ pub struct Stats {
     /// Number of lightmap pages (images).
     pub lightmap_pages: u32,
     /// Transfer curve of the 8-bit lightmap images: `srgb` or `linear`.
-    pub lightmap_encoding: String,
+    pub(crate) lightmap_encoding: String,
     pub texels_per_unit: f32,
     /// `MOZ_lightmap` intensity: H (W/m²) of a full-scale texel.
-    pub lightmap_intensity: f64,
+    pub(crate) lightmap_intensity: f64,
     /// Seam edges, samples, stitched texels, and the seam mismatch before and after
     /// stitching (`lightmap::seams`).
     pub seams: crate::lightmap::seams::SeamStats,

@@ -446,7 +446,7 @@ pub struct RecordedRay {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayCounts {
     /// Indexed like [`Query::ALL`].
-    pub by_query: [u64; 4],
+    pub(crate) by_query: [u64; 4],
 }
 
 impl RayCounts {

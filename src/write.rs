@@ -41,7 +41,7 @@ use std::collections::BTreeMap;
 /// The lightmap as it goes into the file.
 pub struct LightmapImage {
     /// PNG bytes (8-bit RGB in `encoding`), one per atlas page, in page order.
-    pub pngs: Vec<Vec<u8>>,
+    pub(crate) pngs: Vec<Vec<u8>>,
     /// `MOZ_lightmap` intensity, W/m²: irradiance H = decoded texel value (0..1) x intensity.
     pub intensity: f64,
     /// Transfer curve of the PNGs' 8-bit values.

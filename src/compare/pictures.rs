@@ -297,7 +297,7 @@ pub(crate) fn locate(polygon: &Polygon, q: DVec2) -> Option<(usize, [f64; 3])> {
 /// row the same size).
 pub struct Column {
     pub title: String,
-    pub caption: Vec<String>,
+    pub(crate) caption: Vec<String>,
     pub cells: Vec<RgbImage>,
 }
 

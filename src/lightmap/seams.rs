@@ -314,9 +314,9 @@ pub struct Stitched {
     /// The texels that were unknowns (in some footprint), sorted.
     pub texels: Vec<usize>,
     /// Connected groups solved.
-    pub groups: usize,
+    pub(crate) groups: usize,
     /// Most conjugate-gradient iterations any group took.
-    pub iterations: usize,
+    pub(crate) iterations: usize,
 }
 
 /// Least-squares stitching of `texels` along `samples` (module documentation).
@@ -518,9 +518,9 @@ pub struct SeamStats {
     pub samples: usize,
     /// Texels in the samples' footprints (the unknowns), and their connected groups.
     pub texels: usize,
-    pub groups: usize,
+    pub(crate) groups: usize,
     /// Most conjugate-gradient iterations a group took.
-    pub iterations: usize,
+    pub(crate) iterations: usize,
     /// Mean and largest seam mismatch before stitching, relative to the mean covered texel.
     pub mismatch_mean_before: f64,
     pub mismatch_max_before: f64,

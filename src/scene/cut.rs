@@ -29,7 +29,7 @@ pub struct Cut {
     /// Triangles the split ones became.
     pub pieces: usize,
     /// Vertices added.
-    pub vertices_added: usize,
+    pub(crate) vertices_added: usize,
 }
 
 /// Splits every triangle edge of the scene longer than `max_edge` (scene units) by conforming

@@ -195,7 +195,7 @@ pub struct HemicubeStats {
     /// Cells of one hemicube, `3 R²`.
     pub cells: usize,
     /// Sum of the delta form factors (1 in the limit).
-    pub delta_sum: f64,
+    pub(crate) delta_sum: f64,
     /// Hemicubes rendered (shooting patches, matrix rows, gathering vertices).
     pub hemicubes: u64,
 }

@@ -95,7 +95,7 @@ pub struct Cut {
     /// The bounded nodes' contribution, W/m² per channel (with their shadow rays).
     pub bounded: DVec3,
     /// Bounded nodes.
-    pub bounded_nodes: u64,
+    pub(crate) bounded_nodes: u64,
     /// Shadow rays of the bounded nodes.
     pub rays: u64,
 }

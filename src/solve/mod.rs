@@ -195,12 +195,12 @@ pub struct SolveStats {
     /// The patch solvers' form factors (`closed-form`, `raycast`, `hemicube`).
     pub form_factors: Option<FormFactors>,
     pub patches: usize,
-    pub shots: usize,
+    pub(crate) shots: usize,
     /// Wall time of the indirect solve (patches, their solve and the final gather; or the
     /// hierarchical solve), seconds.
-    pub indirect_seconds: f64,
+    pub(crate) indirect_seconds: f64,
     /// Wall time of the patch solve alone (progressive refinement or the matrix), seconds.
-    pub patch_solve_seconds: f64,
+    pub(crate) patch_solve_seconds: f64,
     pub rays: u64,
     /// Unshot power left at the end, relative to the power first received.
     pub unshot_fraction: f64,
@@ -210,7 +210,7 @@ pub struct SolveStats {
     /// counts the elements it solves, which leaves out those buried under closed geometry (a
     /// floor under a box): on interior-20 it reads 750 W where integrating the direct light
     /// over every element gives 761 W (`examples/light_shown.rs`).
-    pub direct_power: f64,
+    pub(crate) direct_power: f64,
     /// Power absorbed by all patches, W (mean over RGB).
     pub absorbed_power: f64,
     /// The direct light at the mesh vertices.

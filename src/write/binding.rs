@@ -15,7 +15,7 @@ use gltf::accessor::Dimensions;
 pub struct Binding {
     /// The UV set, `TEXCOORD_<tex_coord>` (`MOZ_lightmap.texCoord`; 1 when absent, the set
     /// lightmaps conventionally use and the one the writer fills).
-    pub tex_coord: u32,
+    pub(crate) tex_coord: u32,
     /// That set's UV per glTF vertex, normalized.
     pub uv: Vec<DVec2>,
     /// The lightmap texture (`MOZ_lightmap.index`).
