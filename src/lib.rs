@@ -1,9 +1,14 @@
 //! penumbra: a discontinuity-meshing radiosity preprocessor and lightmap baker.
 //!
-//! The pipeline, one module per stage, in the order [`bake()`] calls them:
+//! The pipeline, one module per stage. [`bake()`] packs the atlas on a thread of its own, beside
+//! the stages from the BVH to the solve: the mesh waits only for the atlas's first estimate of
+//! its texel density (the default element budget follows it), and the lightmap for the atlas
+//! itself.
 //!
 //! ```text
-//! load ──► scene ──► visibility ──► atlas ──► discontinuity ──► mesh ──► solve ──► lightmap ──► write
+//! load ──► scene ──┬──► visibility ──► discontinuity ──► mesh ──► solve ──► lightmap ──► write
+//!                  │                                      ▲                    ▲
+//!                  └──► atlas ── density estimate ────────┴─ the packed atlas ─┘
 //! ```
 //!
 //! Units: lengths in scene units (glTF: metres); radiance in W/(m² sr), irradiance and exitance in
@@ -46,7 +51,7 @@ pub mod backproject;
 // stitching of the seams between charts.
 pub mod lightmap;
 
-// The lightmapped glb.
+// The lightmapped glb, and the reader of its lightmap binding (`write::binding`).
 pub mod write;
 
 // Shared physics and small utilities, used by several stages (they depend on nothing but

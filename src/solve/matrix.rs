@@ -4,7 +4,7 @@
 //! 1984; Cohen and Greenberg, "The hemi-cube: a radiosity solution for complex environments",
 //! SIGGRAPH 1985).
 //!
-//! The patches and their system are the progressive solver's ([`super::patches`]), and so is
+//! The patches and their system are the progressive solver's ([`super::patches`](mod@super::patches)), and so is
 //! the final gather at the vertices; only the solve differs. Row `i` of `F` holds the form
 //! factors from patch `i`'s centroid to every patch (`--form-factors`: closed form, ray cast, or
 //! one hemicube per row). The matrix is dense, `n²` f64 entries: its memory and the time to fill

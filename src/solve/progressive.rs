@@ -4,7 +4,7 @@
 //! factors are [`super::form_factors`]'s (`--form-factors`): by default the exact unoccluded
 //! point-to-patch factor with ray-cast visibility (after Wallace, Elmquist, Haines, "A ray
 //! tracing algorithm for progressive radiosity", SIGGRAPH 1989). The patches and the patch
-//! system ([`super::patches`]) and the final gather are shared with classic radiosity
+//! system ([`super::patches`](mod@super::patches)) and the final gather are shared with classic radiosity
 //! ([`super::matrix`]).
 //!
 //! Irradiance `H` and radiosity `B` in W/m² per linear RGB channel; form factors dimensionless.
