@@ -163,7 +163,7 @@ fn main() {
 }
 
 /// Parses and bakes once.
-fn bake_once(name: &str, glb: &[u8], progress: &penumbra::stats::Progress<'_>) -> (Bake, f64) {
+fn bake_once(name: &str, glb: &[u8], progress: &penumbra::progress::Progress<'_>) -> (Bake, f64) {
     let t = Instant::now();
     let gltf = penumbra::load::from_bytes(glb.to_vec(), Path::new(name)).expect("parses");
     let parse = t.elapsed().as_secs_f64();

@@ -55,7 +55,7 @@ pub struct OccluderPiece {
 pub struct Occluders {
     pub pieces: Vec<OccluderPiece>,
     /// The piece each scene triangle belongs to (`u32::MAX`: none, a degenerate triangle).
-    pub piece_of_triangle: Vec<u32>,
+    pub(crate) piece_of_triangle: Vec<u32>,
 }
 
 impl Occluders {
@@ -106,7 +106,8 @@ impl Shaft {
     pub fn hull(points: &[DVec3]) -> Shaft {
         let c = points.iter().copied().sum::<DVec3>() / points.len().max(1) as f64;
         let scale = points.iter().map(|q| q.distance(c)).fold(0.0, f64::max);
-        let tol = 1e-9 * scale;
+        // Coincidence to rounding, relative to the points' own size.
+        let tol = crate::scene::tolerance::COINCIDENT * scale;
         let mut planes: Vec<(DVec3, DVec3)> = Vec::new();
         let m = points.len();
         for i in 0..m {
@@ -114,6 +115,8 @@ impl Shaft {
                 for k in j + 1..m {
                     let nrm = (points[j] - points[i]).cross(points[k] - points[i]);
                     let len = nrm.length();
+                    // An area, so squared scale: a triple this close to collinear has a
+                    // normal of rounding noise.
                     if len <= 1e-12 * scale * scale {
                         continue;
                     }
@@ -143,20 +146,21 @@ impl Shaft {
     }
 
     /// Adds the half-space `normal·(x - point) <= 0` (`normal` unit and outward).
-    pub fn with_plane(mut self, normal: DVec3, point: DVec3) -> Shaft {
+    pub(crate) fn with_plane(mut self, normal: DVec3, point: DVec3) -> Shaft {
         self.planes.push((normal, point));
         self
     }
 
     /// True when the convex polygon `vertices` lies entirely outside the region (beyond one of
     /// its planes by more than the tolerance). False does not mean it intersects.
-    pub fn excludes(&self, vertices: &[DVec3]) -> bool {
+    pub(crate) fn excludes(&self, vertices: &[DVec3]) -> bool {
         self.planes
             .iter()
             .any(|(n, p)| vertices.iter().all(|v| n.dot(*v - *p) > self.tol))
     }
 
-    pub fn plane_count(&self) -> usize {
+    #[cfg(test)]
+    pub(crate) fn plane_count(&self) -> usize {
         self.planes.len()
     }
 
@@ -173,7 +177,7 @@ impl Shaft {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Limits {
     /// Occluders whose clipped projection has area.
-    pub max_occluders: usize,
+    pub(crate) max_occluders: usize,
     /// Convex pieces of the visible emitter part at any time.
     pub max_pieces: usize,
 }

@@ -7,9 +7,10 @@ use crate::files::{self, Staged};
 use crate::lightmap::{self, Encoding, Lightmap};
 use crate::load::{self, Gltf};
 use crate::mesh::{self, Mesher, ReceiverMesh};
+use crate::progress::Progress;
 use crate::scene::{self, Scene, Side};
 use crate::solve::{self, Solution, SolveOptions};
-use crate::stats::{Progress, Stats, stage};
+use crate::stats::{Stats, stage};
 use crate::visibility::Visibility;
 use crate::write::{self, LightmapImage};
 use std::path::{Path, PathBuf};
@@ -198,34 +199,82 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         input: gltf.path.display().to_string(),
         mesher: format!("{:?}", options.mesher).to_lowercase(),
         threads: rayon::current_num_threads(),
+        lightmap_encoding: options.encoding.name().into(),
         ..Default::default()
     };
+    stats.double_sided.mode = options.double_sided.name().into();
     let t = &mut stats.timings_s;
     let (scene, cut, options) = stage(&mut t.load, "scene", progress, || scene_for(gltf, options))?;
     let options = &options;
     stats.cut = cut;
-    // Classic radiosity's matrix is refused before any expensive stage.
-    if options.solve.solver == solve::Solver::Matrix && options.solve.bounces != Some(0) {
-        let n = solve::patches(&scene, options.solve.patches).len();
-        solve::matrix::check_memory(n, options.solve.matrix_memory_mib).map_err(|reason| {
-            Error::BadItem {
-                path: gltf.path.clone(),
-                item: "--solver matrix".into(),
-                reason,
-            }
-        })?;
+    check_matrix_memory(gltf, &scene, options)?;
+    let (vis, atlas, solved) = solve_beside_atlas(gltf, &scene, options, &mut stats, progress);
+    // A failed atlas is reported first. One that fails after its estimate (a page too small
+    // for the charts, or a chart too large for `--page-size`, found while packing) is
+    // reported before the mesh or the solve when it fails before they start, else once the
+    // solve is done (the solve is not interrupted).
+    let atlas = atlas?;
+    let (segments, meshes, solution) = solved.expect("the atlas estimates before it succeeds")?;
+    let t = &mut stats.timings_s;
+    let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
+        lightmap_stage(&scene, &vis, &meshes, &solution, &atlas, options)
+    });
+    stats.seams = seams;
+    stats.gather(&scene, &meshes, &solution, &atlas, &options.solve);
+    check_light_is_finite(gltf, &solution)?;
+    Ok(Bake {
+        scene,
+        segments,
+        meshes,
+        solution,
+        atlas,
+        lightmap,
+        stats,
+    })
+}
+
+/// Classic radiosity's matrix is refused before any expensive stage.
+fn check_matrix_memory(gltf: &Gltf, scene: &Scene, options: &BakeOptions) -> Result<()> {
+    if options.solve.solver != solve::Solver::Matrix || options.solve.bounces == Some(0) {
+        return Ok(());
     }
-    // The atlas depends on the scene only, and only the lightmap needs it: xatlas packs on a
-    // thread of its own (single-threaded) while the other stages run, from the ray caster's
-    // BVH on. The default element budget follows the atlas's texel density, so the mesh waits
-    // for the atlas's first estimate of it (`atlas::pack_estimating`: its sizing packing, a
-    // fraction of the atlas's time) and not for its final packing. The discontinuity stage's
-    // wedges do not depend on the budget (only how many pieces it keeps, which `mesh_scene`
-    // applies): they are traced meanwhile.
+    let n = solve::patches(scene, options.solve.patches).len();
+    solve::matrix::check_memory(n, options.solve.matrix_memory_mib).map_err(|reason| {
+        Error::BadItem {
+            path: gltf.path.clone(),
+            item: "--solver matrix".into(),
+            reason,
+        }
+    })
+}
+
+/// The outputs of the stages from the discontinuities to the solve.
+type Solved = (Vec<Vec<Segment>>, Vec<ReceiverMesh>, Solution);
+
+/// The BVH, the atlas, and the stages from the discontinuities to the solve, with their
+/// timings in `stats`.
+///
+/// The atlas depends on the scene only, and only the lightmap needs it: xatlas packs on a
+/// thread of its own (single-threaded) while the other stages run, from the ray caster's BVH
+/// on. The default element budget follows the atlas's texel density, so the mesh waits for the
+/// atlas's first estimate of it (`atlas::pack_estimating`: its sizing packing, a fraction of
+/// the atlas's time) and not for its final packing. The discontinuity stage's wedges do not
+/// depend on the budget (only how many pieces it keeps, which `mesh_scene` applies): they are
+/// traced meanwhile.
+///
+/// The stages' result is `None` when the atlas failed before its estimate, or before the mesh
+/// or the solve started (its error is reported, not theirs).
+fn solve_beside_atlas(
+    gltf: &Gltf,
+    scene: &Scene,
+    options: &BakeOptions,
+    stats: &mut Stats,
+    progress: &Progress<'_>,
+) -> (Visibility, Result<Atlas>, Option<Result<Solved>>) {
     let atlas_failed = std::sync::atomic::AtomicBool::new(false);
-    let (vis, work, (atlas, atlas_seconds)) = std::thread::scope(|s| {
+    let (vis, solved, (atlas, atlas_seconds)) = std::thread::scope(|s| {
         let (sender, estimate) = std::sync::mpsc::channel();
-        let (scene, atlas_failed) = (&scene, &atlas_failed);
+        let atlas_failed = &atlas_failed;
         let packing = s.spawn(move || {
             let start = std::time::Instant::now();
             let atlas = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -247,56 +296,10 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             || Visibility::new(scene),
         );
         let failed = || atlas_failed.load(std::sync::atomic::Ordering::Relaxed);
-        // The stages up to the solve; `None` when the atlas failed before its estimate, or
-        // before the mesh or the solve started (its error is reported, not theirs). The
-        // estimate's sender lives in the atlas thread, so `recv` returns once the atlas sent
-        // it or ended.
-        let mut work = || {
-            let vis = &vis;
-            let t = &mut stats.timings_s;
-            let traced = (options.mesher == Mesher::Discontinuity).then(|| {
-                stage(&mut t.discontinuity, "discontinuity", progress, || {
-                    discontinuity::segments(scene, vis, &dm_options(options, usize::MAX))
-                })
-            });
-            // A budget given needs no density: the mesh need not wait for the estimate.
-            let texels_per_unit = match options.budget {
-                Some(_) => 0.0,
-                None => estimate.recv().ok()?,
-            };
-            if failed() {
-                return None;
-            }
-            let meshed = catch_mesh_failure(gltf, scene, || {
-                mesh_scene(
-                    scene,
-                    vis,
-                    options,
-                    texels_per_unit,
-                    traced,
-                    &mut stats,
-                    progress,
-                )
-            });
-            let (segments, meshes) = match meshed {
-                Ok(meshed) => meshed,
-                Err(e) => return Some(Err(e)),
-            };
-            if meshes.iter().all(|m| m.triangles.is_empty()) {
-                return Some(Err(Error::EmptyScene {
-                    path: gltf.path.clone(),
-                }));
-            }
-            if failed() {
-                return None;
-            }
-            let t = &mut stats.timings_s;
-            let solution = stage(&mut t.solve, "solve", progress, || {
-                solve::radiosity(scene, vis, &meshes, &options.solve, progress)
-            });
-            Some(Ok((segments, meshes, solution)))
-        };
-        let work = work();
+        // The estimate's sender lives in the atlas thread, so `recv` returns once the atlas
+        // sent it or ended.
+        let density = || estimate.recv().ok();
+        let solved = mesh_and_solve(gltf, scene, &vis, options, density, failed, stats, progress);
         // The progress shows the atlas only if the bake waits for it.
         let waits = !packing.is_finished();
         if waits {
@@ -309,126 +312,119 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         if waits {
             progress("atlas", 1, 1);
         }
-        (vis, work, packed)
+        (vis, solved, packed)
     });
     stats.timings_s.atlas += atlas_seconds;
-    // A failed atlas is reported first. One that fails after its estimate (a page too small
-    // for the charts, or a chart too large for `--page-size`, found while packing) is
-    // reported before the mesh or the solve when it fails before they start, else once the
-    // solve is done (the solve is not interrupted).
-    let atlas = atlas?;
-    let (segments, meshes, solution) = work.expect("the atlas estimates before it succeeds")?;
+    (vis, atlas, solved)
+}
+
+/// The discontinuity, mesh and solve stages, beside the atlas: `density` waits for the atlas's
+/// estimate of its texel density (`None`: the atlas ended without one), `atlas_failed` says
+/// whether the atlas has failed. `None` when the atlas failed before the mesh or the solve
+/// started.
+#[allow(clippy::too_many_arguments)]
+fn mesh_and_solve(
+    gltf: &Gltf,
+    scene: &Scene,
+    vis: &Visibility,
+    options: &BakeOptions,
+    density: impl FnOnce() -> Option<f64>,
+    atlas_failed: impl Fn() -> bool,
+    stats: &mut Stats,
+    progress: &Progress<'_>,
+) -> Option<Result<Solved>> {
+    let t = &mut stats.timings_s;
+    let traced = (options.mesher == Mesher::Discontinuity).then(|| {
+        stage(&mut t.discontinuity, "discontinuity", progress, || {
+            discontinuity::segments(scene, vis, &dm_options(options, usize::MAX))
+        })
+    });
+    // A budget given needs no density: the mesh need not wait for the estimate.
+    let texels_per_unit = match options.budget {
+        Some(_) => 0.0,
+        None => density()?,
+    };
+    if atlas_failed() {
+        return None;
+    }
+    let meshed = catch_mesh_failure(gltf, scene, || {
+        mesh_scene(
+            scene,
+            vis,
+            options,
+            texels_per_unit,
+            traced,
+            stats,
+            progress,
+        )
+    });
+    let (segments, meshes) = match meshed {
+        Ok(meshed) => meshed,
+        Err(e) => return Some(Err(e)),
+    };
+    if meshes.iter().all(|m| m.triangles.is_empty()) {
+        return Some(Err(Error::EmptyScene {
+            path: gltf.path.clone(),
+        }));
+    }
+    if atlas_failed() {
+        return None;
+    }
+    let t = &mut stats.timings_s;
+    let solution = stage(&mut t.solve, "solve", progress, || {
+        solve::radiosity(scene, vis, &meshes, &options.solve, progress)
+    });
+    Some(Ok((segments, meshes, solution)))
+}
+
+/// The lightmap stage: the meshes' irradiance rasterized into the atlas, the seams stitched
+/// (or only measured, with `--seams off`).
+fn lightmap_stage(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    solution: &Solution,
+    atlas: &Atlas,
+    options: &BakeOptions,
+) -> (Lightmap, lightmap::seams::SeamStats) {
     let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
     for (i, m) in meshes.iter().enumerate() {
         mesh_of_polygon[m.polygon] = i;
     }
-    let t = &mut stats.timings_s;
-    let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
-        let mut map = lightmap::rasterize(
-            &scene,
-            &vis,
-            &meshes,
-            &solution.irradiance,
-            &mesh_of_polygon,
-            &atlas,
-            options.supersample,
-        );
-        let on = options.seams == Seams::Stitch;
-        let seams = lightmap::seams::stitch_seams(&mut map, &scene, &vis, &atlas, on);
-        (map, seams)
-    });
-    stats.seams = seams;
-    stats.triangles = scene.triangles.len() + stats.cut.triangles_cut - stats.cut.pieces;
-    stats.polygons = scene.polygons.len();
-    stats.instances = scene.instances.len();
-    let backs = scene.instances.iter().filter(|i| i.side == Side::Back);
-    stats.double_sided = crate::stats::DoubleSidedStats {
-        back_instances: backs.clone().count(),
-        back_triangles: backs.map(|i| i.indices.len() / 3).sum(),
-        mode: options.double_sided.name().into(),
-    };
-    stats.area_emitters = scene.emitters().count();
-    stats.punctual_lights = scene.lights.len();
-    stats.elements = mesh::element_count(&meshes);
-    stats.vertices = meshes.iter().map(|m| m.vertices.len()).sum();
-    stats.solve = solution.stats.clone();
-    stats.lightmap_width = atlas.width;
-    stats.lightmap_height = atlas.height;
-    stats.lightmap_pages = atlas.pages;
-    stats.lightmap_encoding = options.encoding.name().into();
-    stats.texels_per_unit = atlas.texels_per_unit;
-    stats.warnings = scene.warnings.clone();
-    let most = (stats.budget as f64 * (1.0 + mesh::BUDGET_SLACK)) as usize;
-    if stats.elements > most {
-        stats.warnings.push(format!(
-            "the mesh has {} elements, over the budget of {} (+{}%): the outlines and contact \
-             lines alone need that many; raise --budget",
-            stats.elements,
-            stats.budget,
-            mesh::BUDGET_SLACK * 100.0
-        ));
-    }
-    stats
-        .warnings
-        .extend(solution.stats.warnings.iter().cloned());
-    let sky = options.solve.sky.max_element() > 0.0;
-    if !scene.has_light() && !sky {
-        stats
-            .warnings
-            .push("the scene has no emitters (no emissive material, no KHR_lights_punctual light) and no --sky: the lightmap is black".into());
-    } else if solution
-        .irradiance
-        .iter()
-        .flatten()
-        .all(|h| h.max_element() <= 0.0)
-    {
-        stats.warnings.push(format!(
-            "no surface receives any light (every emitter faces away from the receivers, or is \
-             blocked{}): the lightmap is black",
-            if sky {
-                ", and every surface is closed off from the sky"
-            } else {
-                ""
-            }
-        ));
-    }
-    let diverged = stats.solve.unshot_fraction.is_nan()
-        || stats.solve.unshot_fraction > 1.0
-        || solution.irradiance.iter().flatten().any(|h| !h.is_finite());
-    if diverged {
-        return Err(Error::BadItem {
-            path: gltf.path.clone(),
-            item: "scene".into(),
-            reason: if solution.irradiance.iter().flatten().any(|h| !h.is_finite()) {
-                "the light received is not finite: an emitter or a light is stronger than f64 \
-                 arithmetic holds"
-                    .into()
-            } else {
-                "the indirect light diverges: surfaces receive more light than they emit, \
-                 which happens where geometry is duplicated (coincident surfaces count twice); \
-                 remove the duplicates"
-                    .into()
-            },
-        });
-    }
-    stats.converged =
-        options.solve.bounces.is_some() || stats.solve.unshot_fraction <= options.solve.tolerance;
-    if !stats.converged {
-        stats.warnings.push(format!(
-            "the indirect solve stopped on its shot limit with {:.1}% of the reflected power not yet \
-             distributed (the tolerance is {}%): the indirect light is too dark",
-            100.0 * stats.solve.unshot_fraction,
-            100.0 * options.solve.tolerance
-        ));
-    }
-    Ok(Bake {
+    let mut map = lightmap::rasterize(
         scene,
-        segments,
+        vis,
         meshes,
-        solution,
+        &solution.irradiance,
+        &mesh_of_polygon,
         atlas,
-        lightmap,
-        stats,
+        options.supersample,
+    );
+    let on = options.seams == Seams::Stitch;
+    let seams = lightmap::seams::stitch_seams(&mut map, scene, vis, atlas, on);
+    (map, seams)
+}
+
+/// Refuses a solution whose light is not finite or diverged (its unshot power grew).
+fn check_light_is_finite(gltf: &Gltf, solution: &Solution) -> Result<()> {
+    let unshot = solution.stats.unshot_fraction;
+    let infinite = solution.irradiance.iter().flatten().any(|h| !h.is_finite());
+    if !(unshot.is_nan() || unshot > 1.0 || infinite) {
+        return Ok(());
+    }
+    Err(Error::BadItem {
+        path: gltf.path.clone(),
+        item: "scene".into(),
+        reason: if infinite {
+            "the light received is not finite: an emitter or a light is stronger than f64 \
+             arithmetic holds"
+                .into()
+        } else {
+            "the indirect light diverges: surfaces receive more light than they emit, which \
+             happens where geometry is duplicated (coincident surfaces count twice); remove the \
+             duplicates"
+                .into()
+        },
     })
 }
 
@@ -499,7 +495,7 @@ pub const DEFAULT_TEXELS: std::ops::RangeInclusive<f64> = 262_144.0..=16_777_216
 /// `--texels-per-unit` nor `--resolution`: [`TEXELS_PER_TRIANGLE`] texels per triangle within
 /// [`DEFAULT_TEXELS`], spread over the scene's surface area. Rounded to f32 as the atlas takes
 /// it.
-pub fn default_texels_per_unit(scene: &Scene) -> f32 {
+pub(crate) fn default_texels_per_unit(scene: &Scene) -> f32 {
     let area: f64 = scene.triangles.iter().map(|t| t.area()).sum();
     let texels = (scene.triangles.len() as f64 * TEXELS_PER_TRIANGLE)
         .clamp(*DEFAULT_TEXELS.start(), *DEFAULT_TEXELS.end());
@@ -650,7 +646,7 @@ pub struct Budget {
 ///
 /// within [`DEFAULT_BUDGET`]. Either way at least the input's own triangle count: the mesh can
 /// hardly have fewer elements than the geometry.
-pub fn element_budget(
+pub(crate) fn element_budget(
     scene: &Scene,
     requested: Option<usize>,
     texels_per_unit: f64,
@@ -966,7 +962,7 @@ pub fn bake_file(
 /// Where `--exr FILE` puts page `page` (>= 1) of a multi-page lightmap: next to `FILE`, its
 /// stem plus `-<page>`, same extension (`light.exr` → `light-1.exr`, `light-2.exr`, ...).
 /// Page 0 is `FILE` itself.
-pub fn exr_page_path(exr: &Path, page: u32) -> PathBuf {
+pub(crate) fn exr_page_path(exr: &Path, page: u32) -> PathBuf {
     let stem = exr
         .file_stem()
         .map(|s| s.to_string_lossy().into_owned())

@@ -247,7 +247,7 @@ pub struct ErrorStats {
     /// RMSE with the reference's variance removed.
     pub rmse: f64,
     /// RMSE as measured (bake error and reference noise together).
-    pub rmse_raw: f64,
+    pub(crate) rmse_raw: f64,
     /// The reference's RMS standard error over the same texels.
     pub noise: f64,
     /// Largest texel error beyond three reference standard errors.
@@ -491,7 +491,7 @@ pub struct Run {
     pub patches: usize,
     /// Wall time of the indirect solve proper (the patch solve, or the hierarchical solve),
     /// seconds.
-    pub indirect_seconds: f64,
+    pub(crate) indirect_seconds: f64,
     /// Classic radiosity: the form-factor matrix's memory, bytes.
     pub matrix_bytes: Option<u64>,
     /// Hemicube form factors: hemicubes rendered.
@@ -500,7 +500,7 @@ pub struct Run {
     /// lightmap), seconds.
     pub seconds: f64,
     /// Wall time of the whole in-memory bake (adds scene, BVH and atlas), seconds.
-    pub total_seconds: f64,
+    pub(crate) total_seconds: f64,
     pub error: ErrorStats,
     pub regions: BTreeMap<Region, ErrorStats>,
 }
@@ -518,9 +518,9 @@ pub struct SceneReport {
     pub region_texels: BTreeMap<Region, usize>,
     /// `E_lit`, W/m²: the errors are relative to it.
     pub mean_lit_irradiance: f64,
-    pub reference_spp: u32,
-    pub reference_seconds: f64,
-    pub reference_mean_relative_std_error: f64,
+    pub(crate) reference_spp: u32,
+    pub(crate) reference_seconds: f64,
+    pub(crate) reference_mean_relative_std_error: f64,
     pub runs: Vec<Run>,
     /// Classic radiosity against progressive refinement as the patches grow (when the matrix
     /// is among the methods; main scene only).
@@ -534,12 +534,12 @@ pub struct ScalingRow {
     /// `n²` entries of 8 bytes.
     pub matrix_bytes: u64,
     /// Filling the matrix (closed-form form factors), seconds.
-    pub matrix_fill_seconds: f64,
+    pub(crate) matrix_fill_seconds: f64,
     /// Gauss-Seidel to convergence, seconds.
-    pub matrix_solve_seconds: f64,
+    pub(crate) matrix_solve_seconds: f64,
     pub matrix_sweeps: usize,
     /// Progressive refinement to its tolerance (0.1% unshot), seconds.
-    pub progressive_seconds: f64,
+    pub(crate) progressive_seconds: f64,
     pub progressive_shots: usize,
 }
 
@@ -563,7 +563,7 @@ pub struct FailureInput {
 /// Everything `penumbra compare` measured (`report.json`).
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Report {
-    pub penumbra_version: &'static str,
+    pub(crate) penumbra_version: &'static str,
     pub command: String,
     pub options: CompareOptions,
     pub threads: usize,
@@ -1623,7 +1623,7 @@ fn scene_summary(s: &SceneReport) -> String {
 }
 
 /// `report.md`: the findings and every run, for the scene and the failure sweep.
-pub fn markdown(report: &Report) -> String {
+pub(crate) fn markdown(report: &Report) -> String {
     use std::fmt::Write;
     let s = &report.scene;
     let mut md = String::new();

@@ -52,13 +52,6 @@ const UNSIGNED_SHORT: u32 = 5123;
 const UNSIGNED_INT: u32 = 5125;
 const FLOAT: u32 = 5126;
 
-/// glb magic `glTF`, little-endian.
-const GLB_MAGIC: u32 = 0x4654_6C67;
-/// glb chunk type `JSON`.
-const CHUNK_JSON: u32 = 0x4E4F_534A;
-/// glb chunk type `BIN\0`.
-const CHUNK_BIN: u32 = 0x004E_4942;
-
 /// Name of the glTF extension for emitted radiance above 1.
 pub const KHR_MATERIALS_EMISSIVE_STRENGTH: &str = "KHR_materials_emissive_strength";
 /// Name of the glTF extension for point, spot and directional lights.
@@ -86,7 +79,7 @@ pub struct TriangleMesh {
 
 impl TriangleMesh {
     /// Number of triangles (`indices.len() / 3`).
-    pub fn triangle_count(&self) -> usize {
+    pub(crate) fn triangle_count(&self) -> usize {
         self.indices.len() / 3
     }
 
@@ -149,7 +142,8 @@ impl TriangleMesh {
     }
 
     /// Geometric normal of triangle `t` (unit; from the winding, not the vertex normals).
-    pub fn face_normal(&self, t: usize) -> [f64; 3] {
+    #[cfg(test)]
+    pub(crate) fn face_normal(&self, t: usize) -> [f64; 3] {
         let [a, b, c] =
             [0, 1, 2].map(|k| DVec3::from(self.positions[self.indices[3 * t + k] as usize]));
         (b - a).cross(c - a).normalize().into()
@@ -273,7 +267,7 @@ pub struct Material {
     pub name: String,
     /// Diffuse reflectance, linear RGB, each in `[0, 1]` (`pbrMetallicRoughness.baseColorFactor`,
     /// alpha 1).
-    pub base_color: [f64; 3],
+    pub(crate) base_color: [f64; 3],
     /// Emitted radiance `L_e`, linear RGB, W/(m² sr), each `>= 0`; all zero for a non-emitter.
     /// Written as `emissiveFactor` times `KHR_materials_emissive_strength` (see
     /// [`Material::emissive_factor_and_strength`]).
@@ -309,7 +303,7 @@ impl Material {
     /// Splits the emitted radiance `L_e` into glTF's `emissiveFactor` (each component in
     /// `[0, 1]`) and `emissiveStrength` (`>= 1`, unitless multiplier) with
     /// `factor * strength = L_e`: strength is `max(L_e)` when that exceeds 1, else 1.
-    pub fn emissive_factor_and_strength(&self) -> ([f64; 3], f64) {
+    pub(crate) fn emissive_factor_and_strength(&self) -> ([f64; 3], f64) {
         let m = self.emission.iter().copied().fold(0.0, f64::max);
         if m > 1.0 {
             (self.emission.map(|c| c / m), m)
@@ -367,13 +361,13 @@ pub struct PerspectiveCamera {
     /// Camera name.
     pub name: String,
     /// Vertical field of view, radians, in `(0, π)`.
-    pub yfov: f64,
+    pub(crate) yfov: f64,
     /// Width / height of the view; `None` leaves it to the viewport.
-    pub aspect_ratio: Option<f64>,
+    pub(crate) aspect_ratio: Option<f64>,
     /// Near clipping distance, metres, `> 0`.
-    pub znear: f64,
+    pub(crate) znear: f64,
     /// Far clipping distance, metres, `> znear`; `None` for an infinite projection.
-    pub zfar: Option<f64>,
+    pub(crate) zfar: Option<f64>,
 }
 
 impl PerspectiveCamera {
@@ -559,7 +553,7 @@ impl Transform {
     }
 
     /// Translation (metres) and rotation, unit scale.
-    pub fn translation_rotation(t: [f64; 3], rotation: DQuat) -> Self {
+    pub(crate) fn translation_rotation(t: [f64; 3], rotation: DQuat) -> Self {
         Transform::Trs {
             translation: t.into(),
             rotation,
@@ -634,7 +628,7 @@ pub struct Node {
     /// Node name.
     pub name: String,
     /// Local transform (parent-from-local).
-    pub transform: Transform,
+    pub(crate) transform: Transform,
     /// Indices of child nodes (each added earlier, each with only this parent).
     pub children: Vec<usize>,
     /// Index of the mesh drawn at this node, from [`GlbBuilder::add_mesh`].
@@ -661,19 +655,19 @@ impl Node {
     }
 
     /// Returns the node with the given children (node indices).
-    pub fn with_children(mut self, children: &[usize]) -> Self {
+    pub(crate) fn with_children(mut self, children: &[usize]) -> Self {
         self.children = children.to_vec();
         self
     }
 
     /// Returns the node drawing mesh `mesh`.
-    pub fn with_mesh(mut self, mesh: usize) -> Self {
+    pub(crate) fn with_mesh(mut self, mesh: usize) -> Self {
         self.mesh = Some(mesh);
         self
     }
 
     /// Returns the node carrying camera `camera`.
-    pub fn with_camera(mut self, camera: usize) -> Self {
+    pub(crate) fn with_camera(mut self, camera: usize) -> Self {
         self.camera = Some(camera);
         self
     }
@@ -729,7 +723,7 @@ impl GlbBuilder {
     /// # Panics
     /// If a primitive is empty, has an index out of range or an index count not a multiple of
     /// 3, has attribute arrays of the wrong length, or names an unknown material.
-    pub fn add_mesh(&mut self, name: &str, primitives: &[(&TriangleMesh, usize)]) -> usize {
+    pub(crate) fn add_mesh(&mut self, name: &str, primitives: &[(&TriangleMesh, usize)]) -> usize {
         assert!(!primitives.is_empty(), "mesh {name:?} has no primitives");
         let mut prims = Vec::new();
         for &(geometry, material) in primitives {
@@ -753,7 +747,7 @@ impl GlbBuilder {
     }
 
     /// Adds a perspective camera; returns its index. Place it with a node.
-    pub fn add_camera(&mut self, camera: PerspectiveCamera) -> usize {
+    pub(crate) fn add_camera(&mut self, camera: PerspectiveCamera) -> usize {
         self.cameras.push(camera);
         self.cameras.len() - 1
     }
@@ -804,7 +798,7 @@ impl GlbBuilder {
     }
 
     /// The extensions this scene uses, sorted (what `extensionsUsed` will list).
-    pub fn extensions_used(&self) -> Vec<&'static str> {
+    pub(crate) fn extensions_used(&self) -> Vec<&'static str> {
         let mut used = BTreeSet::new();
         if !self.lights.is_empty() {
             used.insert(KHR_LIGHTS_PUNCTUAL);
@@ -817,7 +811,7 @@ impl GlbBuilder {
 
     /// The glTF JSON document (what [`GlbBuilder::to_glb`] writes in its JSON chunk). Empty
     /// top-level arrays are omitted, as glTF requires.
-    pub fn to_json(&self) -> Value {
+    pub(crate) fn to_json(&self) -> Value {
         let mut root = Map::new();
         root.insert(
             "asset".into(),
@@ -870,34 +864,9 @@ impl GlbBuilder {
         Value::Object(root)
     }
 
-    /// Writes the scene as a glb: the 12-byte header (`glTF`, version 2, total length), the
-    /// JSON chunk padded with spaces to a multiple of 4 bytes, then (when there is any
-    /// geometry) the BIN chunk padded with zeros to a multiple of 4 bytes.
+    /// Writes the scene as a glb ([`crate::write::to_glb`]).
     pub fn to_glb(&self) -> Vec<u8> {
-        let mut json = serde_json::to_vec(&self.to_json()).expect("JSON serialisation cannot fail");
-        while !json.len().is_multiple_of(4) {
-            json.push(b' ');
-        }
-        let mut bin = self.bin.clone();
-        while !bin.len().is_multiple_of(4) {
-            bin.push(0);
-        }
-        let mut total = 12 + 8 + json.len();
-        if !bin.is_empty() {
-            total += 8 + bin.len();
-        }
-        let total = u32::try_from(total).expect("glb larger than 4 GiB");
-        let mut out = Vec::with_capacity(total as usize);
-        for word in [GLB_MAGIC, 2, total, json.len() as u32, CHUNK_JSON] {
-            out.extend_from_slice(&word.to_le_bytes());
-        }
-        out.extend_from_slice(&json);
-        if !bin.is_empty() {
-            out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-            out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
-            out.extend_from_slice(&bin);
-        }
-        out
+        crate::write::to_glb(&self.to_json(), self.bin.clone()).expect("glb larger than 4 GiB")
     }
 
     /// Writes one primitive's accessors; returns the primitive's JSON.
@@ -1481,7 +1450,7 @@ pub fn box_on_ground_open_sky(p: DVec3, n: DVec3) -> f64 {
 
 /// The furnace test: [`furnace_box_with`]`(0.5, 1.0)`, so the radiosity is `B = 2` W/m²
 /// everywhere.
-pub fn furnace_box() -> Vec<u8> {
+pub(crate) fn furnace_box() -> Vec<u8> {
     furnace_box_with(0.5, 1.0)
 }
 
@@ -1723,6 +1692,7 @@ pub fn all() -> Vec<(&'static str, Vec<u8>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::write::{CHUNK_BIN, CHUNK_JSON};
 
     fn parse(glb: &[u8]) -> gltf::Gltf {
         gltf::Gltf::from_slice(glb).expect("fixture must parse")

@@ -59,7 +59,7 @@ fn contour_form_factor(p: DVec3, n: DVec3, clipped: &[DVec3]) -> f64 {
 /// of `p` (no clipping), with `r_i` the corners relative to `p` and `gamma_i` the angle between
 /// `r_i` and `r_(i+1)`, in radians; signed by the winding. The form factor is its absolute value
 /// over `2 pi` (see [`point_polygon_form_factor`]). Edges through `p` contribute nothing.
-pub fn contour_sum(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
+pub(crate) fn contour_sum(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
     (0..poly.len())
         .map(|i| contour_term(p, n, poly[i], poly[(i + 1) % poly.len()]))
         .sum()
@@ -67,7 +67,7 @@ pub fn contour_sum(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
 
 /// One edge's term of [`contour_sum`]: `gamma n · normalize(r_a x r_b)` for the directed edge
 /// `a -> b` seen from `p`; 0 for an edge through `p`.
-pub fn contour_term(p: DVec3, n: DVec3, a: DVec3, b: DVec3) -> f64 {
+pub(crate) fn contour_term(p: DVec3, n: DVec3, a: DVec3, b: DVec3) -> f64 {
     let (a, b) = (a - p, b - p);
     let c = a.cross(b);
     let cl = c.length();
@@ -129,7 +129,7 @@ fn angle(y: f64, x: f64) -> f64 {
 /// exactly on the plane also yields an intersection point, at (or within rounding of) that end:
 /// the contour sum gives such a repeated corner a zero or rounding-size term. The form factors
 /// of the solve depend on these exact values, so this variant is kept as it is.
-pub fn clip_to_horizon(poly: &[DVec3], p: DVec3, n: DVec3) -> Vec<DVec3> {
+pub(crate) fn clip_to_horizon(poly: &[DVec3], p: DVec3, n: DVec3) -> Vec<DVec3> {
     let mut out = Vec::with_capacity(poly.len() + 2);
     for i in 0..poly.len() {
         let a = poly[i];
@@ -151,7 +151,7 @@ pub fn clip_to_horizon(poly: &[DVec3], p: DVec3, n: DVec3) -> Vec<DVec3> {
 /// stage of Sutherland and Hodgman, "Reentrant polygon clipping", CACM 1974. An edge gets an
 /// intersection point only when its ends lie strictly on opposite sides, so a corner on the
 /// plane is kept once and never doubled. Convex in, convex out; `n` need not be unit.
-pub fn clip_polygon_to_plane(poly: &[DVec3], n: DVec3, o: DVec3, out: &mut Vec<DVec3>) {
+pub(crate) fn clip_polygon_to_plane(poly: &[DVec3], n: DVec3, o: DVec3, out: &mut Vec<DVec3>) {
     out.clear();
     let len = poly.len();
     for i in 0..len {
@@ -347,7 +347,7 @@ pub fn convex_hull(points: &[DVec2]) -> Vec<DVec2> {
 
 /// Signed area of a 2D polygon (scene units²): positive when counter-clockwise. A fan from the
 /// first corner (the shoelace formula); fewer than three corners give 0.
-pub fn signed_area(poly: &[DVec2]) -> f64 {
+pub(crate) fn signed_area(poly: &[DVec2]) -> f64 {
     if poly.len() < 3 {
         return 0.0;
     }
@@ -380,7 +380,7 @@ pub const BOX_FACES: [[u32; 4]; 6] = [
 ];
 
 /// The eight corners of the axis-aligned box `[min, max]`.
-pub fn box_corners(min: DVec3, max: DVec3) -> [DVec3; 8] {
+pub(crate) fn box_corners(min: DVec3, max: DVec3) -> [DVec3; 8] {
     std::array::from_fn(|c| {
         DVec3::new(
             if c & 1 == 0 { min.x } else { max.x },
@@ -416,7 +416,7 @@ pub fn barycentric_2d(t: &[DVec2; 3], q: DVec2) -> [f64; 3] {
 
 /// Barycentric coordinates of point `p` (projected onto the triangle's plane) in the 3D triangle
 /// `t`, by least squares over the edge vectors; `[1, 0, 0]` for a degenerate triangle.
-pub fn barycentric_3d(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
+pub(crate) fn barycentric_3d(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
     let (e1, e2, d) = (t[1] - t[0], t[2] - t[0], p - t[0]);
     let (d11, d12, d22) = (e1.dot(e1), e1.dot(e2), e2.dot(e2));
     let (d1p, d2p) = (e1.dot(d), e2.dot(d));
@@ -433,7 +433,7 @@ pub fn barycentric_3d(t: &[DVec3; 3], p: DVec3) -> [f64; 3] {
 // A grid of buckets
 
 /// The bounding box `(min, max)` of a 2D triangle.
-pub fn triangle_bounds(t: &[DVec2; 3]) -> (DVec2, DVec2) {
+pub(crate) fn triangle_bounds(t: &[DVec2; 3]) -> (DVec2, DVec2) {
     (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
 }
 
@@ -505,12 +505,12 @@ impl BoxGrid {
     }
 
     /// The grid's `(columns, rows)`.
-    pub fn dims(&self) -> (usize, usize) {
+    pub(crate) fn dims(&self) -> (usize, usize) {
         self.dims
     }
 
     /// The cell holding point `p`, clamped into the grid (NaN: the first cell).
-    pub fn cell_of(&self, p: DVec2) -> (usize, usize) {
+    pub(crate) fn cell_of(&self, p: DVec2) -> (usize, usize) {
         let c = ((p - self.min) / self.cell).floor();
         let clamp = |v: f64, n: usize| {
             if v.is_nan() || v < 0.0 {
@@ -523,7 +523,7 @@ impl BoxGrid {
     }
 
     /// The items of cell `(x, y)`, in increasing order.
-    pub fn bucket(&self, x: usize, y: usize) -> &[u32] {
+    pub(crate) fn bucket(&self, x: usize, y: usize) -> &[u32] {
         let k = y * self.dims.0 + x;
         &self.ids[self.starts[k] as usize..self.starts[k + 1] as usize]
     }
@@ -531,7 +531,7 @@ impl BoxGrid {
     /// The items (sorted, each once) whose boxes come within `margin` of the segment `p-q`:
     /// every item the segment passes within `margin` of is among them. Visits only the cells
     /// along the segment, column by column.
-    pub fn near_segment(&self, p: DVec2, q: DVec2, margin: f64) -> Vec<u32> {
+    pub(crate) fn near_segment(&self, p: DVec2, q: DVec2, margin: f64) -> Vec<u32> {
         let mut out = Vec::new();
         let (lo, hi) = (p.min(q) - margin, p.max(q) + margin);
         let (x0, _) = self.cell_of(lo);

@@ -1,9 +1,14 @@
 //! penumbra: a discontinuity-meshing radiosity preprocessor and lightmap baker.
 //!
-//! The pipeline, one module per stage, in the order [`bake()`] calls them:
+//! The pipeline, one module per stage. [`bake()`] packs the atlas on a thread of its own, beside
+//! the stages from the BVH to the solve: the mesh waits only for the atlas's first estimate of
+//! its texel density (the default element budget follows it), and the lightmap for the atlas
+//! itself.
 //!
 //! ```text
-//! load ──► scene ──► visibility ──► atlas ──► discontinuity ──► mesh ──► solve ──► lightmap ──► write
+//! load ──► scene ──┬──► visibility ──► discontinuity ──► mesh ──► solve ──► lightmap ──► write
+//!                  │                                      ▲                    ▲
+//!                  └──► atlas ── density estimate ────────┴─ the packed atlas ─┘
 //! ```
 //!
 //! Units: lengths in scene units (glTF: metres); radiance in W/(m² sr), irradiance and exitance in
@@ -46,10 +51,11 @@ pub mod backproject;
 // stitching of the seams between charts.
 pub mod lightmap;
 
-// The lightmapped glb.
+// The lightmapped glb, and the reader of its lightmap binding (`write::binding`).
 pub mod write;
 
-// Shared physics, used by several stages (depend on nothing but `scene`'s plain data).
+// Shared physics and small utilities, used by several stages (they depend on nothing but
+// `scene`'s plain data).
 
 // Form factors by Lambert's contour formula, polygon clipping, convex pieces, areas,
 // barycentrics, a bucket grid of 2D boxes.
@@ -57,6 +63,12 @@ pub mod geometry;
 
 // Receiving points, area emitters, the punctual light model, luminance.
 pub mod light;
+
+// The sRGB transfer curves.
+pub mod color;
+
+// SplitMix64, the one pseudo-random generator (the reference, generated scenes, tests).
+pub mod rng;
 
 // The pipeline driver and its bookkeeping.
 
@@ -66,8 +78,11 @@ pub mod bake;
 // Errors.
 pub mod error;
 
-// `--stats` and progress.
+// `--stats`: per-stage times and counts.
 pub mod stats;
+
+// The progress callback.
+pub mod progress;
 
 // Output files: never the input, written together or not at all, cleaned up on signals.
 pub mod files;

@@ -33,7 +33,7 @@ pub const NO_POLYGON: usize = usize::MAX;
 impl SurfacePoint {
     /// A point inside a surface: rays start `2 epsilon` along the normal (`epsilon`: the ray
     /// offset of the scene's BVH, scene units).
-    pub fn with_epsilon(p: DVec3, n: DVec3, polygon: usize, epsilon: f64) -> SurfacePoint {
+    pub(crate) fn with_epsilon(p: DVec3, n: DVec3, polygon: usize, epsilon: f64) -> SurfacePoint {
         SurfacePoint {
             p,
             n,
@@ -43,9 +43,10 @@ impl SurfacePoint {
     }
 
     /// A point on or near a polygon's edge: `inward` is the unit in-plane direction into the
-    /// polygon. Form factors are evaluated `1e-6` of the scene extent (`extent`, scene units)
-    /// inside, rays start `4 epsilon` inside and `2 epsilon` off the surface.
-    pub fn near_edge_with_epsilon(
+    /// polygon. Form factors are evaluated [`crate::scene::tolerance::INPUT`] of the scene extent
+    /// (`extent`, scene units) inside, rays start `4 epsilon` inside and `2 epsilon` off the
+    /// surface.
+    pub(crate) fn near_edge_with_epsilon(
         p: DVec3,
         n: DVec3,
         inward: DVec3,
@@ -55,7 +56,7 @@ impl SurfacePoint {
     ) -> SurfacePoint {
         let e = epsilon;
         SurfacePoint {
-            p: p + inward * (1e-6 * extent),
+            p: p + inward * (crate::scene::tolerance::INPUT * extent),
             n,
             ray_origin: p + inward * (4.0 * e) + n * (2.0 * e),
             polygon,
@@ -75,7 +76,7 @@ pub struct EmitterShape {
     /// Convex pieces, counter-clockwise in `frame` coordinates (seen from the front).
     pub pieces: Vec<Vec<DVec2>>,
     /// The pieces in world space.
-    pub pieces_world: Vec<Vec<DVec3>>,
+    pub(crate) pieces_world: Vec<Vec<DVec3>>,
     /// Convex hull of all pieces, counter-clockwise.
     pub hull: Vec<DVec2>,
     /// Area, scene units².
@@ -135,12 +136,12 @@ impl EmitterShape {
 
     /// Occluders no farther than this in front of the emitter's plane (scene units) are taken
     /// to lie in it, and never block it.
-    pub fn plane_tolerance(&self) -> f64 {
+    pub(crate) fn plane_tolerance(&self) -> f64 {
         1e-9 * self.size
     }
 
     /// The hull's corners in world space.
-    pub fn hull_world(&self) -> Vec<DVec3> {
+    pub(crate) fn hull_world(&self) -> Vec<DVec3> {
         self.hull
             .iter()
             .map(|q| self.frame.world_from_plane(*q))
@@ -182,7 +183,7 @@ pub struct AreaEmitter {
 }
 
 /// The radical inverse in base 2 (van der Corput), the second Hammersley coordinate, in [0, 1).
-pub fn radical_inverse2(mut i: u32) -> f64 {
+pub(crate) fn radical_inverse2(mut i: u32) -> f64 {
     i = i.reverse_bits();
     i as f64 / 4294967296.0
 }
@@ -274,7 +275,7 @@ impl AreaEmitter {
 ///
 /// The one model of punctual light: the direct light, the Monte Carlo reference and the
 /// discontinuity ranking all use it.
-pub fn punctual_unoccluded(light: &PunctualLight, p: DVec3, n: DVec3) -> Option<DVec3> {
+pub(crate) fn punctual_unoccluded(light: &PunctualLight, p: DVec3, n: DVec3) -> Option<DVec3> {
     match light.kind {
         LightKind::Directional => {
             let cos = n.dot(-light.direction);

@@ -10,6 +10,7 @@
 //! closed primitive ([`crate::scene::Instance::is_closed`]: a box with all its faces) gets no back: its back
 //! is inside the volume, which many exporters mark double-sided by default.
 
+use crate::color::srgb_to_linear;
 use crate::error::{Error, Result};
 use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side};
 use base64::Engine;
@@ -90,7 +91,7 @@ pub fn from_bytes(bytes: Vec<u8>, path: &Path) -> Result<Gltf> {
 
 /// Parses glTF bytes; `path` names the file in messages and anchors relative URIs, which may
 /// name files only in its folder and `options.allow_outside` ([`uri`]).
-pub fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions) -> Result<Gltf> {
+pub(crate) fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions) -> Result<Gltf> {
     let not_gltf = |reason: String| Error::NotGltf {
         path: path.to_path_buf(),
         reason,
@@ -189,7 +190,12 @@ pub fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions) -> Re
 /// Reads the bytes behind a URI: a base64 data URI, or a regular file relative to the glTF
 /// file, inside its folder or `options.allow_outside` ([`uri`]), of at most
 /// [`Limits::input_bytes`].
-pub fn read_uri(gltf_path: &Path, uri: &str, item: &str, options: &LoadOptions) -> Result<Vec<u8>> {
+pub(crate) fn read_uri(
+    gltf_path: &Path,
+    uri: &str,
+    item: &str,
+    options: &LoadOptions,
+) -> Result<Vec<u8>> {
     if let Some(rest) = uri.strip_prefix("data:") {
         let (_, payload) = rest.split_once(";base64,").ok_or_else(|| Error::BadItem {
             path: gltf_path.to_path_buf(),
@@ -240,14 +246,14 @@ fn percent_decode(uri: &str) -> String {
 impl Gltf {
     /// The bytes behind one of this file's URIs ([`read_uri`] with the options it was read
     /// with).
-    pub fn uri_bytes(&self, uri: &str, item: &str) -> Result<Vec<u8>> {
+    pub(crate) fn uri_bytes(&self, uri: &str, item: &str) -> Result<Vec<u8>> {
         read_uri(&self.path, uri, item, &self.options)
     }
 
     /// Decodes an image within [`Limits::image_side`] and [`Limits::image_bytes`]: `Ok(Err)`
     /// says why it cannot be decoded (not an image, a format not built in), an error naming
     /// `item` that it is past a limit.
-    pub fn decode_image(
+    pub(crate) fn decode_image(
         &self,
         bytes: &[u8],
         item: &str,
@@ -304,7 +310,7 @@ impl Gltf {
     }
 
     /// The bytes of a buffer view, checked against its buffer.
-    pub fn view_bytes(&self, view: &gltf::buffer::View, item: &str) -> Result<&[u8]> {
+    pub(crate) fn view_bytes(&self, view: &gltf::buffer::View, item: &str) -> Result<&[u8]> {
         let data = &self.buffers[view.buffer().index()];
         let end = view.offset().checked_add(view.length());
         match end {
@@ -324,7 +330,7 @@ impl Gltf {
 
     /// An accessor's elements, tightly packed (sparse substitution applied), and the size of one
     /// element in bytes.
-    pub fn accessor_bytes(&self, accessor: &gltf::Accessor) -> Result<(Vec<u8>, usize)> {
+    pub(crate) fn accessor_bytes(&self, accessor: &gltf::Accessor) -> Result<(Vec<u8>, usize)> {
         let item = format!("accessor {}", accessor.index());
         let elem = accessor.size();
         let count = accessor.count();
@@ -474,7 +480,7 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
 
 /// [`scene`] within `limits`: the instances and the triangles are counted as the node graph is
 /// walked, before each primitive's geometry is read.
-pub fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
+pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     let doc = &gltf.document;
     let mut scene = Scene::default();
     let mut textures = TextureMeans::default();
@@ -642,7 +648,7 @@ pub const MAX_EXTENT: f64 = 1e9;
 pub const MIN_EXTENT: f64 = 1e-9;
 
 /// The largest ratio of the scene's extent to its typical (median) triangle. The geometric
-/// tolerances are about 1e-6 of the extent; past this ratio most triangles would fall below
+/// tolerances of input geometry are 1e-6 of the extent ([`crate::scene::tolerance::INPUT`]); past this ratio most triangles would fall below
 /// them and vanish from the bake. A stray vertex far from everything else is the usual cause.
 pub const MAX_EXTENT_RATIO: f64 = 1e6;
 
@@ -1082,14 +1088,5 @@ impl TextureMeans {
         };
         self.cache.insert(index, mean);
         Ok(mean)
-    }
-}
-
-/// The sRGB electro-optical transfer function (IEC 61966-2-1), value in 0..1.
-pub fn srgb_to_linear(c: f64) -> f64 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
     }
 }

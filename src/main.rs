@@ -178,7 +178,7 @@ fn parse_method(s: &str) -> Result<penumbra::compare::Method, String> {
 
 #[derive(Args)]
 struct ReferenceArgs {
-    /// A glb baked by `penumbra bake` (its TEXCOORD_1 and MOZ_lightmap give the texel layout).
+    /// A glb baked by `penumbra bake` (its MOZ_lightmap and the UV set it names give the texel layout).
     input: PathBuf,
     /// Output OpenEXR: irradiance H per texel (W/m², linear RGB; uncovered texels 0).
     #[arg(long, value_name = "FILE")]

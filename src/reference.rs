@@ -1,10 +1,10 @@
 //! An independent Monte Carlo reference for a baked lightmap: per texel, the irradiance `H`
 //! (W/m², linear RGB, without albedo) at the texel's surface points, estimated by path tracing.
 //!
-//! It reads only the baked glb: the lightmap layout (each lightmapped primitive's `TEXCOORD_1`
-//! and the size of its `MOZ_lightmap` image) and the geometry, through [`load::scene`] and the
-//! [`Visibility`] BVH. It uses no receiver mesh and no radiosity solution, so it checks the
-//! baker from outside.
+//! It reads only the baked glb: the lightmap layout (each lightmapped primitive's UV set that
+//! `MOZ_lightmap.texCoord` names, and the size of its `MOZ_lightmap` image) and the geometry,
+//! through [`load::scene`] and the [`Visibility`] BVH. It uses no receiver mesh and no radiosity
+//! solution, so it checks the baker from outside.
 //!
 //! The estimator solves the rendering equation (Kajiya 1986, "The rendering equation",
 //! SIGGRAPH) for Lambertian surfaces in its irradiance form:
@@ -29,8 +29,8 @@
 //!   ray both add `L_e cos(theta_x) / (p_l + p_b)`, which is at most `pi L_e`. Plain
 //!   next-event estimation (weight `L_e cos cos / r² · A`, emission never added at hits) is
 //!   unbiased too, but near the edge where two emitting faces meet (the furnace's corners) its
-//!   variance grows without bound and the sample variance no longer measures the error: its
-//!   reported standard error was several times too small there. Nothing is counted twice: the
+//!   variance grows without bound and the sample variance does not measure the error: the
+//!   standard error it reports there is several times too small. Nothing is counted twice: the
 //!   weights of the two strategies sum to 1. Where no hemisphere ray is traced (the last
 //!   vertex under `bounces_max`, e.g. `Some(0)`: direct light only), the light sample takes the
 //!   full weight.
@@ -54,12 +54,14 @@
 //! result does not depend on the thread count.
 
 use crate::error::{Error, Result};
+use crate::light::luminance;
 use crate::load::{self, Gltf};
+use crate::rng::{SplitMix64, mix64};
 use crate::scene::Scene;
 use crate::solve::{self, SurfacePoint};
 use crate::visibility::Visibility;
+use crate::write::binding::{self, Binding};
 use glam::{DVec2, DVec3};
-use gltf::accessor::Dimensions;
 use rayon::prelude::*;
 use std::f64::consts::PI;
 use std::path::Path;
@@ -115,7 +117,7 @@ pub struct ReferenceMap {
     /// Per texel, the shortest distance to another surface along its first-bounce hemisphere
     /// rays (scene units; infinite when no ray hit, or no hemisphere rays were traced because
     /// `bounces_max` is `Some(0)`). Small values mark contact regions.
-    pub nearest_surface: Vec<f32>,
+    pub(crate) nearest_surface: Vec<f32>,
 }
 
 /// A summary of a [`ReferenceMap`] (the `--stats` JSON of `penumbra reference`).
@@ -128,13 +130,13 @@ pub struct ReferenceSummary {
     /// `sum_c stderr_c / sum_c mean_c` (channel sums).
     pub mean_relative_std_error: f64,
     /// Largest relative standard error of a texel.
-    pub max_relative_std_error: f64,
+    pub(crate) max_relative_std_error: f64,
 }
 
 impl ReferenceMap {
     /// Relative standard error of texel `i` (`sum_c stderr_c / sum_c mean_c`), `None` when its
     /// mean is 0 or it is uncovered.
-    pub fn relative_std_error(&self, i: usize) -> Option<f64> {
+    pub(crate) fn relative_std_error(&self, i: usize) -> Option<f64> {
         let m = self.mean[i].element_sum();
         (self.coverage[i] > 0.0 && m > 0.0).then(|| self.std_error[i].element_sum() / m)
     }
@@ -162,7 +164,7 @@ impl ReferenceMap {
     }
 
     /// Writes `mean` (H, W/m², linear RGB) as OpenEXR, atomically.
-    pub fn write_exr(&self, path: &Path) -> Result<()> {
+    pub(crate) fn write_exr(&self, path: &Path) -> Result<()> {
         crate::files::write_atomically(path, &self.exr_bytes()?)
     }
 }
@@ -198,8 +200,9 @@ fn bad(gltf: &Gltf, item: String, reason: &str) -> Error {
     }
 }
 
-/// Reads the lightmap layout of a baked glb: the `TEXCOORD_1` triangles of every primitive
-/// whose material has `MOZ_lightmap`, rasterized into the grid of the lightmap image with `n x n`
+/// Reads the lightmap layout of a baked glb: the lightmap UV triangles (the set that
+/// `MOZ_lightmap.texCoord` names, [`binding::binding`]) of every primitive whose material has
+/// `MOZ_lightmap`, rasterized into the grid of the lightmap image with `n x n`
 /// sub-samples per texel, as the bake does. `scene` must be `load::scene(gltf)` and `vis` its
 /// BVH (for the rays' start points). All lightmapped materials must share one lightmap size. A
 /// multi-page lightmap (textures with `extras.penumbra.page`, see [`crate::write`]) gives one
@@ -224,29 +227,16 @@ pub fn texel_layout(
     let mut page_texture: std::collections::BTreeMap<usize, usize> = Default::default();
     let mut sizes = std::collections::BTreeMap::new();
     for inst in &scene.instances {
-        let prim = gltf
-            .document
-            .meshes()
-            .nth(inst.mesh)
-            .and_then(|m| m.primitives().nth(inst.primitive))
-            .ok_or_else(|| bad(gltf, format!("mesh {}", inst.mesh), "missing primitive"))?;
-        let Some(moz) = inst
-            .gltf_material
-            .and_then(|m| gltf.json["materials"][m]["extensions"]["MOZ_lightmap"].as_object())
+        let Some(Binding {
+            tex_coord,
+            uv,
+            texture,
+            ..
+        }) = binding::binding(gltf, inst)?
         else {
             continue;
         };
-        let set = moz.get("texCoord").and_then(|v| v.as_u64()).unwrap_or(1) as u32;
         let item = format!("mesh {} primitive {}", inst.mesh, inst.primitive);
-        let acc = prim
-            .get(&gltf::Semantic::TexCoords(set))
-            .ok_or_else(|| bad(gltf, item.clone(), "MOZ_lightmap without its TEXCOORD set"))?;
-        let flat = gltf.read_floats(&acc, Dimensions::Vec2)?;
-        let uv: Vec<DVec2> = flat
-            .chunks_exact(2)
-            .map(|c| DVec2::new(c[0], c[1]))
-            .collect();
-        let texture = moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize;
         let dims = match sizes.get(&texture) {
             Some(&d) => d,
             None => {
@@ -263,7 +253,7 @@ pub fn texel_layout(
             ));
         }
         size = Some(dims);
-        let page = crate::render::texture_page(gltf, texture);
+        let page = binding::texture_page(gltf, texture);
         if *page_texture.entry(page).or_insert(texture) != texture {
             return Err(bad(
                 gltf,
@@ -278,7 +268,8 @@ pub fn texel_layout(
             }
             let ids = &inst.indices[3 * k..3 * k + 3];
             if ids.iter().any(|&i| i as usize >= uv.len()) {
-                return Err(bad(gltf, item, "TEXCOORD_1 is shorter than POSITION"));
+                let reason = format!("TEXCOORD_{tex_coord} is shorter than POSITION");
+                return Err(bad(gltf, item, &reason));
             }
             tris.push((ids_to_uv(ids, &uv), t, page));
         }
@@ -363,15 +354,7 @@ fn ids_to_uv(ids: &[u32], uv: &[DVec2]) -> [DVec2; 3] {
 
 /// Width and height of a texture's image (decoded header only).
 fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
-    let tex = gltf
-        .document
-        .textures()
-        .nth(texture)
-        .ok_or_else(|| bad(gltf, format!("texture {texture}"), "does not exist"))?;
-    let bytes = match tex.source().source() {
-        gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, "lightmap")?.to_vec(),
-        gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, "lightmap")?,
-    };
+    let bytes = binding::texture_bytes(gltf, texture)?;
     let (w, h) = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| bad(gltf, format!("texture {texture}"), &e.to_string()))?
@@ -385,26 +368,6 @@ fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
         ));
     }
     Ok((w, h))
-}
-
-/// SplitMix64 (Steele, Lea & Flood 2014): a small, fast generator, one stream per texel.
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        mix64(self.0)
-    }
-    /// Uniform in [0, 1).
-    fn next_f64(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-}
-
-fn mix64(mut z: u64) -> u64 {
-    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-    z ^ (z >> 31)
 }
 
 /// One area emitter for next-event estimation: its triangles with a cumulative area table.
@@ -648,11 +611,6 @@ impl Default for Probe {
             nearest: f64::INFINITY,
         }
     }
-}
-
-/// Rec. 709 luminance of linear RGB.
-fn luminance(c: DVec3) -> f64 {
-    0.2126 * c.x + 0.7152 * c.y + 0.0722 * c.z
 }
 
 /// A cosine-weighted direction about the unit normal `n` (pdf `cos(theta) / pi`).

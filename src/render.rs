@@ -4,16 +4,17 @@
 //! the surface's own emission, exposed and encoded as sRGB. Each primitive reads the lightmap
 //! page its material's `MOZ_lightmap.index` names.
 //!
-//! It reads only the output file (TEXCOORD_1, the lightmap image, the materials), so it checks
-//! what a client would see, not the baker's internal state.
+//! It reads only the output file (the UV set `MOZ_lightmap.texCoord` names, the lightmap image,
+//! the materials; through [`crate::write::binding`]), so it checks what a client would see, not
+//! the baker's internal state.
 
 use crate::error::{Error, Result};
-use crate::lightmap::{Encoding, Lightmap};
+use crate::lightmap::Lightmap;
 use crate::load::{self, Gltf};
 use crate::scene::Scene;
 use crate::visibility::Visibility;
+use crate::write::binding::{self, Binding};
 use glam::{DMat4, DVec2, DVec3};
-use gltf::accessor::Dimensions;
 use rayon::prelude::*;
 use std::collections::BTreeMap;
 
@@ -22,11 +23,11 @@ use std::collections::BTreeMap;
 pub struct Camera {
     pub eye: DVec3,
     /// Unit vectors: forward (view direction), up and right.
-    pub forward: DVec3,
+    pub(crate) forward: DVec3,
     pub up: DVec3,
     pub right: DVec3,
     /// Vertical field of view, radians.
-    pub yfov: f64,
+    pub(crate) yfov: f64,
 }
 
 impl Camera {
@@ -127,35 +128,6 @@ impl Camera {
     }
 }
 
-/// Per instance: TEXCOORD_1 of every vertex, and the lightmap (texture index, its page,
-/// intensity).
-struct LightmapBinding {
-    uv1: Vec<DVec2>,
-    texture: usize,
-    page: usize,
-    intensity: f64,
-}
-
-/// The encoding of a lightmap texture, from its `extras.penumbra.encoding` (absent: linear, as
-/// files written before the field existed). An unknown name is an error.
-pub fn texture_encoding(gltf: &Gltf, texture: usize) -> Result<Encoding> {
-    match gltf.json["textures"][texture]["extras"]["penumbra"]["encoding"].as_str() {
-        None => Ok(Encoding::Linear),
-        Some(name) => Encoding::from_name(name).ok_or_else(|| Error::BadItem {
-            path: gltf.path.clone(),
-            item: format!("texture {texture}"),
-            reason: format!("extras.penumbra.encoding {name:?} is neither \"srgb\" nor \"linear\""),
-        }),
-    }
-}
-
-/// The page of a lightmap texture, from its `extras.penumbra.page` (absent: 0).
-pub fn texture_page(gltf: &Gltf, texture: usize) -> usize {
-    gltf.json["textures"][texture]["extras"]["penumbra"]["page"]
-        .as_u64()
-        .unwrap_or(0) as usize
-}
-
 /// What a lightmapped surface shows.
 #[derive(Clone, Copy, Debug)]
 pub enum Shading<'a> {
@@ -200,46 +172,20 @@ pub fn render_radiance(
         item,
         reason: reason.into(),
     };
-    // Lightmap bindings per instance, decoded textures per texture index.
+    // Lightmap bindings per instance with their page, decoded textures per texture index.
     let mut textures: BTreeMap<usize, Lightmap> = BTreeMap::new();
-    let mut bindings: Vec<Option<LightmapBinding>> = Vec::new();
+    let mut bindings: Vec<Option<(Binding, usize)>> = Vec::new();
     for inst in &scene.instances {
-        let prim = gltf
-            .document
-            .meshes()
-            .nth(inst.mesh)
-            .and_then(|m| m.primitives().nth(inst.primitive))
-            .ok_or_else(|| bad(format!("mesh {}", inst.mesh), "missing primitive"))?;
-        let moz = inst
-            .gltf_material
-            .and_then(|m| gltf.json["materials"][m]["extensions"]["MOZ_lightmap"].as_object());
-        let (Some(moz), Some(acc)) = (moz, prim.get(&gltf::Semantic::TexCoords(1))) else {
-            bindings.push(None);
-            continue;
-        };
-        let flat = gltf.read_floats(&acc, Dimensions::Vec2)?;
-        let uv1 = flat
-            .chunks_exact(2)
-            .map(|c| DVec2::new(c[0], c[1]))
-            .collect();
-        let texture = moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize;
-        let intensity = moz.get("intensity").and_then(|v| v.as_f64()).unwrap_or(1.0);
-        if let std::collections::btree_map::Entry::Vacant(e) = textures.entry(texture) {
-            let tex = gltf
-                .document
-                .textures()
-                .nth(texture)
-                .ok_or_else(|| bad(format!("texture {texture}"), "does not exist"))?;
-            let bytes = match tex.source().source() {
-                gltf::image::Source::View { view, .. } => {
-                    gltf.view_bytes(&view, "lightmap")?.to_vec()
-                }
-                gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, "lightmap")?,
-            };
-            let encoding = texture_encoding(gltf, texture)?;
+        let b = binding::binding(gltf, inst)?;
+        if let Some(b) = &b
+            && let std::collections::btree_map::Entry::Vacant(e) = textures.entry(b.texture)
+        {
+            let item = format!("texture {}", b.texture);
+            let bytes = binding::texture_bytes(gltf, b.texture)?;
+            let encoding = binding::texture_encoding(gltf, b.texture)?;
             let img = gltf
-                .decode_image(&bytes, &format!("texture {texture}"))?
-                .map_err(|e| bad(format!("texture {texture}"), &e))?
+                .decode_image(&bytes, &item)?
+                .map_err(|e| bad(item, &e))?
                 .to_rgb32f();
             e.insert(Lightmap {
                 width: img.width(),
@@ -251,11 +197,9 @@ pub fn render_radiance(
                 coverage: Vec::new(),
             });
         }
-        bindings.push(Some(LightmapBinding {
-            uv1,
-            texture,
-            page: texture_page(gltf, texture),
-            intensity,
+        bindings.push(b.map(|b| {
+            let page = binding::texture_page(gltf, b.texture);
+            (b, page)
         }));
     }
     let aspect = width as f64 / height as f64;
@@ -273,25 +217,27 @@ pub fn render_radiance(
             let tri = &scene.triangles[hit.triangle];
             let mat = &scene.materials[tri.material];
             let p = camera.eye + dir * hit.t;
-            let uv = bindings[tri.instance].as_ref().map(|b| {
+            let uv = bindings[tri.instance].as_ref().map(|(b, page)| {
                 let inst = &scene.instances[tri.instance];
                 let k = tri.local_index;
                 let ids = &inst.indices[3 * k..3 * k + 3];
                 let bary = crate::geometry::barycentric_3d(&tri.p, p);
-                let uv: DVec2 = (0..3).map(|c| b.uv1[ids[c] as usize] * bary[c]).sum();
-                (b, uv)
+                let uv: DVec2 = (0..3).map(|c| b.uv[ids[c] as usize] * bary[c]).sum();
+                (b, *page, uv)
             });
             if let Shading::Colour(map) = shading {
-                return uv.map_or(DVec3::splat(0.02), |(b, uv)| sample_page(map, b.page, uv));
+                return uv.map_or(DVec3::splat(0.02), |(_, page, uv)| {
+                    sample_page(map, page, uv)
+                });
             }
             let mut l = if tri.normal.dot(dir) < 0.0 {
                 mat.radiance
             } else {
                 DVec3::ZERO
             };
-            if let Some((b, uv)) = uv {
+            if let Some((b, page, uv)) = uv {
                 let h = match shading {
-                    Shading::Irradiance(map) => sample_page(map, b.page, uv),
+                    Shading::Irradiance(map) => sample_page(map, page, uv),
                     _ => sample_map(&textures[&b.texture], uv) * b.intensity,
                 };
                 l += mat.rho / std::f64::consts::PI * h;
@@ -304,7 +250,7 @@ pub fn render_radiance(
 
 /// The exposure of [`render`]'s automatic mode: the 97th percentile of the luminance of what
 /// was hit maps to 0.9.
-pub fn auto_exposure(radiance: &[DVec3]) -> f64 {
+pub(crate) fn auto_exposure(radiance: &[DVec3]) -> f64 {
     let mut lum: Vec<f64> = radiance
         .iter()
         .map(|c| crate::light::luminance(*c))
@@ -315,12 +261,12 @@ pub fn auto_exposure(radiance: &[DVec3]) -> f64 {
 }
 
 /// Linear RGB divided by `scale`, clamped and sRGB-encoded to 8 bits.
-pub fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> image::RgbImage {
+pub(crate) fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> image::RgbImage {
     let mut img = image::RgbImage::new(width, height);
     for (i, c) in radiance.iter().enumerate() {
         let v = (*c / scale)
             .to_array()
-            .map(|x| (linear_to_srgb(x.clamp(0.0, 1.0)) * 255.0).round() as u8);
+            .map(|x| (crate::color::linear_to_srgb(x.clamp(0.0, 1.0)) * 255.0).round() as u8);
         img.put_pixel(i as u32 % width, i as u32 / width, image::Rgb(v));
     }
     img
@@ -328,35 +274,16 @@ pub fn tone_map(radiance: &[DVec3], width: u32, height: u32, scale: f64) -> imag
 
 /// Bilinear sample of a float map (its first page) at normalized UV with clamp-to-edge, as the
 /// output's sampler says.
-pub fn sample_map(map: &Lightmap, uv: DVec2) -> DVec3 {
+pub(crate) fn sample_map(map: &Lightmap, uv: DVec2) -> DVec3 {
     sample_page(map, 0, uv)
 }
 
 /// [`sample_map`] on page `page` of a multi-page map (black when the map has no such page).
-pub fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
+pub(crate) fn sample_page(map: &Lightmap, page: usize, uv: DVec2) -> DVec3 {
     let (w, h) = (map.width as usize, map.height as usize);
     if w == 0 || h == 0 || map.texels.len() < (page + 1) * w * h {
         return DVec3::ZERO;
     }
     let texel_uv = uv * DVec2::new(w as f64, h as f64);
     crate::lightmap::seams::Footprint::at(map.width, map.height, page, texel_uv).sample(&map.texels)
-}
-
-/// The sRGB opto-electronic transfer function (IEC 61966-2-1), value in \[0, 1\].
-pub fn linear_to_srgb(c: f64) -> f64 {
-    if c <= 0.0031308 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-/// The sRGB electro-optical transfer function (IEC 61966-2-1), the inverse of
-/// [`linear_to_srgb`]: encoded value in \[0, 1\] to linear.
-pub fn srgb_to_linear(e: f64) -> f64 {
-    if e <= 0.04045 {
-        e / 12.92
-    } else {
-        ((e + 0.055) / 1.055).powf(2.4)
-    }
 }

@@ -9,6 +9,25 @@ use std::collections::BTreeMap;
 
 pub mod cut;
 
+/// The geometric tolerances of every stage, as fractions of [`Scene::extent`] (times it: scene
+/// units), so a scene bakes alike at any size. Three levels, by the rounding each must absorb:
+pub mod tolerance {
+    /// Points computed along different paths that stand for the same point (a texel corner
+    /// found again, a box flat in one axis): f64 rounds each operation to about 1e-16 of the
+    /// magnitudes involved, so 1e-9 leaves room for millions of operations and is still far
+    /// below any modelled feature.
+    pub const COINCIDENT: f64 = 1e-9;
+    /// Input geometry that stands for the same point or plane (the triangles of one planar
+    /// polygon, a point set in from an edge): glTF stores coordinates as f32, rounded to about
+    /// 6e-8 of their magnitude, so 1e-6 is above that with a margin of about 16. A typical
+    /// triangle is larger than this ([`crate::load::MAX_EXTENT_RATIO`]).
+    pub const INPUT: f64 = 1e-6;
+    /// How far rays start off their surfaces and stop short of their targets
+    /// ([`crate::visibility::Visibility::epsilon`]): the BVH intersects in f32, about 1e-7 of
+    /// the extent, and 1e-5 is a hundred times that.
+    pub const RAY: f64 = 1e-5;
+}
+
 /// A Lambertian surface material.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
@@ -22,7 +41,7 @@ pub struct Material {
 
 impl Material {
     /// True when the material emits light.
-    pub fn is_emitter(&self) -> bool {
+    pub(crate) fn is_emitter(&self) -> bool {
         self.radiance.max_element() > 0.0
     }
 }
@@ -39,7 +58,7 @@ pub struct Triangle {
     /// Index into [`Scene::instances`].
     pub instance: usize,
     /// Index of the triangle within its instance's index list (`indices[3k..3k+3]`).
-    pub local_index: usize,
+    pub(crate) local_index: usize,
     /// Index into [`Scene::polygons`], or `None` for degenerate triangles, which receive nothing.
     pub polygon: Option<usize>,
 }
@@ -115,7 +134,7 @@ impl Polygon {
 }
 
 /// Inside-or-on test of a 2D point against a triangle, with a small relative tolerance.
-pub fn point_in_triangle(q: DVec2, t: &[DVec2; 3]) -> bool {
+pub(crate) fn point_in_triangle(q: DVec2, t: &[DVec2; 3]) -> bool {
     let area2 = (t[1] - t[0]).perp_dot(t[2] - t[0]);
     if area2 == 0.0 {
         return false;
@@ -175,7 +194,7 @@ pub struct Instance {
     /// Primitive index within the mesh.
     pub primitive: usize,
     /// glTF material index, if the primitive has one.
-    pub gltf_material: Option<usize>,
+    pub(crate) gltf_material: Option<usize>,
     /// Vertex positions in world space (the primitive's vertices, one per glTF vertex).
     pub positions_world: Vec<DVec3>,
     /// Triangle list over `positions_world` (strips and fans expanded, winding fixed for mirrors).
@@ -220,7 +239,7 @@ impl Instance {
     }
 
     /// Number of the primitive's own glTF vertices (the first ones of `positions_world`).
-    pub fn source_vertices(&self) -> usize {
+    pub(crate) fn source_vertices(&self) -> usize {
         self.positions_world.len() - self.derived.len()
     }
 
@@ -259,7 +278,7 @@ impl Instance {
 
     /// The back side of this (front) instance: the same vertices, every triangle's second and
     /// third corner swapped.
-    pub fn back_side(&self) -> Instance {
+    pub(crate) fn back_side(&self) -> Instance {
         let mut indices = self.indices.clone();
         for t in indices.chunks_exact_mut(3) {
             t.swap(1, 2);
@@ -322,7 +341,7 @@ impl Scene {
     }
 
     /// True when the scene has at least one area emitter or punctual light.
-    pub fn has_light(&self) -> bool {
+    pub(crate) fn has_light(&self) -> bool {
         !self.lights.is_empty() || self.emitters().next().is_some()
     }
 
@@ -346,7 +365,7 @@ impl Scene {
     }
 
     /// True when triangle `t` is on the back side of a double-sided primitive.
-    pub fn is_back(&self, t: usize) -> bool {
+    pub(crate) fn is_back(&self, t: usize) -> bool {
         self.instances[self.triangles[t].instance].side == Side::Back
     }
 
@@ -357,14 +376,14 @@ impl Scene {
 
     /// The polygon on the other side of polygon `p` of a double-sided surface (the polygon of
     /// its first triangle's twin), if any.
-    pub fn twin_polygon(&self, p: usize) -> Option<usize> {
+    pub(crate) fn twin_polygon(&self, p: usize) -> Option<usize> {
         self.twin_triangle(*self.polygons[p].triangles.first()?)
             .and_then(|t| self.triangles[t].polygon)
     }
 
     /// Appends an instance's triangles and groups them into polygons. `positions_world` and
     /// `indices` describe a triangle list; `material` indexes [`Scene::materials`].
-    pub fn add_instance(&mut self, mut instance: Instance, material: usize) {
+    pub(crate) fn add_instance(&mut self, mut instance: Instance, material: usize) {
         let id = self.instances.len();
         instance.first_triangle = self.triangles.len();
         let first = self.triangles.len();
@@ -422,7 +441,7 @@ impl Scene {
                 edges.entry((a.min(b), a.max(b))).or_default().push(t);
             }
         }
-        let tol = 1e-6 * self.extent().max(1e-12);
+        let tol = tolerance::INPUT * self.extent().max(1e-12);
         let mut assigned = vec![false; range.len()];
         let mut new_polygons = Vec::new();
         for seed in range.clone() {

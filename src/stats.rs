@@ -1,11 +1,13 @@
 //! Run statistics (`--stats FILE`): per-stage wall times and the counts of every stage.
 //! Field names are stable; later stages add fields.
 
+use crate::atlas::Atlas;
+use crate::mesh::{self, ReceiverMesh};
+use crate::progress::Progress;
+use crate::scene::{Scene, Side};
+use crate::solve::{Solution, SolveOptions};
 use serde::Serialize;
 use std::time::Instant;
-
-/// Progress callback: `(stage, done, total)`. Called from worker threads.
-pub type Progress<'a> = dyn Fn(&str, u64, u64) + Sync + 'a;
 
 /// Wall time of each stage, seconds, in pipeline order. The atlas packs on a thread of its own
 /// while the discontinuity, mesh and solve stages run (xatlas packs on one core), so the
@@ -43,7 +45,7 @@ pub struct Stats {
     /// The element budget the meshers aimed at, and what chose it (`--budget`, `lightmap texels`,
     /// `input triangles`, `geometry`, `minimum` or `maximum`; see `bake::element_budget`).
     pub budget: usize,
-    pub budget_from: String,
+    pub(crate) budget_from: String,
     pub elements: usize,
     pub vertices: usize,
     /// Discontinuity meshing counters (only with `--mesher discontinuity`).
@@ -58,15 +60,91 @@ pub struct Stats {
     /// Number of lightmap pages (images).
     pub lightmap_pages: u32,
     /// Transfer curve of the 8-bit lightmap images: `srgb` or `linear`.
-    pub lightmap_encoding: String,
+    pub(crate) lightmap_encoding: String,
     pub texels_per_unit: f32,
     /// `MOZ_lightmap` intensity: H (W/m²) of a full-scale texel.
-    pub lightmap_intensity: f64,
+    pub(crate) lightmap_intensity: f64,
     /// Seam edges, samples, stitched texels, and the seam mismatch before and after
     /// stitching (`lightmap::seams`).
     pub seams: crate::lightmap::seams::SeamStats,
     pub timings_s: Timings,
     pub warnings: Vec<String>,
+}
+
+impl Stats {
+    /// The counts of a finished bake (scene, meshes, solve, atlas) and its warnings: the
+    /// scene's, a mesh over its budget, the solve's, no light anywhere, an unconverged solve.
+    /// The fields set before the stages (input, options, budget, cut, timings) stay.
+    pub fn gather(
+        &mut self,
+        scene: &Scene,
+        meshes: &[ReceiverMesh],
+        solution: &Solution,
+        atlas: &Atlas,
+        options: &SolveOptions,
+    ) {
+        self.triangles = scene.triangles.len() + self.cut.triangles_cut - self.cut.pieces;
+        self.polygons = scene.polygons.len();
+        self.instances = scene.instances.len();
+        let backs = scene.instances.iter().filter(|i| i.side == Side::Back);
+        self.double_sided.back_instances = backs.clone().count();
+        self.double_sided.back_triangles = backs.map(|i| i.indices.len() / 3).sum();
+        self.area_emitters = scene.emitters().count();
+        self.punctual_lights = scene.lights.len();
+        self.elements = mesh::element_count(meshes);
+        self.vertices = meshes.iter().map(|m| m.vertices.len()).sum();
+        self.solve = solution.stats.clone();
+        self.lightmap_width = atlas.width;
+        self.lightmap_height = atlas.height;
+        self.lightmap_pages = atlas.pages;
+        self.texels_per_unit = atlas.texels_per_unit;
+        self.warnings = scene.warnings.clone();
+        let most = (self.budget as f64 * (1.0 + mesh::BUDGET_SLACK)) as usize;
+        if self.elements > most {
+            self.warnings.push(format!(
+                "the mesh has {} elements, over the budget of {} (+{}%): the outlines and \
+                 contact lines alone need that many; raise --budget",
+                self.elements,
+                self.budget,
+                mesh::BUDGET_SLACK * 100.0
+            ));
+        }
+        self.warnings
+            .extend(solution.stats.warnings.iter().cloned());
+        let sky = options.sky.max_element() > 0.0;
+        if !scene.has_light() && !sky {
+            self.warnings.push(
+                "the scene has no emitters (no emissive material, no KHR_lights_punctual \
+                 light) and no --sky: the lightmap is black"
+                    .into(),
+            );
+        } else if solution
+            .irradiance
+            .iter()
+            .flatten()
+            .all(|h| h.max_element() <= 0.0)
+        {
+            self.warnings.push(format!(
+                "no surface receives any light (every emitter faces away from the receivers, or \
+                 is blocked{}): the lightmap is black",
+                if sky {
+                    ", and every surface is closed off from the sky"
+                } else {
+                    ""
+                }
+            ));
+        }
+        self.converged =
+            options.bounces.is_some() || self.solve.unshot_fraction <= options.tolerance;
+        if !self.converged {
+            self.warnings.push(format!(
+                "the indirect solve stopped on its shot limit with {:.1}% of the reflected power \
+                 not yet distributed (the tolerance is {}%): the indirect light is too dark",
+                100.0 * self.solve.unshot_fraction,
+                100.0 * options.tolerance
+            ));
+        }
+    }
 }
 
 /// Measures the wall time of one stage into `slot` and reports its start and end as progress.

@@ -51,7 +51,8 @@ pub struct Visibility {
 /// Hits within this many [`Visibility::epsilon`] of each other are a tie, which the face
 /// facing the ray wins (see [`Visibility::first_hit`]). Coincident triangles are met at
 /// distances that differ by the f32 rounding of the intersection, about 1e-7 of the scene's
-/// extent; epsilon is 1e-5 of it, so the window is 1e-6 of the extent.
+/// extent; epsilon is [`crate::scene::tolerance::RAY`] = 1e-5 of it, so the window is 1e-6 of
+/// the extent.
 pub const TIE: f64 = 0.1;
 
 /// Slanted rays of [`Visibility::buried`], besides the one along the normal.
@@ -115,12 +116,12 @@ impl Visibility {
             ids,
             polygons,
             center,
-            eps: 1e-5 * scene.extent(),
+            eps: crate::scene::tolerance::RAY * scene.extent(),
         }
     }
 
     /// The distance used to keep rays off the surfaces they start and end on (scene units):
-    /// 1e-5 of the scene's bounding-box diagonal.
+    /// [`crate::scene::tolerance::RAY`] of the scene's bounding-box diagonal.
     pub fn epsilon(&self) -> f64 {
         self.eps
     }
@@ -339,7 +340,8 @@ impl Visibility {
     }
 
     /// Brute force [`Visibility::triangles_overlapping`] (for tests).
-    pub fn triangles_overlapping_brute_force(&self, min: DVec3, max: DVec3) -> Vec<usize> {
+    #[cfg(test)]
+    pub(crate) fn triangles_overlapping_brute_force(&self, min: DVec3, max: DVec3) -> Vec<usize> {
         let pad = DVec3::splat(self.eps);
         let query = Aabb::new(
             Vec3A::from((min - self.center - pad).as_vec3()),
@@ -357,7 +359,13 @@ impl Visibility {
     }
 
     /// Brute force closest hit over all triangles (for tests).
-    pub fn first_hit_brute_force(&self, origin: DVec3, dir: DVec3, tmax: f64) -> Option<Hit> {
+    #[cfg(test)]
+    pub(crate) fn first_hit_brute_force(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        tmax: f64,
+    ) -> Option<Hit> {
         let ray = self.ray(origin, dir, self.eps, tmax);
         let d = Vec3A::from(dir.as_vec3());
         let mut best: Option<(f64, usize)> = None;
@@ -438,7 +446,7 @@ pub struct RecordedRay {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayCounts {
     /// Indexed like [`Query::ALL`].
-    pub by_query: [u64; 4],
+    pub(crate) by_query: [u64; 4],
 }
 
 impl RayCounts {
@@ -562,26 +570,20 @@ mod tests {
     use super::*;
     use crate::scene::{Instance, Material};
 
-    /// A small deterministic generator (SplitMix64) for test inputs.
-    pub(crate) struct SplitMix(pub u64);
-    impl SplitMix {
-        pub fn next_f64(&mut self) -> f64 {
-            self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-            let mut z = self.0;
-            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-            ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
-        }
-        pub fn vec(&mut self, lo: f64, hi: f64) -> DVec3 {
-            DVec3::new(
-                lo + (hi - lo) * self.next_f64(),
-                lo + (hi - lo) * self.next_f64(),
-                lo + (hi - lo) * self.next_f64(),
-            )
+    use crate::rng::SplitMix64;
+
+    /// A point uniform in the cube `[lo, hi)³`.
+    trait RandomVec {
+        fn vec(&mut self, lo: f64, hi: f64) -> DVec3;
+    }
+
+    impl RandomVec for SplitMix64 {
+        fn vec(&mut self, lo: f64, hi: f64) -> DVec3 {
+            DVec3::new(self.range(lo, hi), self.range(lo, hi), self.range(lo, hi))
         }
     }
 
-    fn random_scene(rng: &mut SplitMix, n: usize, offset: DVec3) -> Scene {
+    fn random_scene(rng: &mut SplitMix64, n: usize, offset: DVec3) -> Scene {
         let mut scene = Scene::default();
         scene.materials.push(Material {
             name: "m".into(),
@@ -599,7 +601,7 @@ mod tests {
     #[test]
     fn bvh_agrees_with_brute_force_on_random_rays() {
         for offset in [DVec3::ZERO, DVec3::new(1e4, -3e4, 2e4)] {
-            let mut rng = SplitMix(7);
+            let mut rng = SplitMix64(7);
             let scene = random_scene(&mut rng, 300, offset);
             let vis = Visibility::new(&scene);
             let mut hits = 0;
@@ -629,7 +631,7 @@ mod tests {
 
     #[test]
     fn box_query_agrees_with_brute_force() {
-        let mut rng = SplitMix(3);
+        let mut rng = SplitMix64(3);
         let scene = random_scene(&mut rng, 400, DVec3::new(50.0, 0.0, -20.0));
         let vis = Visibility::new(&scene);
         let mut total = 0;
@@ -646,7 +648,7 @@ mod tests {
 
     #[test]
     fn recording_keeps_answers_and_the_rays_as_cast() {
-        let mut rng = SplitMix(11);
+        let mut rng = SplitMix64(11);
         let offset = DVec3::new(300.0, 20.0, -40.0);
         let scene = random_scene(&mut rng, 200, offset);
         let vis = Visibility::new(&scene);
@@ -744,7 +746,7 @@ mod tests {
 
     #[test]
     fn of_two_coincident_sides_the_ray_meets_the_one_facing_it() {
-        let mut rng = SplitMix(5);
+        let mut rng = SplitMix64(5);
         for back_first in [false, true] {
             let scene = back_to_back(back_first);
             let vis = Visibility::new(&scene);
@@ -779,7 +781,7 @@ mod tests {
     #[test]
     fn near_origin_hits_are_found() {
         // A ray starting just above a plate must hit it when pointed at it: the CWBVH trap.
-        let mut rng = SplitMix(1);
+        let mut rng = SplitMix64(1);
         let scene = random_scene(&mut rng, 50, DVec3::ZERO);
         let vis = Visibility::new(&scene);
         for t in &scene.triangles {

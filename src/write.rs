@@ -26,7 +26,9 @@
 //! attributes, remapped through the atlas's vertex cross-reference. A mesh placed by several
 //! nodes is copied so that each placement has its own lightmap space. The bytes are built here;
 //! [`crate::files`] writes them (temporary file, then rename), so a failure never leaves a half
-//! file.
+//! file. [`binding`] reads the lightmap binding back from a written file.
+
+pub mod binding;
 
 use crate::atlas::{Atlas, AtlasMesh};
 use crate::error::{Error, Result};
@@ -39,7 +41,7 @@ use std::collections::BTreeMap;
 /// The lightmap as it goes into the file.
 pub struct LightmapImage {
     /// PNG bytes (8-bit RGB in `encoding`), one per atlas page, in page order.
-    pub pngs: Vec<Vec<u8>>,
+    pub(crate) pngs: Vec<Vec<u8>>,
     /// `MOZ_lightmap` intensity, W/m²: irradiance H = decoded texel value (0..1) x intensity.
     pub intensity: f64,
     /// Transfer curve of the PNGs' 8-bit values.
@@ -429,7 +431,7 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     if !used.iter().any(|e| e == "MOZ_lightmap") {
         used.push(json!("MOZ_lightmap"));
     }
-    Ok(to_glb(&root, bin.data))
+    to_glb(&root, bin.data)
 }
 
 /// The pages a mesh's triangles lie on, ascending.
@@ -777,8 +779,18 @@ fn retarget_tex_coord(v: &mut Value, from: u64, to: u32) {
     }
 }
 
-/// Assembles a GLB container: JSON chunk padded with spaces, BIN chunk padded with zeros.
-pub fn to_glb(root: &Value, mut bin: Vec<u8>) -> Vec<u8> {
+/// glb magic `glTF`, as a little-endian word.
+pub(crate) const GLB_MAGIC: u32 = 0x4654_6C67;
+/// glb chunk type `JSON`.
+pub(crate) const CHUNK_JSON: u32 = 0x4E4F_534A;
+/// glb chunk type `BIN\0`.
+pub(crate) const CHUNK_BIN: u32 = 0x004E_4942;
+
+/// Assembles a glb container (glTF 2.0, binary): the 12-byte header (magic, version 2, total
+/// length), the JSON chunk padded with spaces to a multiple of 4 bytes, then, unless `bin` is
+/// empty, the BIN chunk padded with zeros to a multiple of 4 bytes. An error when the whole is
+/// over 4 GiB, the most the header's 32-bit length can say.
+pub fn to_glb(root: &Value, mut bin: Vec<u8>) -> Result<Vec<u8>> {
     let mut json = serde_json::to_vec(root).expect("a serde_json::Value always serializes");
     while !json.len().is_multiple_of(4) {
         json.push(b' ');
@@ -786,24 +798,44 @@ pub fn to_glb(root: &Value, mut bin: Vec<u8>) -> Vec<u8> {
     while !bin.len().is_multiple_of(4) {
         bin.push(0);
     }
-    let total = 12 + 8 + json.len() + if bin.is_empty() { 0 } else { 8 + bin.len() };
-    let mut out = Vec::with_capacity(total);
-    out.extend_from_slice(b"glTF");
-    out.extend_from_slice(&2u32.to_le_bytes());
-    out.extend_from_slice(&(total as u32).to_le_bytes());
-    out.extend_from_slice(&(json.len() as u32).to_le_bytes());
-    out.extend_from_slice(b"JSON");
+    let total = glb_length(json.len(), bin.len())?;
+    let mut out = Vec::with_capacity(total as usize);
+    // The chunk lengths fit: each is below the total.
+    for word in [GLB_MAGIC, 2, total, json.len() as u32, CHUNK_JSON] {
+        out.extend_from_slice(&word.to_le_bytes());
+    }
     out.extend_from_slice(&json);
     if !bin.is_empty() {
         out.extend_from_slice(&(bin.len() as u32).to_le_bytes());
-        out.extend_from_slice(b"BIN\0");
+        out.extend_from_slice(&CHUNK_BIN.to_le_bytes());
         out.extend_from_slice(&bin);
     }
-    out
+    Ok(out)
+}
+
+/// The total length of a glb with padded chunks of `json` and `bin` bytes (no BIN chunk when
+/// `bin` is 0): header 12, chunk headers 8 each. An error when it does not fit the header's
+/// 32 bits.
+fn glb_length(json: usize, bin: usize) -> Result<u32> {
+    let bin_chunk = if bin == 0 {
+        Some(0)
+    } else {
+        bin.checked_add(8)
+    };
+    bin_chunk
+        .and_then(|b| json.checked_add(12 + 8)?.checked_add(b))
+        .and_then(|total| u32::try_from(total).ok())
+        .ok_or_else(|| Error::Output {
+            what: "glb",
+            reason: format!(
+                "{json} bytes of JSON and {bin} of binary data are more than the 4 GiB a glb \
+                 can hold (its header counts the length in 32 bits)"
+            ),
+        })
 }
 
 /// Encodes 8-bit RGB as PNG.
-pub fn png_bytes(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
+pub(crate) fn png_bytes(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
     use image::ImageEncoder;
     let mut png = Vec::new();
     image::codecs::png::PngEncoder::new(&mut png)
@@ -822,4 +854,50 @@ pub fn exr_bytes(texels: &[glam::DVec3], width: u32, height: u32) -> Result<Vec<
         .write_to(&mut bytes, image::ImageFormat::OpenExr)
         .map_err(|e| Error::Image(format!("EXR encoding failed: {e}")))?;
     Ok(bytes.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn glb_has_its_header_and_padded_chunks() {
+        let glb = to_glb(&json!({"asset": {"version": "2.0"}}), vec![1, 2, 3]).unwrap();
+        let word = |at: usize| u32::from_le_bytes(glb[at..at + 4].try_into().unwrap());
+        assert_eq!(&glb[0..4], b"glTF");
+        assert_eq!(
+            (word(0), word(4), word(8) as usize),
+            (GLB_MAGIC, 2, glb.len())
+        );
+        let json_len = word(12) as usize;
+        assert!(json_len.is_multiple_of(4));
+        assert_eq!(word(16), CHUNK_JSON);
+        let bin_at = 20 + json_len;
+        assert_eq!((word(bin_at), word(bin_at + 4)), (4, CHUNK_BIN));
+        assert_eq!(&glb[bin_at + 8..], &[1, 2, 3, 0]);
+        // No BIN chunk without binary data.
+        let glb = to_glb(&json!({}), Vec::new()).unwrap();
+        assert_eq!((glb.len(), &glb[20..]), (24, &b"{}  "[..]));
+    }
+
+    #[test]
+    fn glb_length_counts_the_headers_and_refuses_what_32_bits_cannot_say() {
+        assert_eq!(glb_length(8, 0).unwrap(), 28);
+        assert_eq!(glb_length(8, 4).unwrap(), 40);
+        // The largest glb: 12 + 8 + json + 8 + bin = u32::MAX.
+        let json = u32::MAX as usize - 12 - 8 - 8 - 4;
+        assert_eq!(glb_length(json, 4).unwrap(), u32::MAX);
+        assert_eq!(glb_length(u32::MAX as usize - 20, 0).unwrap(), u32::MAX);
+        let over = [
+            (json + 1, 4),
+            (u32::MAX as usize - 19, 0),
+            (4, u32::MAX as usize),
+            (usize::MAX - 4, 4),
+            (4, usize::MAX),
+        ];
+        for (json, bin) in over {
+            let e = glb_length(json, bin).unwrap_err().to_string();
+            assert!(e.contains("4 GiB"), "{json} + {bin}: {e}");
+        }
+    }
 }

@@ -87,7 +87,7 @@ impl Sums {
 }
 
 /// The surface class of each covered texel of `layout` (`None`: uncovered), see the module docs.
-pub fn surface_classes(layout: &TexelLayout) -> Vec<Option<&'static str>> {
+pub(crate) fn surface_classes(layout: &TexelLayout) -> Vec<Option<&'static str>> {
     let means: Vec<Option<(DVec3, DVec3)>> = layout
         .samples
         .iter()

@@ -11,7 +11,7 @@ pub struct Series {
     pub label: String,
     pub colour: (u8, u8, u8),
     /// Dashed (e.g. sampled direct light) rather than solid.
-    pub dashed: bool,
+    pub(crate) dashed: bool,
     /// (x, y) points, both positive (log axes); others are skipped.
     pub points: Vec<(f64, f64)>,
 }
@@ -20,9 +20,9 @@ pub struct Series {
 #[derive(Clone, Debug)]
 pub struct Panel {
     pub title: String,
-    pub x_label: String,
-    pub y_label: String,
-    pub series: Vec<Series>,
+    pub(crate) x_label: String,
+    pub(crate) y_label: String,
+    pub(crate) series: Vec<Series>,
     /// A horizontal reference line (e.g. the reference's own noise), with its legend label.
     pub floor: Option<(f64, String)>,
 }

@@ -3,19 +3,19 @@
 //! Sans, bundled by the `dejavu` crate, so PNGs draw the same on any machine).
 
 use super::Region;
+use crate::color::{linear_to_srgb, srgb_to_linear};
 use crate::error::{Error, Result};
 use crate::geometry::barycentric_2d;
 use crate::lightmap::{self, Lightmap, Locator};
 use crate::mesh::ReceiverMesh;
 use crate::reference::ReferenceMap;
-use crate::render::linear_to_srgb;
 use crate::scene::{Polygon, point_in_triangle};
 use glam::{DVec2, DVec3};
 use image::RgbImage;
 use plotters::prelude::*;
 
 /// Registers the bundled font as plotters' "sans-serif" (once per process).
-pub fn register_font() -> Result<()> {
+pub(crate) fn register_font() -> Result<()> {
     static DONE: std::sync::OnceLock<bool> = std::sync::OnceLock::new();
     let ok = *DONE.get_or_init(|| {
         plotters::style::register_font("sans-serif", FontStyle::Normal, dejavu::sans::regular())
@@ -30,14 +30,6 @@ pub fn register_font() -> Result<()> {
     }
 }
 
-fn srgb_to_linear(c: f64) -> f64 {
-    if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
 fn linear(rgb: [u8; 3]) -> DVec3 {
     DVec3::from(rgb.map(|c| srgb_to_linear(c as f64 / 255.0)))
 }
@@ -47,7 +39,7 @@ pub const ERROR_RANGE: f64 = 0.25;
 
 /// The diverging colour of a signed relative error: white at 0, red where the bake is too
 /// bright, blue where it is too dark, saturated at ±[`ERROR_RANGE`]. Linear RGB.
-pub fn error_colour(e: f64) -> DVec3 {
+pub(crate) fn error_colour(e: f64) -> DVec3 {
     let t = (e / ERROR_RANGE).clamp(-1.0, 1.0);
     let end = if t >= 0.0 {
         linear([178, 24, 43])
@@ -58,7 +50,7 @@ pub fn error_colour(e: f64) -> DVec3 {
 }
 
 /// The colour of each region in the region map and its legend (sRGB).
-pub fn region_colour(r: Region) -> [u8; 3] {
+pub(crate) fn region_colour(r: Region) -> [u8; 3] {
     match r {
         Region::Lit => [250, 230, 160],
         Region::Penumbra => [240, 140, 40],
@@ -70,7 +62,7 @@ pub fn region_colour(r: Region) -> [u8; 3] {
 
 /// Per texel the false colour of `(bake - reference) / scale` (channel means), dilated over the
 /// whole image so bilinear lookups at chart edges stay in colour.
-pub fn error_map(bake: &Lightmap, reference: &ReferenceMap, scale: f64) -> Lightmap {
+pub(crate) fn error_map(bake: &Lightmap, reference: &ReferenceMap, scale: f64) -> Lightmap {
     let texels = (0..reference.mean.len())
         .map(|i| {
             if reference.coverage[i] > 0.0 {
@@ -85,7 +77,7 @@ pub fn error_map(bake: &Lightmap, reference: &ReferenceMap, scale: f64) -> Light
 }
 
 /// Per texel the colour of its region.
-pub fn region_map(reference: &ReferenceMap, regions: &[Option<Region>]) -> Lightmap {
+pub(crate) fn region_map(reference: &ReferenceMap, regions: &[Option<Region>]) -> Lightmap {
     let texels = regions
         .iter()
         .map(|r| r.map_or(DVec3::ZERO, |r| linear(region_colour(r))))
@@ -94,7 +86,7 @@ pub fn region_map(reference: &ReferenceMap, regions: &[Option<Region>]) -> Light
 }
 
 /// The reference irradiance as a float lightmap, dilated like a baked one.
-pub fn reference_lightmap(reference: &ReferenceMap) -> Lightmap {
+pub(crate) fn reference_lightmap(reference: &ReferenceMap) -> Lightmap {
     filled(reference, reference.mean.clone())
 }
 
@@ -137,7 +129,7 @@ impl Window {
 /// texels (umbra if there is no penumbra), a square of 40% of the polygon's larger side, placed
 /// over as many of that polygon's penumbra texels as it can hold. `texels[i]` is texel `i`'s
 /// polygon and plane point. `None` when nothing is shadowed.
-pub fn shadow_window(
+pub(crate) fn shadow_window(
     polygons: &[Polygon],
     texels: &[Option<(usize, DVec2)>],
     regions: &[Option<Region>],
@@ -210,7 +202,7 @@ const OUTSIDE: [u8; 3] = [235, 235, 240];
 
 /// A close-up of `window` (`s x s` pixels) shaded by `value(q)` (irradiance at plane point q),
 /// greyscale with `white` as full white; points outside the polygon are light grey.
-pub fn closeup(
+pub(crate) fn closeup(
     polygon: &Polygon,
     window: &Window,
     s: u32,
@@ -238,7 +230,7 @@ pub fn closeup(
 
 /// [`closeup`] of a receiver mesh's own interpolant, with its wireframe drawn over it: edges
 /// dark and thin, discontinuity constraints orange.
-pub fn mesh_closeup(
+pub(crate) fn mesh_closeup(
     polygon: &Polygon,
     window: &Window,
     s: u32,
@@ -293,7 +285,7 @@ pub fn mesh_closeup(
 
 /// Point location in a polygon's input triangles: the triangle (index into
 /// `polygon.triangles`) containing plane point `q`, with its barycentrics.
-pub fn locate(polygon: &Polygon, q: DVec2) -> Option<(usize, [f64; 3])> {
+pub(crate) fn locate(polygon: &Polygon, q: DVec2) -> Option<(usize, [f64; 3])> {
     polygon
         .triangles_plane
         .iter()
@@ -305,7 +297,7 @@ pub fn locate(polygon: &Polygon, q: DVec2) -> Option<(usize, [f64; 3])> {
 /// row the same size).
 pub struct Column {
     pub title: String,
-    pub caption: Vec<String>,
+    pub(crate) caption: Vec<String>,
     pub cells: Vec<RgbImage>,
 }
 

@@ -135,7 +135,7 @@ impl Encoding {
     /// Linear value (0..1) to encoded value (0..1).
     pub fn encode(self, v: f64) -> f64 {
         match self {
-            Encoding::Srgb => crate::render::linear_to_srgb(v),
+            Encoding::Srgb => crate::color::linear_to_srgb(v),
             Encoding::Linear => v,
         }
     }
@@ -143,7 +143,7 @@ impl Encoding {
     /// Encoded value (0..1, i.e. code / 255) to linear value (0..1).
     pub fn decode(self, e: f64) -> f64 {
         match self {
-            Encoding::Srgb => crate::render::srgb_to_linear(e),
+            Encoding::Srgb => crate::color::srgb_to_linear(e),
             Encoding::Linear => e,
         }
     }
@@ -193,7 +193,7 @@ impl<'a> Locator<'a> {
     /// [`Locator::value`], trying the triangle `hint` first and leaving in it the triangle that
     /// held `q`: neighbouring queries (the sub-samples of a texel, then of the next) mostly fall
     /// in the same triangle, and skip the search.
-    pub fn value_near(&self, q: DVec2, hint: &mut Option<u32>) -> DVec3 {
+    pub(crate) fn value_near(&self, q: DVec2, hint: &mut Option<u32>) -> DVec3 {
         if self.mesh.triangles.is_empty() {
             return DVec3::ZERO;
         }
@@ -267,7 +267,7 @@ impl<'a> Locator<'a> {
 /// (about one test per texel); only a texel whose corners disagree (a
 /// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
 /// that touches none of its corners is missed (its sub-samples count as visible).
-pub fn rasterize(
+pub(crate) fn rasterize(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],
@@ -374,7 +374,7 @@ pub fn rasterize(
                 // sub-samples; one whose corners differ (a contact line crosses it) tests every
                 // sub-sample.
                 let mut hint = None;
-                let same = 1e-9 * scene.extent();
+                let same = crate::scene::tolerance::COINCIDENT * scene.extent();
                 let mut corner_buried = |cx: usize, cy: usize| {
                     let p = world(DVec2::new(cx as f64, cy as f64));
                     let c = &mut corner[(cy - y_lo) * cw + cx];
@@ -451,7 +451,7 @@ pub fn rasterize(
 }
 
 /// [`dilate_page`] on every page of `map`, each on its own, from the covered texels.
-pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
+pub(crate) fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
     let filled = map.coverage.iter().map(|&c| c > 0.0).collect();
     dilate_from(map, filled, rings);
 }
@@ -459,7 +459,7 @@ pub fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
 /// Dilation on every page of `map`, each on its own, from the texels marked in `filled` (same
 /// layout as the texels): the others are filled, ring by ring outward, with the mean of their
 /// already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole page).
-pub fn dilate_from(map: &mut Lightmap, mut filled: Vec<bool>, rings: u32) {
+pub(crate) fn dilate_from(map: &mut Lightmap, mut filled: Vec<bool>, rings: u32) {
     let n = map.width as usize * map.height as usize;
     if n == 0 {
         return;

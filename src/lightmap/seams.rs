@@ -314,9 +314,9 @@ pub struct Stitched {
     /// The texels that were unknowns (in some footprint), sorted.
     pub texels: Vec<usize>,
     /// Connected groups solved.
-    pub groups: usize,
+    pub(crate) groups: usize,
     /// Most conjugate-gradient iterations any group took.
-    pub iterations: usize,
+    pub(crate) iterations: usize,
 }
 
 /// Least-squares stitching of `texels` along `samples` (module documentation).
@@ -518,9 +518,9 @@ pub struct SeamStats {
     pub samples: usize,
     /// Texels in the samples' footprints (the unknowns), and their connected groups.
     pub texels: usize,
-    pub groups: usize,
+    pub(crate) groups: usize,
     /// Most conjugate-gradient iterations a group took.
-    pub iterations: usize,
+    pub(crate) iterations: usize,
     /// Mean and largest seam mismatch before stitching, relative to the mean covered texel.
     pub mismatch_mean_before: f64,
     pub mismatch_max_before: f64,
@@ -537,7 +537,7 @@ pub struct SeamStats {
 /// `stitch` is set, stitches them and re-dilates the padding from the covered and the
 /// stitched texels, so that the padding and every mipmap level agree with the stitched
 /// values.
-pub fn stitch_seams(
+pub(crate) fn stitch_seams(
     map: &mut Lightmap,
     scene: &Scene,
     vis: &Visibility,
@@ -593,10 +593,8 @@ mod tests {
 
     /// A deterministic value in [0, 1) for `i` (SplitMix64's finaliser).
     fn noise(i: u64) -> f64 {
-        let mut z = i.wrapping_add(1).wrapping_mul(0x9E37_79B9_7F4A_7C15);
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64
+        use crate::rng::{GAMMA, mix64, unit_f64};
+        unit_f64(mix64(i.wrapping_add(1).wrapping_mul(GAMMA)))
     }
 
     #[test]

@@ -75,7 +75,7 @@ const PIXEL_BYTES: u64 = 12;
 pub const IMAGES_TOGETHER: u64 = 8;
 
 /// Bytes a decoded `width` x `height` image is counted as against [`Limits::image_bytes`].
-pub fn decoded_bytes(width: u32, height: u32) -> u64 {
+pub(crate) fn decoded_bytes(width: u32, height: u32) -> u64 {
     u64::from(width) * u64::from(height) * PIXEL_BYTES
 }
 

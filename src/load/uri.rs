@@ -176,7 +176,7 @@ pub(crate) fn kind_of(meta: &std::fs::Metadata) -> &'static str {
 
 /// Opens `path` for reading without blocking on a FIFO, and checks through the handle that it is
 /// a regular file (it may have been replaced since it was looked at).
-pub fn open_regular(path: &Path) -> Result<std::fs::File, Refusal> {
+pub(crate) fn open_regular(path: &Path) -> Result<std::fs::File, Refusal> {
     let mut options = std::fs::OpenOptions::new();
     options.read(true);
     #[cfg(unix)]
@@ -202,7 +202,7 @@ pub fn open_regular(path: &Path) -> Result<std::fs::File, Refusal> {
 
 /// Reads at most `limit` bytes from `reader`; more is refused (naming `option`, which raises
 /// the limit), without reading past `limit + 1` bytes.
-pub fn read_limited(
+pub(crate) fn read_limited(
     reader: impl Read,
     limit: u64,
     option: &str,
@@ -224,7 +224,7 @@ pub fn read_limited(
 }
 
 /// A size for messages: `2048 MiB`, or `300 bytes` below a mebibyte.
-pub fn size_text(bytes: u64) -> String {
+pub(crate) fn size_text(bytes: u64) -> String {
     if bytes >= super::limits::MIB {
         format!("{} MiB", bytes / super::limits::MIB)
     } else {

@@ -19,7 +19,7 @@ use serde_json::Value;
 /// A problem found: the item's JSON path, and what is wrong with it.
 pub struct Invalid {
     pub item: String,
-    pub reason: String,
+    pub(crate) reason: String,
 }
 
 /// Top-level arrays whose elements are objects.

@@ -29,7 +29,7 @@ pub struct Cut {
     /// Triangles the split ones became.
     pub pieces: usize,
     /// Vertices added.
-    pub vertices_added: usize,
+    pub(crate) vertices_added: usize,
 }
 
 /// Splits every triangle edge of the scene longer than `max_edge` (scene units) by conforming
@@ -37,7 +37,7 @@ pub struct Cut {
 /// between `max_edge / 2` and `max_edge` long. A scene with no edge that long is left untouched
 /// (same triangles, same order). Degenerate triangles are split like any other when a
 /// neighbour's edge asks for it.
-pub fn cut_long_edges(scene: &mut Scene, max_edge: f64) -> Cut {
+pub(crate) fn cut_long_edges(scene: &mut Scene, max_edge: f64) -> Cut {
     let mut cut = Cut::default();
     if !(max_edge > 0.0 && max_edge.is_finite()) {
         return cut;
@@ -97,7 +97,7 @@ pub fn cut_long_edges(scene: &mut Scene, max_edge: f64) -> Cut {
 /// About how many triangles [`cut_long_edges`] makes of the triangles it cuts: their area over
 /// that of a piece (bisection leaves pieces with edges of `max_edge / 2` to `max_edge`, of
 /// area at least about `max_edge² / 8`). Cheap: to refuse a cut before making it.
-pub fn estimate_pieces(scene: &Scene, max_edge: f64) -> usize {
+pub(crate) fn estimate_pieces(scene: &Scene, max_edge: f64) -> usize {
     let piece = max_edge * max_edge / 8.0;
     scene
         .triangles

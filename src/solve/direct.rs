@@ -182,7 +182,7 @@ impl<'a> Direct<'a> {
 
     /// Leaves the area emitters out: the direct light is then the punctual lights' alone (the
     /// hemicube form factors carry the area emitters, [`super::form_factors`]).
-    pub fn drop_area_emitters(&mut self) {
+    pub(crate) fn drop_area_emitters(&mut self) {
         self.emitters.clear();
         self.per_emitter.clear();
         self.tree = LightTree::default();
@@ -601,7 +601,8 @@ impl ClusterTree {
             one_normal &= points[i].n == n0;
         }
         let extent = (hi - lo).max_element();
-        let flat = hi.z - lo.z <= 1e-9 * extent;
+        // Flat to rounding, relative to the points' own extent.
+        let flat = hi.z - lo.z <= crate::scene::tolerance::COINCIDENT * extent;
         let corners = (0..if flat { 4 } else { 8 })
             .map(|k| {
                 let x = if k & 1 == 0 { lo.x } else { hi.x };
@@ -702,7 +703,7 @@ pub fn direct_light(
     vis: &Visibility,
     direct: &Direct<'_>,
     meshes: &[ReceiverMesh],
-    progress: &crate::stats::Progress<'_>,
+    progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let done = AtomicU64::new(0);

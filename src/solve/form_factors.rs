@@ -15,7 +15,8 @@
 //! Form factors dimensionless; lengths in scene units.
 
 use super::hemicube::Hemicube;
-use super::progressive::{Patch, point_patch_form_factor};
+use super::patches::Patch;
+use crate::geometry::point_polygon_form_factor;
 use crate::light::SurfacePoint;
 use crate::visibility::Visibility;
 use glam::DVec3;
@@ -58,16 +59,85 @@ pub const RAYCAST_SAMPLES: usize = RAYCAST_SPLIT * RAYCAST_SPLIT;
 /// The culls shared by the point-to-patch factors: a planar polygon does not see itself; the
 /// receiver behind (or in the plane of) the patch; the patch entirely below the receiver's
 /// horizon.
-pub(super) fn culled(at: &SurfacePoint, patch: &Patch) -> bool {
+fn culled(at: &SurfacePoint, patch: &Patch) -> bool {
     at.polygon == patch.polygon
         || patch.normal.dot(at.p - patch.centroid) <= 1e-9 * (at.p - patch.centroid).length()
         || patch.p.iter().all(|q| at.n.dot(*q - at.p) <= 0.0)
 }
 
+/// Form factor from a receiving surface point `(p, n)` to a patch, with visibility: exact unoccluded
+/// form factor of each piece times the visibility of its centroid; pieces near `p` are split in
+/// four, up to two levels. Returns the form factor and adds the rays cast to `rays`.
+pub fn point_patch_form_factor(
+    vis: &Visibility,
+    at: &SurfacePoint,
+    patch: &Patch,
+    rays: &mut u64,
+) -> f64 {
+    let (p, n) = (at.p, at.n);
+    if culled(at, patch) {
+        return 0.0;
+    }
+    let skip = [at.polygon, patch.polygon];
+    piece_form_factor(
+        vis,
+        p,
+        at.ray_origin,
+        n,
+        skip,
+        &patch.p,
+        patch.radius,
+        0,
+        rays,
+    )
+}
+
+#[allow(clippy::too_many_arguments)]
+fn piece_form_factor(
+    vis: &Visibility,
+    p: DVec3,
+    p_ray: DVec3,
+    n: DVec3,
+    skip: [usize; 2],
+    t: &[DVec3; 3],
+    radius: f64,
+    depth: u32,
+    rays: &mut u64,
+) -> f64 {
+    let c = (t[0] + t[1] + t[2]) / 3.0;
+    if depth < 2 && c.distance(p) < 3.0 * radius {
+        let m = [
+            (t[0] + t[1]) * 0.5,
+            (t[1] + t[2]) * 0.5,
+            (t[2] + t[0]) * 0.5,
+        ];
+        let kids = [
+            [t[0], m[0], m[2]],
+            [m[0], t[1], m[1]],
+            [m[2], m[1], t[2]],
+            [m[0], m[1], m[2]],
+        ];
+        return kids
+            .iter()
+            .map(|k| piece_form_factor(vis, p, p_ray, n, skip, k, radius * 0.5, depth + 1, rays))
+            .sum();
+    }
+    let f = point_polygon_form_factor(p, n, t);
+    if f <= 0.0 {
+        return 0.0;
+    }
+    *rays += 1;
+    if vis.occluded_skipping(p_ray, c, skip) {
+        0.0
+    } else {
+        f
+    }
+}
+
 /// Ray-cast form factor from the receiving point `at` to `patch` (Wallace, Elmquist, Haines
 /// 1989, their equation for a disk of area `dA` at distance `r`): the patch split into
 /// [`RAYCAST_SAMPLES`] equal sub-triangles, each a disk at its centroid. Adds the rays cast.
-pub fn raycast_form_factor(
+pub(crate) fn raycast_form_factor(
     vis: &Visibility,
     at: &SurfacePoint,
     patch: &Patch,
@@ -125,7 +195,7 @@ pub struct HemicubeStats {
     /// Cells of one hemicube, `3 R²`.
     pub cells: usize,
     /// Sum of the delta form factors (1 in the limit).
-    pub delta_sum: f64,
+    pub(crate) delta_sum: f64,
     /// Hemicubes rendered (shooting patches, matrix rows, gathering vertices).
     pub hemicubes: u64,
 }
@@ -153,7 +223,7 @@ impl<'a> Kernel<'a> {
     }
 
     /// The hemicube's counters (`None` for the other methods).
-    pub fn hemicube_stats(&self) -> Option<HemicubeStats> {
+    pub(crate) fn hemicube_stats(&self) -> Option<HemicubeStats> {
         self.hemicube.as_ref().map(|h| HemicubeStats {
             resolution: h.resolution(),
             cells: h.cells(),
@@ -219,7 +289,7 @@ impl<'a> Kernel<'a> {
     }
 
     /// The receiving point at the centroid of patch `i`.
-    pub fn centroid_point(&self, i: usize) -> SurfacePoint {
+    pub(crate) fn centroid_point(&self, i: usize) -> SurfacePoint {
         let r = &self.patches[i];
         SurfacePoint::new(r.centroid, r.normal, r.polygon, self.vis)
     }
@@ -229,7 +299,7 @@ impl<'a> Kernel<'a> {
     /// The hemicube renders one hemicube at `i`'s centroid and uses reciprocity,
     /// `F_ji = F_ij A_i / A_j`, capped at 1 (Cohen, Chen, Wallace, Greenberg 1988); the others
     /// evaluate every receiver in parallel.
-    pub fn shoot(&self, i: usize) -> Vec<(f64, u64)> {
+    pub(crate) fn shoot(&self, i: usize) -> Vec<(f64, u64)> {
         match &self.hemicube {
             Some(hc) => {
                 let src = &self.patches[i];

@@ -108,7 +108,7 @@ impl Hemicube {
     }
 
     /// The sum of all delta form factors (1 in the limit of fine cells).
-    pub fn delta_sum(&self) -> f64 {
+    pub(crate) fn delta_sum(&self) -> f64 {
         self.delta.iter().sum()
     }
 

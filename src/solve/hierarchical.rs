@@ -2409,7 +2409,7 @@ pub fn indirect(
     direct_h: &[Vec<DVec3>],
     options: &SolveOptions,
     stats: &mut SolveStats,
-    progress: &crate::stats::Progress<'_>,
+    progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
     let mut hs = HierStats {
         tolerance: options.hr_tolerance,

@@ -43,10 +43,11 @@
 //!   representative's centre. Its error is at most its bound, below [`EPSILON`] of the total;
 //!   the point's error is at most the sum of its bounded nodes' bounds. With the cosines the
 //!   bounds are close to the contributions, so the error is of the order of [`EPSILON`]
-//!   (without them, `L A / d²` alone left it about a hundred times smaller, at many more exact
-//!   evaluations; a smaller `--light-error` buys that back).
+//!   (bounds of `L A / d²` alone, without the cosines, are looser: the error is then about a
+//!   hundred times smaller, at many more exact evaluations; a smaller `--light-error` buys the
+//!   same accuracy).
 //!
-//! With one emitter, or where every emitter matters, everything is exact as before.
+//! With one emitter, or where every emitter matters, every emitter is evaluated exactly.
 
 use crate::geometry::box_corners;
 use crate::light::{AreaEmitter, SurfacePoint};
@@ -94,7 +95,7 @@ pub struct Cut {
     /// The bounded nodes' contribution, W/m² per channel (with their shadow rays).
     pub bounded: DVec3,
     /// Bounded nodes.
-    pub bounded_nodes: u64,
+    pub(crate) bounded_nodes: u64,
     /// Shadow rays of the bounded nodes.
     pub rays: u64,
 }

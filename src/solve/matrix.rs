@@ -4,21 +4,24 @@
 //! 1984; Cohen and Greenberg, "The hemi-cube: a radiosity solution for complex environments",
 //! SIGGRAPH 1985).
 //!
-//! The patches are the coarse ones of the progressive solver ([`super::progressive::patches`]),
-//! and so are the system and the final gather at the vertices
-//! ([`super::progressive::PatchSystem`]); only the solve differs. Row `i` of `F` holds the form
+//! The patches and their system are the progressive solver's ([`super::patches`](mod@super::patches)), and so is
+//! the final gather at the vertices; only the solve differs. Row `i` of `F` holds the form
 //! factors from patch `i`'s centroid to every patch (`--form-factors`: closed form, ray cast, or
 //! one hemicube per row). The matrix is dense, `n²` f64 entries: its memory and the time to fill
 //! it grow with the square of the patch count, which is why progressive refinement and
 //! hierarchical radiosity replaced it. A bake refuses more patches than fit in
 //! `--matrix-memory` ([`check_memory`]) before any expensive stage.
 //!
+//! [`gauss_seidel`] solves the full system with closed-form form factors, apart from a bake: the
+//! progressive solver's test oracle.
+//!
 //! Irradiance `H` and radiosity `B` in W/m² per linear RGB channel; memory in bytes.
 
 use super::SolveOptions;
 use super::SolveStats;
-use super::form_factors::Kernel;
-use super::progressive::PatchSystem;
+use super::form_factors::{FormFactors, Kernel};
+use super::patches::{Patch, PatchSystem};
+use crate::visibility::Visibility;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -47,7 +50,7 @@ pub fn bytes(n: usize) -> u64 {
 }
 
 /// The most patches whose matrix fits in `limit_mib` MiB.
-pub fn max_patches(limit_mib: u64) -> usize {
+pub(crate) fn max_patches(limit_mib: u64) -> usize {
     let entries = limit_mib.saturating_mul(1 << 20) / BYTES_PER_ENTRY;
     let mut n = (entries as f64).sqrt() as u64;
     while n * n > entries {
@@ -60,7 +63,7 @@ pub fn max_patches(limit_mib: u64) -> usize {
 }
 
 /// Refuses `n` patches whose matrix exceeds `limit_mib` MiB, with the sizes and what to do.
-pub fn check_memory(n: usize, limit_mib: u64) -> Result<(), String> {
+pub(crate) fn check_memory(n: usize, limit_mib: u64) -> Result<(), String> {
     if bytes(n) <= limit_mib.saturating_mul(1 << 20) {
         return Ok(());
     }
@@ -84,13 +87,13 @@ pub struct MatrixStats {
     /// Memory of the matrix, bytes.
     pub bytes: u64,
     /// The limit it had to fit, bytes.
-    pub limit_bytes: u64,
+    pub(crate) limit_bytes: u64,
     /// Entries that are not 0.
-    pub nonzero: u64,
+    pub(crate) nonzero: u64,
     /// Time to fill the matrix, seconds.
-    pub form_factor_seconds: f64,
+    pub(crate) form_factor_seconds: f64,
     /// Time of the Gauss-Seidel (or Jacobi, with `--bounces`) iterations, seconds.
-    pub solve_seconds: f64,
+    pub(crate) solve_seconds: f64,
     pub sweeps: usize,
     /// The power changed by the last sweep, relative to the source power.
     pub last_change: f64,
@@ -170,7 +173,7 @@ pub fn solve(
             }
         }
         None => {
-            let (sweeps, change) = super::gauss_seidel::sweeps(
+            let (sweeps, change) = sweeps(
                 &f,
                 system,
                 &mut b,
@@ -195,6 +198,55 @@ pub fn solve(
         last_change,
     });
     h
+}
+
+/// Gauss-Seidel sweeps on `B = S + rho F B` (`S` the source of `system`, `F` the matrix),
+/// starting from `b` and updating it in place, until the power changed by one sweep is at most
+/// `tolerance` of the source's power, or `max_sweeps`. Returns the sweeps done and the last
+/// sweep's relative change. Sequential sums in index order: deterministic.
+pub fn sweeps(
+    f: &FormFactorMatrix,
+    system: &PatchSystem<'_>,
+    b: &mut [DVec3],
+    tolerance: f64,
+    max_sweeps: usize,
+) -> (usize, f64) {
+    let n = system.patches.len();
+    let source = system.source();
+    let scale = system.power(&source).max(f64::MIN_POSITIVE);
+    let mut change = f64::INFINITY;
+    let mut done = 0;
+    while done < max_sweeps && (change > tolerance || change.is_nan()) {
+        let mut moved = 0.0;
+        for i in 0..n {
+            let row = f.row(i);
+            let gathered: DVec3 = (0..n).map(|j| b[j] * row[j]).sum();
+            let new = source[i] + system.patches[i].rho * gathered;
+            moved += (new - b[i]).abs().element_sum() / 3.0 * system.patches[i].area;
+            b[i] = new;
+        }
+        change = moved / scale;
+        done += 1;
+    }
+    (done, change)
+}
+
+/// The full patch system with closed-form form factors, solved by `sweeps` Gauss-Seidel
+/// sweeps: returns each patch's irradiance like
+/// the progressive solver. Quadratic memory: for small scenes and
+/// tests.
+pub fn gauss_seidel(
+    vis: &Visibility,
+    patches: &[Patch],
+    direct: &[DVec3],
+    sweeps_: usize,
+) -> Vec<DVec3> {
+    let kernel = Kernel::new(vis, patches, FormFactors::ClosedForm, 0);
+    let system = PatchSystem::new(patches, direct.to_vec(), vec![DVec3::ZERO; patches.len()]);
+    let (f, _) = FormFactorMatrix::new(&kernel, patches.len());
+    let mut b = system.source();
+    sweeps(&f, &system, &mut b, 0.0, sweeps_);
+    f.irradiance(&system, &b)
 }
 
 #[cfg(test)]

@@ -23,33 +23,34 @@
 //!
 //! * **Classic radiosity** (`--solver matrix`, [`matrix`]): the same patches and final gather,
 //!   but every pair's form factor in a matrix and the system solved by Gauss-Seidel
-//!   ([`gauss_seidel`](mod@gauss_seidel)).
+//!   ([`matrix::sweeps`]).
 //! * **Form factors** of the patch solvers (`--form-factors`, [`form_factors`]): closed form
 //!   (the default), ray cast (Wallace et al. 1989), or hemicube ([`hemicube`]; Cohen and
 //!   Greenberg 1985), which also carries the area emitters' light.
 //!
 //! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
-//! indirect light: patches, progressive refinement, final gather), `matrix.rs` (classic
-//! radiosity), `gauss_seidel.rs` (its iteration, also the progressive solver's test oracle),
-//! `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`; the sky's
+//! indirect light: progressive refinement, final gather), `matrix.rs` (classic radiosity and
+//! its Gauss-Seidel iteration, also the progressive solver's test oracle), `patches.rs` (the
+//! patches and the linear system these two share), `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`; the sky's
 //! direct light in `sky.rs`. [`radiosity`] is
 //! the entry point: the direct light, then the indirect solver. The shared physics (form
 //! factors, emitters, the punctual light model) is in [`crate::geometry`] and [`crate::light`].
 
 pub mod direct;
 pub mod form_factors;
-pub mod gauss_seidel;
 pub mod hemicube;
 pub mod hierarchical;
 pub mod lightcuts;
 pub mod matrix;
+pub mod patches;
 pub mod progressive;
 pub mod sky;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
-pub use form_factors::FormFactors;
-pub use gauss_seidel::gauss_seidel;
-pub use progressive::{Patch, patches, point_patch_form_factor, progressive};
+pub use form_factors::{FormFactors, point_patch_form_factor};
+pub use matrix::gauss_seidel;
+pub use patches::{Patch, patches};
+pub use progressive::progressive;
 // The receiving point and the area emitter are shared physics; re-exported for the solver's
 // users.
 pub use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint};
@@ -148,9 +149,9 @@ pub struct SolveOptions {
     pub sky_samples: usize,
 }
 
-/// Default of [`SolveOptions::hr_tolerance`]: at 3e-5 the 20x20 box grid's indirect solve was
-/// 7.9x faster than progressive's (2.9x at 1e-5), and the furnace holds to 1e-3 at every vertex
-/// (see [`hierarchical`]).
+/// Default of [`SolveOptions::hr_tolerance`]: at 3e-5 the 20x20 box grid's indirect solve
+/// measures 7.9x faster than progressive's (2.9x at 1e-5), and the furnace holds to 1e-3 at
+/// every vertex (see [`hierarchical`]).
 pub const DEFAULT_HR_TOLERANCE: f64 = 3e-5;
 
 impl Default for SolveOptions {
@@ -194,12 +195,12 @@ pub struct SolveStats {
     /// The patch solvers' form factors (`closed-form`, `raycast`, `hemicube`).
     pub form_factors: Option<FormFactors>,
     pub patches: usize,
-    pub shots: usize,
+    pub(crate) shots: usize,
     /// Wall time of the indirect solve (patches, their solve and the final gather; or the
     /// hierarchical solve), seconds.
-    pub indirect_seconds: f64,
+    pub(crate) indirect_seconds: f64,
     /// Wall time of the patch solve alone (progressive refinement or the matrix), seconds.
-    pub patch_solve_seconds: f64,
+    pub(crate) patch_solve_seconds: f64,
     pub rays: u64,
     /// Unshot power left at the end, relative to the power first received.
     pub unshot_fraction: f64,
@@ -209,7 +210,7 @@ pub struct SolveStats {
     /// counts the elements it solves, which leaves out those buried under closed geometry (a
     /// floor under a box): on interior-20 it reads 750 W where integrating the direct light
     /// over every element gives 761 W (`examples/light_shown.rs`).
-    pub direct_power: f64,
+    pub(crate) direct_power: f64,
     /// Power absorbed by all patches, W (mean over RGB).
     pub absorbed_power: f64,
     /// The direct light at the mesh vertices.
@@ -241,9 +242,9 @@ impl SurfacePoint {
     }
 
     /// A point on or near a polygon's edge: `inward` is the unit in-plane direction into the
-    /// polygon. Form factors are evaluated `1e-6` of the scene extent inside, rays start
-    /// `4 epsilon` inside and `2 epsilon` off the surface.
-    pub fn near_edge(
+    /// polygon. Form factors are evaluated [`crate::scene::tolerance::INPUT`] of the scene
+    /// extent inside, rays start `4 epsilon` inside and `2 epsilon` off the surface.
+    pub(crate) fn near_edge(
         p: DVec3,
         n: DVec3,
         inward: DVec3,
@@ -305,7 +306,7 @@ pub fn radiosity(
     vis: &Visibility,
     meshes: &[ReceiverMesh],
     options: &SolveOptions,
-    progress: &crate::stats::Progress<'_>,
+    progress: &crate::progress::Progress<'_>,
 ) -> Solution {
     let mut direct = Direct::with_options(scene, vis, options);
     let mut stats = SolveStats {

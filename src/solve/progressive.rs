@@ -3,14 +3,15 @@
 //! then a final gather of the converged patch radiosities at every mesh vertex. The form
 //! factors are [`super::form_factors`]'s (`--form-factors`): by default the exact unoccluded
 //! point-to-patch factor with ray-cast visibility (after Wallace, Elmquist, Haines, "A ray
-//! tracing algorithm for progressive radiosity", SIGGRAPH 1989). The patches, the patch system
-//! and the final gather are shared with classic radiosity ([`super::matrix`]).
+//! tracing algorithm for progressive radiosity", SIGGRAPH 1989). The patches and the patch
+//! system ([`super::patches`](mod@super::patches)) and the final gather are shared with classic radiosity
+//! ([`super::matrix`]).
 //!
 //! Irradiance `H` and radiosity `B` in W/m² per linear RGB channel; form factors dimensionless.
 
 use super::form_factors::{FormFactors, Kernel};
+use super::patches::{Patch, PatchSystem, patches};
 use super::{SolveOptions, SolveStats, Solver, evaluation_points};
-use crate::geometry::{point_polygon_form_factor, triangle_area};
 use crate::light::SurfacePoint;
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
@@ -19,121 +20,6 @@ use crate::visibility::Visibility;
 use glam::DVec3;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicU64, Ordering};
-
-/// A coarse patch of the indirect solve: one triangle.
-#[derive(Clone, Debug)]
-pub struct Patch {
-    /// Index into [`Scene::polygons`].
-    pub polygon: usize,
-    pub p: [DVec3; 3],
-    pub normal: DVec3,
-    pub centroid: DVec3,
-    pub area: f64,
-    pub rho: DVec3,
-    /// Bounding radius around the centroid.
-    pub radius: f64,
-}
-
-impl Patch {
-    fn new(polygon: usize, p: [DVec3; 3], normal: DVec3, rho: DVec3) -> Patch {
-        let centroid = (p[0] + p[1] + p[2]) / 3.0;
-        let area = triangle_area(&p);
-        let radius = p.iter().map(|q| q.distance(centroid)).fold(0.0, f64::max);
-        Patch {
-            polygon,
-            p,
-            normal,
-            centroid,
-            area,
-            rho,
-            radius,
-        }
-    }
-}
-
-/// Builds the patches: the polygons triangulated to about `target` triangles.
-pub fn patches(scene: &Scene, target: usize) -> Vec<Patch> {
-    let meshes = crate::mesh::uniform(scene, target);
-    let mut out = Vec::new();
-    for m in &meshes {
-        let poly = &scene.polygons[m.polygon];
-        let rho = scene.materials[poly.material].rho;
-        for t in &m.triangles {
-            let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
-            out.push(Patch::new(m.polygon, p, poly.frame.n, rho));
-        }
-    }
-    out
-}
-
-/// Form factor from a receiving surface point `(p, n)` to a patch, with visibility: exact unoccluded
-/// form factor of each piece times the visibility of its centroid; pieces near `p` are split in
-/// four, up to two levels. Returns the form factor and adds the rays cast to `rays`.
-pub fn point_patch_form_factor(
-    vis: &Visibility,
-    at: &SurfacePoint,
-    patch: &Patch,
-    rays: &mut u64,
-) -> f64 {
-    let (p, n) = (at.p, at.n);
-    if super::form_factors::culled(at, patch) {
-        return 0.0;
-    }
-    let skip = [at.polygon, patch.polygon];
-    piece_form_factor(
-        vis,
-        p,
-        at.ray_origin,
-        n,
-        skip,
-        &patch.p,
-        patch.radius,
-        0,
-        rays,
-    )
-}
-
-#[allow(clippy::too_many_arguments)]
-fn piece_form_factor(
-    vis: &Visibility,
-    p: DVec3,
-    p_ray: DVec3,
-    n: DVec3,
-    skip: [usize; 2],
-    t: &[DVec3; 3],
-    radius: f64,
-    depth: u32,
-    rays: &mut u64,
-) -> f64 {
-    let c = (t[0] + t[1] + t[2]) / 3.0;
-    if depth < 2 && c.distance(p) < 3.0 * radius {
-        let m = [
-            (t[0] + t[1]) * 0.5,
-            (t[1] + t[2]) * 0.5,
-            (t[2] + t[0]) * 0.5,
-        ];
-        let kids = [
-            [t[0], m[0], m[2]],
-            [m[0], t[1], m[1]],
-            [m[2], m[1], t[2]],
-            [m[0], m[1], m[2]],
-        ];
-        return kids
-            .iter()
-            .map(|k| piece_form_factor(vis, p, p_ray, n, skip, k, radius * 0.5, depth + 1, rays))
-            .sum();
-    }
-    let f = point_polygon_form_factor(p, n, t);
-    if f <= 0.0 {
-        return 0.0;
-    }
-    *rays += 1;
-    if vis.occluded_skipping(p_ray, c, skip) {
-        0.0
-    } else {
-        f
-    }
-}
 
 /// Progressive refinement over patches with closed-form form factors: returns the irradiance
 /// of each patch, direct plus indirect. `direct[i]` is the direct irradiance of patch `i`.
@@ -148,54 +34,6 @@ pub fn progressive(
     let kernel = Kernel::new(vis, patches, FormFactors::ClosedForm, 0);
     let system = PatchSystem::new(patches, direct.to_vec(), vec![DVec3::ZERO; patches.len()]);
     refine(&kernel, &system, bounces, tolerance, stats)
-}
-
-/// The linear system of the patch solvers: `B_i = M_i + rho_i H_i`, `H_i = D_i + sum_j F_ij B_j`
-/// (Goral, Torrance, Greenberg, Battaile 1984), with `F_ij` the form factor from patch `i`'s
-/// centroid to patch `j`. W/m² per linear RGB channel.
-pub struct PatchSystem<'a> {
-    pub patches: &'a [Patch],
-    /// `D`: the irradiance the form factors do not carry (the direct light computed apart: all
-    /// of it, or with hemicube form factors only the punctual lights').
-    pub direct: Vec<DVec3>,
-    /// `M`: the emitted radiosity carried by the form factors (with hemicube form factors the
-    /// area emitters', `pi L`; otherwise 0).
-    pub emission: Vec<DVec3>,
-}
-
-impl<'a> PatchSystem<'a> {
-    pub fn new(patches: &'a [Patch], direct: Vec<DVec3>, emission: Vec<DVec3>) -> Self {
-        PatchSystem {
-            patches,
-            direct,
-            emission,
-        }
-    }
-
-    /// The source of the system, `S_i = M_i + rho_i D_i`: `B = S + rho F B`.
-    pub fn source(&self) -> Vec<DVec3> {
-        self.patches
-            .iter()
-            .zip(&self.direct)
-            .zip(&self.emission)
-            .map(|((p, d), m)| *m + p.rho * *d)
-            .collect()
-    }
-
-    /// True when the form factors carry emitted light, whose first transfer is then the direct
-    /// light rather than a bounce.
-    pub fn emits(&self) -> bool {
-        self.emission.iter().any(|m| m.max_element() > 0.0)
-    }
-
-    /// Power of a radiosity (or irradiance) per patch, W (mean over RGB).
-    pub fn power(&self, b: &[DVec3]) -> f64 {
-        self.patches
-            .iter()
-            .zip(b)
-            .map(|(p, b)| b.element_sum() / 3.0 * p.area)
-            .sum()
-    }
 }
 
 /// Progressive refinement of `system` (Cohen, Chen, Wallace, Greenberg 1988): the patch with
@@ -299,7 +137,7 @@ pub fn indirect(
     direct_h: &mut [Vec<DVec3>],
     options: &SolveOptions,
     stats: &mut SolveStats,
-    progress: &crate::stats::Progress<'_>,
+    progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let patches = patches(scene, options.patches);

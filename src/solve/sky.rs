@@ -35,6 +35,7 @@
 use crate::error::Error;
 use crate::geometry::box_corners;
 use crate::light::{SurfacePoint, radical_inverse2};
+use crate::rng::{GAMMA, unit_f64};
 use crate::scene::Scene;
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
@@ -155,7 +156,12 @@ impl Sky {
 
     /// Adds the sky's irradiance `pi L_sky V` (W/m²) of each of `points` to `h`; counts the
     /// points, rays and time.
-    pub fn add_irradiance(&self, vis: &Visibility, points: &[SurfacePoint], h: &mut [DVec3]) {
+    pub(crate) fn add_irradiance(
+        &self,
+        vis: &Visibility,
+        points: &[SurfacePoint],
+        h: &mut [DVec3],
+    ) {
         let start = Instant::now();
         let (mut open, mut rays) = (0, 0);
         for (at, h) in points.iter().zip(h) {
@@ -194,7 +200,7 @@ impl Sky {
 /// Shirley and Chiu's concentric map from the unit square to the unit disk (JGT 1997): the
 /// square's concentric squares go to concentric circles, so strata stay compact and areas keep
 /// their proportions (uniform in, uniform out).
-pub fn concentric_disk(u: DVec2) -> DVec2 {
+pub(crate) fn concentric_disk(u: DVec2) -> DVec2 {
     let a = 2.0 * u.x - 1.0;
     let b = 2.0 * u.y - 1.0;
     if a == 0.0 && b == 0.0 {
@@ -221,12 +227,11 @@ fn point_shift(p: DVec3) -> DVec2 {
     let h = fmix(
         p.x.to_bits() ^ fmix(p.y.to_bits() ^ fmix(p.z.to_bits()).rotate_left(17)).rotate_left(31),
     );
-    let unit = |bits: u64| (bits >> 11) as f64 / (1u64 << 53) as f64;
-    DVec2::new(unit(h), unit(fmix(h ^ 0x9E37_79B9_7F4A_7C15)))
+    DVec2::new(unit_f64(h), unit_f64(fmix(h ^ GAMMA)))
 }
 
 /// Checks a sky radiance: three finite, non-negative numbers. The reason when not.
-pub fn check_radiance(radiance: DVec3) -> Result<(), String> {
+pub(crate) fn check_radiance(radiance: DVec3) -> Result<(), String> {
     if radiance.is_finite() && radiance.min_element() >= 0.0 {
         Ok(())
     } else {

@@ -86,7 +86,7 @@ pub fn expect_failure(name: &str, input_bytes: Option<&[u8]>, needles: &[&str]) 
 pub fn edit(bytes: &[u8], f: impl FnOnce(&mut Value, &mut Vec<u8>)) -> Vec<u8> {
     let (mut json, mut bin) = split_glb(bytes);
     f(&mut json, &mut bin);
-    penumbra::write::to_glb(&json, bin)
+    penumbra::write::to_glb(&json, bin).unwrap()
 }
 
 #[test]

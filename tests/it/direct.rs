@@ -273,8 +273,8 @@ fn brute_force(
         let mut sum = 0.0;
         for i in 0..grid {
             for j in 0..grid {
-                let s = (i as f64 + rng.next()) / grid as f64;
-                let t = (j as f64 + rng.next()) / grid as f64;
+                let s = (i as f64 + rng.next_f64()) / grid as f64;
+                let t = (j as f64 + rng.next_f64()) / grid as f64;
                 let y = a + e1 * s + e2 * t;
                 let d = y - p;
                 let r2 = d.length_squared();
@@ -302,7 +302,7 @@ fn random_convex(rng: &mut Rng, c: DVec3, n: DVec3, radius: f64, k: usize) -> Ve
     let v = n.cross(u);
     let pts: Vec<DVec2> = (0..k)
         .map(|_| {
-            let r = radius * rng.next().sqrt();
+            let r = radius * rng.next_f64().sqrt();
             let a = rng.range(0.0, 2.0 * PI);
             DVec2::new(r * a.cos(), r * a.sin())
         })
@@ -348,12 +348,12 @@ fn random_occluders_agree_with_brute_force() {
         );
         // A normal that sometimes puts part of the emitter below the horizon.
         let n = (DVec3::Y + rng.unit() * rng.range(0.0, 1.2)).normalize();
-        let count = 1 + (rng.next() * 4.0) as usize;
+        let count = 1 + (rng.next_f64() * 4.0) as usize;
         let occluders: Vec<Vec<DVec3>> = (0..count)
             .map(|_| {
-                let y = a + e1 * rng.next() + e2 * rng.next();
+                let y = a + e1 * rng.next_f64() + e2 * rng.next_f64();
                 let c = p + (y - p) * rng.range(0.2, 0.8);
-                let k = 3 + (rng.next() * 6.0) as usize;
+                let k = 3 + (rng.next_f64() * 6.0) as usize;
                 let (normal, radius) = (rng.unit(), rng.range(0.1, 0.5));
                 random_convex(&mut rng, c, normal, radius, k)
             })

@@ -40,7 +40,7 @@ fn mirrored_shelf() -> Vec<u8> {
             node["scale"] = serde_json::json!([-1.0, 1.0, 1.0]);
         }
     }
-    penumbra::write::to_glb(&root, g.buffers[0].clone())
+    penumbra::write::to_glb(&root, g.buffers[0].clone()).unwrap()
 }
 
 /// Bakes `bytes` to a scratch file and reads the output back.
@@ -146,40 +146,36 @@ fn sides_against_reference(baked: &Bake, gltf: &Gltf, spp: u32) -> SideMeans {
 /// of the bake and of the reference agree within
 ///
 /// * 4 standard errors of the reference's mean (its noise: a false alarm below one in ten
-///   thousand per side),
-/// * plus 3% of it: the bake's own error at this small budget (3000 elements; the irradiance
-///   is linear over each element, the indirect light comes over coarse links),
-/// * plus 0.1% of the brightest side's (the shelf's back, `pi L F` = 3.43 W/m²): the
-///   hierarchical solver refines its links by the power they carry, so a side lit only by dim
-///   bounce light gets coarse links. The wall's back (0.017 W/m², from the floor behind the
-///   wall, itself in the wall's shadow) is measured 13% (0.0021 W/m²) above the reference,
-///   and so is the same wall built as two one-sided quads back to back (12.5%): the error is
-///   the solver's, not the double-sided handling's.
+///   thousand per side; 1024 paths per texel keep it under the allowance below),
+/// * plus 4% of it: the bake's own error at this small budget (2000 elements; the irradiance
+///   is linear over each element, the indirect light comes over coarse links). Measured, bake
+///   vs reference (W/m²): shelf front 0.1934 vs 0.1958 (-1.2%), back 3.461 vs 3.480 (-0.5%);
+///   wall front 0.6631 vs 0.6652 (-0.3%), back 0.01677 vs 0.01647 (+1.8%, the largest: lit
+///   only by bounce light, from the floor behind the wall); ramp front 0.0602 vs 0.0596
+///   (+0.9%), back 1.053 vs 1.062 (-0.9%). 4% is about twice the largest.
 ///
-/// Measured (bake vs reference, W/m²): shelf front 0.190 vs 0.196, back 3.462 vs 3.466
-/// (closed form 3.478); wall front 0.661 vs 0.666, back 0.0187 vs 0.0166; ramp front 0.0602 vs
-/// 0.0606, back 1.052 vs 1.061. A lost back side (0) fails on every back.
+/// A lost back side (0) fails on every back, and so does a back that shows its front's value
+/// (the wall's front gets 40 times its back).
 ///
 /// And the backs really are lit: the shelf's back, facing the light, gets exactly `pi L F`
-/// (it sees the light and nothing else), about 8 times what its front (facing the floor, in
-/// its own shadow) gets: a one-sided shelf would lose it all, and the shared lightmap would show
-/// the front's value there.
+/// (it sees the light and nothing else; the bake is 0.5% under it), about 18 times what its
+/// front (facing the floor, in its own shadow) gets: a one-sided shelf would lose it all, and
+/// the shared lightmap would show the front's value there.
 #[test]
 fn both_sides_of_every_panel_match_the_reference() {
     let (baked, gltf) = bake_panels(DoubleSided::Separate, "reference");
-    let sides = sides_against_reference(&baked, &gltf, 64);
+    let sides = sides_against_reference(&baked, &gltf, 1024);
     for (name, bake, reference, se, n) in &sides {
         eprintln!(
-            "{name}: bake {bake:.4} reference {reference:.4} +- {se:.4} W/m² over {n} texels \
+            "{name}: bake {bake:.5} reference {reference:.5} +- {se:.5} W/m² over {n} texels \
              ({:+.2}%)",
             100.0 * (bake / reference - 1.0)
         );
     }
-    let brightest = sides.iter().map(|s| s.2).fold(0.0, f64::max);
     for (name, bake, reference, se, n) in &sides {
         assert!(*n >= 20, "{name}: only {n} texels");
         // The reference's noise stays below the bake's allowance, so the test resolves it.
-        let allowance = 0.03 * reference + 1e-3 * brightest;
+        let allowance = 0.04 * reference;
         assert!(
             4.0 * se < allowance,
             "{name}: the reference is too noisy: {se}"
@@ -203,7 +199,8 @@ fn both_sides_of_every_panel_match_the_reference() {
         (reference - exact).abs() < 4.0 * se,
         "{reference} vs {exact}"
     );
-    assert!((back / exact - 1.0).abs() < 0.02, "{back} vs {exact}");
+    // Measured 0.5% under: the bake's error, within 1%.
+    assert!((back / exact - 1.0).abs() < 0.01, "{back} vs {exact}");
     let front = value("shelf front").1;
     assert!(
         front > 0.0 && back / front > 4.0,
@@ -477,7 +474,7 @@ fn one_sided_panels() -> Vec<u8> {
     for m in root["materials"].as_array_mut().unwrap() {
         m.as_object_mut().unwrap().remove("doubleSided");
     }
-    penumbra::write::to_glb(&root, g.buffers[0].clone())
+    penumbra::write::to_glb(&root, g.buffers[0].clone()).unwrap()
 }
 
 /// The discontinuity stage is not fooled by the two sides back to back: the same wedges (the
@@ -651,7 +648,7 @@ fn under_a_double_sided_box_the_floor_is_not_buried() {
     for m in root["materials"].as_array_mut().unwrap() {
         m["doubleSided"] = Value::Bool(true);
     }
-    let double = penumbra::write::to_glb(&root, g.buffers[0].clone());
+    let double = penumbra::write::to_glb(&root, g.buffers[0].clone()).unwrap();
     let under = DVec3::new(0.1, 0.0, 0.2);
     for (bytes, buried) in [(fixtures::box_on_floor(), true), (double, false)] {
         let scene = load::scene(&crate::parse(&bytes, "box.glb")).unwrap();

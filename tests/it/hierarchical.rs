@@ -160,9 +160,17 @@ fn mean_luminance(b: &Bake) -> (f64, f64) {
     (all / n as f64, ind / n as f64)
 }
 
-/// Cornell box: the mean vertex irradiance of the hierarchical and the progressive solver agree
-/// (the progressive solver's final gather at every vertex is within 0.2% of the Monte Carlo
-/// reference's mean in the lit region at the default budget).
+/// Cornell box: the hierarchical and the progressive solver give the same lightmap, texel by
+/// texel, and the same mean light (the progressive solver's final gather at every vertex is
+/// within 0.2% of the Monte Carlo reference's mean in the lit region at the default budget).
+///
+/// Both bakes share the mesh, the atlas and the direct light (the stages before the solve), so
+/// their texels differ by the indirect light alone. Over the fully covered texels (the lightmap
+/// varies by 72% of its mean across them), measured: the RMS difference is 2.9% of the mean
+/// texel, and on the texels brighter than the mean the largest relative difference is 6.0%
+/// (the progressive solver's 256 patches are coarse: 3.0% with 1024). The tolerances are twice
+/// these. Vertices are not compared one by one: on a contact line (a box on the floor, the
+/// light on the ceiling) the light is discontinuous and each solver's vertex takes one side.
 #[test]
 fn hierarchical_agrees_with_progressive_on_cornell_box() {
     let bytes = fixtures::cornell_box();
@@ -170,6 +178,37 @@ fn hierarchical_agrees_with_progressive_on_cornell_box() {
     progressive.solve.solver = Solver::Progressive;
     let p = bake(&bytes, &progressive);
     let h = bake(&bytes, &hierarchical(quick()));
+    for (a, b) in p.meshes.iter().zip(&h.meshes) {
+        assert!(a.vertices == b.vertices, "the two bakes mesh alike");
+    }
+    assert!(
+        p.solution.direct == h.solution.direct,
+        "the same direct light"
+    );
+    let (lp, lh) = (&p.lightmap, &h.lightmap);
+    assert_eq!(lp.texels.len(), lh.texels.len(), "the same atlas");
+    let texels: Vec<(f64, f64)> = (0..lp.texels.len())
+        .filter(|&i| lp.coverage[i] >= 1.0)
+        .map(|i| (luminance(lp.texels[i]), luminance(lh.texels[i])))
+        .collect();
+    let n = texels.len() as f64;
+    let mean = texels.iter().map(|t| t.0).sum::<f64>() / n;
+    let rms = (texels.iter().map(|t| (t.1 - t.0).powi(2)).sum::<f64>() / n).sqrt() / mean;
+    let lit_max = texels
+        .iter()
+        .filter(|t| t.0 > mean)
+        .map(|t| (t.1 / t.0 - 1.0).abs())
+        .fold(0.0, f64::max);
+    eprintln!(
+        "{n} texels: RMS difference {:.2}% of the mean, largest on the lit ones {:.2}%",
+        100.0 * rms,
+        100.0 * lit_max
+    );
+    assert!(rms < 0.06, "RMS difference {rms} of the mean texel");
+    assert!(
+        lit_max < 0.12,
+        "largest difference on a lit texel {lit_max}"
+    );
     let (ap, ip) = mean_luminance(&p);
     let (ah, ih) = mean_luminance(&h);
     assert!(
@@ -181,7 +220,7 @@ fn hierarchical_agrees_with_progressive_on_cornell_box() {
         ah / ap,
         ih / ip
     );
-    // Measured: 0.988 and 0.975; without the source radiosity gradients 0.982 and 0.961.
+    // Measured: 0.989 and 0.975.
     assert!(
         (ah / ap - 1.0).abs() < 0.015,
         "mean H: hierarchical {ah} vs progressive {ap}"

@@ -12,7 +12,7 @@ fn edit(bytes: &[u8], f: impl FnOnce(&mut Value, &mut Vec<u8>)) -> Vec<u8> {
     if let Some(b) = json["buffers"].get_mut(0) {
         b["byteLength"] = json!(bin.len());
     }
-    penumbra::write::to_glb(&json, bin)
+    penumbra::write::to_glb(&json, bin).unwrap()
 }
 
 /// Appends `data` to the binary chunk as a new buffer view; returns its index.
@@ -194,7 +194,7 @@ fn base_color_texture_mean_scales_the_reflectance() {
         json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"] = json!({"index": 0});
     });
     let scene = penumbra::load::scene(&parse(&input, "textured.glb")).unwrap();
-    let expected = 0.5 * (1.0 + penumbra::load::srgb_to_linear(128.0 / 255.0)) / 2.0;
+    let expected = 0.5 * (1.0 + penumbra::color::srgb_to_linear(128.0 / 255.0)) / 2.0;
     assert!(
         (scene.materials[0].rho.x - expected).abs() < 1e-6,
         "{} vs {expected}",

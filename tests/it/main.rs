@@ -22,7 +22,7 @@ mod stability;
 mod untrusted;
 
 use penumbra::load::{self, Gltf};
-use penumbra::stats::Progress;
+use penumbra::progress::Progress;
 use penumbra::{Bake, BakeOptions};
 use std::path::{Path, PathBuf};
 
@@ -59,31 +59,17 @@ pub fn quick() -> BakeOptions {
     o
 }
 
-/// SplitMix64 (Steele, Lea, Flood 2014): a small, fixed random stream for tests.
-pub struct Rng(pub u64);
+/// A small, fixed random stream for tests: penumbra's SplitMix64.
+pub use penumbra::rng::SplitMix64 as Rng;
 
-impl Rng {
-    pub fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1). (Not an `Iterator`: the stream never ends and yields `f64`.)
-    #[allow(clippy::should_implement_trait)]
-    pub fn next(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    /// Uniform in [lo, hi).
-    pub fn range(&mut self, lo: f64, hi: f64) -> f64 {
-        lo + (hi - lo) * self.next()
-    }
-
+/// The draws tests need beyond [`Rng`]'s own.
+pub trait Below {
     /// Uniform in 0..n (0 when n is 0).
-    pub fn below(&mut self, n: usize) -> usize {
+    fn below(&mut self, n: usize) -> usize;
+}
+
+impl Below for Rng {
+    fn below(&mut self, n: usize) -> usize {
         (self.next_u64() % n.max(1) as u64) as usize
     }
 }

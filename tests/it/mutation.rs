@@ -16,8 +16,8 @@
 //! files, and a folder beside it a file with a random marker: the marker must never be in the
 //! output or the messages. `PENUMBRA_MUTANT_CLASSES=untrusted` makes every mutant one of them.
 
-use crate::Rng;
 use crate::output::split_glb;
+use crate::{Below, Rng};
 use penumbra::fixtures;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
@@ -404,7 +404,10 @@ fn mutant(i: usize, bases: &[(&str, Vec<u8>)], outside: &Path) -> (Vec<u8>, Stri
         for _ in 0..[1, 1, 1, 2][rng.below(4)] {
             what.push(mutate_untrusted(&mut rng, &mut json, &mut bin, outside));
         }
-        return (penumbra::write::to_glb(&json, bin), what.join("; "));
+        return (
+            penumbra::write::to_glb(&json, bin).unwrap(),
+            what.join("; "),
+        );
     }
     if rng.below(10) == 0 {
         // Raw damage to the file: bit flips or a cut.
@@ -426,7 +429,10 @@ fn mutant(i: usize, bases: &[(&str, Vec<u8>)], outside: &Path) -> (Vec<u8>, Stri
     for _ in 0..[1, 1, 1, 2, 2, 3][rng.below(6)] {
         what.push(mutate(&mut rng, &mut json, &mut bin));
     }
-    (penumbra::write::to_glb(&json, bin), what.join("; "))
+    (
+        penumbra::write::to_glb(&json, bin).unwrap(),
+        what.join("; "),
+    )
 }
 
 /// The folder beside a worker's folder that holds the marker file, and the marker.

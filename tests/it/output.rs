@@ -514,3 +514,87 @@ fn an_atlas_too_large_fails_before_the_solve_naming_file_and_density() {
     }
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// `glb` with every lightmapped primitive's lightmap UVs moved from `TEXCOORD_1` to
+/// `TEXCOORD_<set>` and `MOZ_lightmap.texCoord` saying so; `TEXCOORD_1` then holds a decoy, all
+/// UVs zero. With `point_at_decoy`, `texCoord` stays 1 (so readers get the decoy).
+fn lightmap_uvs_moved_to(glb: &[u8], set: u32, point_at_decoy: bool) -> Vec<u8> {
+    let (mut json, mut bin) = split_glb(glb);
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let lightmapped = |json: &Value, m: &Value| {
+        m.as_u64().is_some_and(|m| {
+            json["materials"][m as usize]["extensions"]["MOZ_lightmap"].is_object()
+        })
+    };
+    let meshes = json["meshes"].as_array().unwrap().len();
+    let mut moved = 0;
+    for mesh in 0..meshes {
+        let prims = json["meshes"][mesh]["primitives"].as_array().unwrap().len();
+        for p in 0..prims {
+            let prim = json["meshes"][mesh]["primitives"][p].clone();
+            if !lightmapped(&json, &prim["material"]) {
+                continue;
+            }
+            let uv = prim["attributes"]["TEXCOORD_1"].clone();
+            let count = json["accessors"][uv.as_u64().unwrap() as usize]["count"]
+                .as_u64()
+                .unwrap();
+            let offset = bin.len();
+            bin.extend(std::iter::repeat_n(0u8, count as usize * 8));
+            let views = json["bufferViews"].as_array_mut().unwrap();
+            views.push(
+                serde_json::json!({"buffer": 0, "byteOffset": offset, "byteLength": count * 8}),
+            );
+            let view = views.len() - 1;
+            let accessors = json["accessors"].as_array_mut().unwrap();
+            accessors.push(serde_json::json!({
+                "bufferView": view, "componentType": 5126, "count": count, "type": "VEC2"
+            }));
+            let decoy = accessors.len() - 1;
+            let attributes = &mut json["meshes"][mesh]["primitives"][p]["attributes"];
+            attributes[format!("TEXCOORD_{set}")] = uv;
+            attributes["TEXCOORD_1"] = decoy.into();
+            moved += 1;
+        }
+    }
+    assert!(moved > 0);
+    for m in json["materials"].as_array_mut().unwrap() {
+        if let Some(moz) = m["extensions"].get_mut("MOZ_lightmap") {
+            moz["texCoord"] = if point_at_decoy { 1 } else { set }.into();
+        }
+    }
+    json["buffers"][0]["byteLength"] = bin.len().into();
+    penumbra::write::to_glb(&json, bin).unwrap()
+}
+
+/// `penumbra render` and the reference's texel layout read the lightmap UVs from the set that
+/// `MOZ_lightmap.texCoord` names, whichever it is.
+#[test]
+fn render_and_reference_read_the_uv_set_moz_lightmap_names() {
+    let dir = scratch("moz-texcoord");
+    let baked = bake_to_file(&fixtures::box_on_floor(), &dir, 2);
+    let read = |glb: &[u8]| {
+        let g = penumbra::load::from_bytes(glb.to_vec(), Path::new("baked.glb")).unwrap();
+        let scene = penumbra::load::scene(&g).unwrap();
+        let vis = penumbra::visibility::Visibility::new(&scene);
+        let camera = penumbra::render::Camera::auto(&scene);
+        let shading = penumbra::render::Shading::Lightmap;
+        let picture = penumbra::render::render_radiance(&g, Some(camera), 32, 32, shading).unwrap();
+        let layout = penumbra::reference::texel_layout(&g, &scene, &vis, 2).unwrap();
+        (picture, layout.samples)
+    };
+    let expected = read(&baked);
+    for set in [0, 2] {
+        let moved = read(&lightmap_uvs_moved_to(&baked, set, false));
+        assert!(
+            moved == expected,
+            "texCoord {set}: not the same picture and texel layout"
+        );
+    }
+    // The decoy set differs: a reader of TEXCOORD_1 would not pass the check above.
+    let decoy = read(&lightmap_uvs_moved_to(&baked, 2, true));
+    assert!(decoy.0 != expected.0 && decoy.1 != expected.1);
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -128,7 +128,7 @@ fn check(name: &str, b: &Bake, rms: f64, max: f64) -> ShadowErrors {
 fn edit(bytes: &[u8], f: impl FnOnce(&mut Value)) -> Vec<u8> {
     let (mut json, bin) = split_glb(bytes);
     f(&mut json);
-    penumbra::write::to_glb(&json, bin)
+    penumbra::write::to_glb(&json, bin).unwrap()
 }
 
 /// Puts the whole scene under one root node with the given TRS.

@@ -1,0 +1,109 @@
+//! The lightmap binding of a baked glb, read back as a client reads it: the UV set that
+//! `MOZ_lightmap.texCoord` names, the texture of `MOZ_lightmap.index` with its page and
+//! encoding (from the texture's `extras.penumbra`), and `MOZ_lightmap.intensity`.
+//! [`crate::render`] and [`crate::reference`] read baked files through it.
+
+use crate::error::{Error, Result};
+use crate::lightmap::Encoding;
+use crate::load::Gltf;
+use crate::scene::Instance;
+use glam::DVec2;
+use gltf::accessor::Dimensions;
+
+/// How one primitive samples its lightmap.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Binding {
+    /// The UV set, `TEXCOORD_<tex_coord>` (`MOZ_lightmap.texCoord`; 1 when absent, the set
+    /// lightmaps conventionally use and the one the writer fills).
+    pub(crate) tex_coord: u32,
+    /// That set's UV per glTF vertex, normalized.
+    pub uv: Vec<DVec2>,
+    /// The lightmap texture (`MOZ_lightmap.index`).
+    pub texture: usize,
+    /// Irradiance H (W/m²) of a full-scale texel (`MOZ_lightmap.intensity`, 1 when absent).
+    pub intensity: f64,
+}
+
+/// The lightmap binding of a scene instance's primitive: `None` when its material has no
+/// `MOZ_lightmap`; an error when the primitive lacks the UV set the extension names.
+pub(crate) fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
+    let Some(moz) = inst
+        .gltf_material
+        .and_then(|m| gltf.json["materials"][m]["extensions"]["MOZ_lightmap"].as_object())
+    else {
+        return Ok(None);
+    };
+    let item = format!("mesh {} primitive {}", inst.mesh, inst.primitive);
+    let prim = gltf
+        .document
+        .meshes()
+        .nth(inst.mesh)
+        .and_then(|m| m.primitives().nth(inst.primitive))
+        .ok_or_else(|| bad(gltf, item.clone(), "missing primitive".into()))?;
+    let tex_coord = u32::try_from(moz.get("texCoord").and_then(|v| v.as_u64()).unwrap_or(1))
+        .map_err(|_| {
+            bad(
+                gltf,
+                item.clone(),
+                "MOZ_lightmap.texCoord is too large".into(),
+            )
+        })?;
+    let acc = prim
+        .get(&gltf::Semantic::TexCoords(tex_coord))
+        .ok_or_else(|| {
+            let reason = format!("MOZ_lightmap names TEXCOORD_{tex_coord}, which it does not have");
+            bad(gltf, item.clone(), reason)
+        })?;
+    let uv = gltf
+        .read_floats(&acc, Dimensions::Vec2)?
+        .chunks_exact(2)
+        .map(|c| DVec2::new(c[0], c[1]))
+        .collect();
+    Ok(Some(Binding {
+        tex_coord,
+        uv,
+        texture: moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
+        intensity: moz.get("intensity").and_then(|v| v.as_f64()).unwrap_or(1.0),
+    }))
+}
+
+/// The encoding of a lightmap texture, from its `extras.penumbra.encoding` (absent: linear, the
+/// plain reading of 8-bit values). An unknown name is an error.
+pub(crate) fn texture_encoding(gltf: &Gltf, texture: usize) -> Result<Encoding> {
+    match gltf.json["textures"][texture]["extras"]["penumbra"]["encoding"].as_str() {
+        None => Ok(Encoding::Linear),
+        Some(name) => Encoding::from_name(name).ok_or_else(|| {
+            let reason =
+                format!("extras.penumbra.encoding {name:?} is neither \"srgb\" nor \"linear\"");
+            bad(gltf, format!("texture {texture}"), reason)
+        }),
+    }
+}
+
+/// The page of a lightmap texture, from its `extras.penumbra.page` (absent: 0).
+pub(crate) fn texture_page(gltf: &Gltf, texture: usize) -> usize {
+    gltf.json["textures"][texture]["extras"]["penumbra"]["page"]
+        .as_u64()
+        .unwrap_or(0) as usize
+}
+
+/// The encoded image bytes of a texture's source (embedded or a file beside the glTF).
+pub(crate) fn texture_bytes(gltf: &Gltf, texture: usize) -> Result<Vec<u8>> {
+    let tex = gltf
+        .document
+        .textures()
+        .nth(texture)
+        .ok_or_else(|| bad(gltf, format!("texture {texture}"), "does not exist".into()))?;
+    Ok(match tex.source().source() {
+        gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, "lightmap")?.to_vec(),
+        gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, "lightmap")?,
+    })
+}
+
+fn bad(gltf: &Gltf, item: String, reason: String) -> Error {
+    Error::BadItem {
+        path: gltf.path.clone(),
+        item,
+        reason,
+    }
+}
