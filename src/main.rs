@@ -279,9 +279,15 @@ struct RenderArgs {
     /// Image height in pixels [default: same as width].
     #[arg(long)]
     height: Option<u32>,
-    /// Radiance (W/(m² sr)) shown as white [default: automatic].
+    /// Radiance (W/(m² sr)) shown as white [default: automatic]. Give the same value to
+    /// pictures that are compared.
     #[arg(long)]
     exposure: Option<f64>,
+    /// Light the surfaces with this float lightmap instead of the file's own: a bake's `--exr`
+    /// or a `penumbra reference` of it (irradiance, W/m², in the file's lightmap layout; further
+    /// pages beside it as the bake names them).
+    #[arg(long, value_name = "EXR")]
+    irradiance: Option<PathBuf>,
     #[command(flatten)]
     input_args: InputArgs,
 }
@@ -689,7 +695,20 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         "--width must be between 1 and 16384"
     );
     let height = args.height.unwrap_or(args.width).clamp(1, 16384);
-    let img = penumbra::render::render(&gltf, camera, args.width, height, args.exposure)?;
+    let img = match &args.irradiance {
+        Some(exr) => {
+            let map = penumbra::render::read_irradiance(exr)?;
+            penumbra::render::render_irradiance(
+                &gltf,
+                camera,
+                args.width,
+                height,
+                args.exposure,
+                &map,
+            )?
+        }
+        None => penumbra::render::render(&gltf, camera, args.width, height, args.exposure)?,
+    };
     let mut png = std::io::Cursor::new(Vec::new());
     img.write_to(&mut png, image::ImageFormat::Png)?;
     let out = check_outputs(&gltf, &[("--out", &args.out)])?;

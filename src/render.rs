@@ -155,6 +155,44 @@ pub fn render(
     Ok(tone_map(&radiance, width, height, scale))
 }
 
+/// [`render`] with the surfaces lit by `map` (irradiance, W/m², in the file's lightmap layout)
+/// instead of the file's own lightmap: a float lightmap or a reference, shown as a client would.
+pub fn render_irradiance(
+    gltf: &Gltf,
+    camera: Option<Camera>,
+    width: u32,
+    height: u32,
+    exposure: Option<f64>,
+    map: &Lightmap,
+) -> Result<image::RgbImage> {
+    let radiance = render_radiance(gltf, camera, width, height, Shading::Irradiance(map))?;
+    let scale = exposure.unwrap_or_else(|| auto_exposure(&radiance));
+    Ok(tone_map(&radiance, width, height, scale))
+}
+
+/// Reads a float lightmap (OpenEXR, linear RGB): `path` is page 0, and the pages after it are
+/// read from beside it while they exist ([`crate::bake::exr_page_path`]), each the size of the
+/// first.
+pub fn read_irradiance(path: &std::path::Path) -> Result<Lightmap> {
+    let first = image::open(path).map_err(|e| Error::BadItem {
+        path: path.to_path_buf(),
+        item: "lightmap".into(),
+        reason: format!("cannot read it as OpenEXR: {e}"),
+    })?;
+    let (width, height) = (first.width(), first.height());
+    let mut pages = 1;
+    while crate::bake::exr_page_path(path, pages).is_file() {
+        pages += 1;
+    }
+    let texels = crate::compare::accuracy::read_lightmap(path, width, height * pages, pages)?;
+    Ok(Lightmap {
+        width,
+        height,
+        texels,
+        coverage: Vec::new(),
+    })
+}
+
 /// Per pixel (row-major, top row first) the radiance the camera sees (or the false colour,
 /// for [`Shading::Colour`]), linear RGB.
 pub fn render_radiance(
