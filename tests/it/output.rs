@@ -376,6 +376,51 @@ fn charts_that_do_not_fit_one_page_go_onto_more_pages() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// `penumbra render --irradiance`: the float lightmap of a paged bake, read back from its EXR
+/// pages, draws the picture the file's 8-bit pages draw (within their quantisation); a map of
+/// zeros draws the surfaces black.
+#[test]
+fn render_draws_a_float_lightmap_in_the_files_layout() {
+    let dir = scratch("irradiance");
+    let input = fixtures::box_on_floor();
+    let inp = dir.join("in.glb");
+    std::fs::write(&inp, &input).unwrap();
+    let files = penumbra::OutputFiles {
+        glb: dir.join("out.glb"),
+        exr: Some(dir.join("out.exr")),
+        stats: None,
+    };
+    let b = penumbra::bake_file(&inp, &files, &paged(128), no_progress()).expect("bake");
+    assert!(b.atlas.pages > 1);
+    let map = penumbra::render::read_irradiance(&dir.join("out.exr")).unwrap();
+    assert_eq!(map.pages(), b.atlas.pages as usize, "every page read");
+    let glb = std::fs::read(&files.glb).unwrap();
+    let g = penumbra::load::from_bytes(glb.clone(), Path::new("out.glb")).unwrap();
+    let camera = penumbra::render::Camera::auto(&penumbra::load::scene(&g).unwrap());
+    let mean = |map: &penumbra::lightmap::Lightmap| {
+        let r = penumbra::render::render_radiance(
+            &g,
+            Some(camera),
+            64,
+            64,
+            penumbra::render::Shading::Irradiance(map),
+        )
+        .unwrap();
+        r.iter().map(|c| c.x).sum::<f64>() / r.len() as f64
+    };
+    let (float, eight_bit) = (mean(&map), rendered_mean(&glb));
+    assert!(
+        (float / eight_bit - 1.0).abs() < 0.02,
+        "{float} vs {eight_bit}"
+    );
+    let dark = penumbra::lightmap::Lightmap {
+        texels: vec![glam::DVec3::ZERO; map.texels.len()],
+        ..map.clone()
+    };
+    assert_eq!(mean(&dark), 0.0);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
 /// A floor 4 m wide (one quad, with normals and `TEXCOORD_0` = its position) under an area
 /// light.
 fn textured_floor() -> Vec<u8> {
