@@ -43,6 +43,10 @@ pub mod failure;
 // 100 000 triangles), for measuring how the baker scales.
 pub mod ladder;
 
+// A generated city as irregular as OpenStreetMap building data: jittered, subdivided
+// footprints, courtyards, overlapping and near-parallel neighbours, under the sun.
+pub mod osm;
+
 /// glTF `bufferView.target` for vertex attributes.
 const ARRAY_BUFFER: u32 = 34962;
 /// glTF `bufferView.target` for indices.
