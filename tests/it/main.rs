@@ -14,6 +14,7 @@ mod known_answers;
 mod loading;
 mod matrix;
 mod mutation;
+mod osm_like;
 mod output;
 mod reference;
 mod seams;
