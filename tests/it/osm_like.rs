@@ -16,7 +16,11 @@ fn osm_like_city_is_deterministic_and_irregular() {
     assert!(a != c, "the seed changes nothing");
     assert!((s.triangles as f64 - 30_000.0).abs() < 0.02 * 30_000.0);
     assert!(s.buildings > 300, "{} buildings", s.buildings);
-    assert!(s.courtyards * 20 > s.buildings, "{} courtyards", s.courtyards);
+    assert!(
+        s.courtyards * 20 > s.buildings,
+        "{} courtyards",
+        s.courtyards
+    );
     assert!(s.wedges * 20 > s.buildings, "{} wedges", s.wedges);
     assert!(
         s.overlapping_pairs * 10 > s.buildings,
@@ -28,7 +32,12 @@ fn osm_like_city_is_deterministic_and_irregular() {
         "{} near-parallel pairs",
         s.near_parallel_pairs
     );
-    assert!(s.short_edges * 10 > s.edges, "{} of {} edges short", s.short_edges, s.edges);
+    assert!(
+        s.short_edges * 10 > s.edges,
+        "{} of {} edges short",
+        s.short_edges,
+        s.edges
+    );
     assert!(s.min_angle_deg < 25.0, "smallest angle {}", s.min_angle_deg);
     assert!(s.min_height >= 6.0 && s.max_height <= 30.0);
 }
@@ -43,7 +52,11 @@ fn small_osm_like_city_bakes_to_the_exact_sun_on_the_ground() {
     let mut o = BakeOptions::default();
     o.solve.bounces = Some(0);
     let b = crate::bake(&glb, &o);
-    let dm = b.stats.discontinuity.as_ref().expect("discontinuity meshing");
+    let dm = b
+        .stats
+        .discontinuity
+        .as_ref()
+        .expect("discontinuity meshing");
     println!("{dm:?}, {} elements", b.stats.elements);
     assert_eq!(dm.dropped_budget, 0, "discontinuity pieces dropped: {dm:?}");
     // The ground: the one polygon facing up at y = 0.
@@ -66,7 +79,16 @@ fn small_osm_like_city_bakes_to_the_exact_sun_on_the_ground() {
     // in the umbra) when the exact light is the same at it and at 8 points 1 mm around it.
     let (mut all, mut lit, mut boundary) = ((0.0, 0usize), (0.0, 0usize), 0usize);
     let mut worst: (f64, DVec3) = (0.0, DVec3::ZERO);
+    let mut used = vec![false; m.vertices.len()];
+    for t in &m.triangles {
+        for &i in t {
+            used[i as usize] = true;
+        }
+    }
     for (v, &q) in m.vertices.iter().enumerate() {
+        if !used[v] {
+            continue;
+        }
         let p = frame.world_from_plane(q);
         let exact_at = |p: DVec3| {
             let at = penumbra::solve::SurfacePoint::new(p, frame.n, ground, &vis);
@@ -100,6 +122,10 @@ fn small_osm_like_city_bakes_to_the_exact_sun_on_the_ground() {
         all.1, lit.1, worst.0, worst.1
     );
     assert!(lit.1 * 2 > all.1, "few fully lit ground vertices");
-    assert!(rms_lit < 1.0, "fully lit ground: RMS {rms_lit}");
-    assert!(rms_all < 1.0, "ground: RMS {rms_all}");
+    // Measured: RMS 0.546 of E cos(theta) over the 778 fully lit vertices, 0.320 over all 2 273
+    // off the boundaries, worst 1.0: many fully lit ground vertices bake to 0 (the same check
+    // on `ladder::town(600)` gives 0.086). Not yet explained: these bounds (1.5x the measured)
+    // only keep it from getting worse; the aim is a few 1e-3.
+    assert!(rms_lit < 0.82, "fully lit ground: RMS {rms_lit}");
+    assert!(rms_all < 0.48, "ground: RMS {rms_all}");
 }
