@@ -2,7 +2,7 @@
 //! irregularities it claims, and a small one bakes to the exact sun light on the ground.
 
 use penumbra::BakeOptions;
-use penumbra::fixtures::osm::{self, OSM_SEED, osm_like_scene};
+use penumbra::fixtures::osm::{OSM_SEED, osm_like_scene};
 
 #[test]
 fn osm_like_city_is_deterministic_and_irregular() {
