@@ -617,9 +617,15 @@ const FLOOR_PASSES: usize = 3;
 
 /// Bounds of the default element budget (elements). The minimum is what a small closed room
 /// needs: the shipped Cornell box measured 1.55% RMSE against the reference at 4 600 elements
-/// (0.91% at 20 000, for about three times the solve). The maximum leaves room for a real city's
-/// hard shadow lines, all kept: Florence's 35 373 triangles take 458 109 elements.
-pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 5_000..=1_000_000;
+/// (0.91% at 20 000, for about three times the solve). The maximum holds for the budget from the
+/// texels and the triangles; the discontinuity lines may raise it further, to
+/// [`LINES_BUDGET_MAX`].
+pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 5_000..=250_000;
+
+/// The most elements the floor of the geometry and its discontinuity lines may raise the default
+/// budget to: a real city's hard shadow lines, all kept, take more than [`DEFAULT_BUDGET`]
+/// allows (Florence's 35 373 triangles: 522 071 elements).
+pub const LINES_BUDGET_MAX: usize = 1_000_000;
 
 /// The element budget of a bake, and what chose it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -644,7 +650,8 @@ pub struct Budget {
 ///   elements per input triangle), and a real city's ground holds thousands of lines: below
 ///   this the lines are dropped for the budget and the surfaces between them go unrefined,
 ///
-/// within [`DEFAULT_BUDGET`]. Either way at least the input's own triangle count: the mesh can
+/// within [`DEFAULT_BUDGET`] (the last up to [`LINES_BUDGET_MAX`]). Either way at least the
+/// input's own triangle count: the mesh can
 /// hardly have fewer elements than the geometry.
 pub(crate) fn element_budget(
     scene: &Scene,
@@ -653,16 +660,17 @@ pub(crate) fn element_budget(
     mut geometry_floor: impl FnMut(usize) -> usize,
 ) -> Budget {
     let triangles = scene.triangles.len();
-    let within = |b: f64, from| {
+    let within_to = |b: f64, from, most: usize| {
         let b = b.min(1e9) as usize;
         if b < *DEFAULT_BUDGET.start() {
             (*DEFAULT_BUDGET.start(), "minimum")
-        } else if b > *DEFAULT_BUDGET.end() {
-            (*DEFAULT_BUDGET.end(), "maximum")
+        } else if b > most {
+            (most, "maximum")
         } else {
             (b, from)
         }
     };
+    let within = |b: f64, from| within_to(b, from, *DEFAULT_BUDGET.end());
     let (elements, from) = match requested {
         Some(b) => (b, "--budget"),
         None => {
@@ -686,7 +694,7 @@ pub(crate) fn element_budget(
                 if geometry <= chosen.0 as f64 {
                     break;
                 }
-                chosen = within(geometry, "geometry");
+                chosen = within_to(geometry, "geometry", LINES_BUDGET_MAX);
                 if chosen.0 <= at {
                     break;
                 }
@@ -1045,7 +1053,13 @@ mod tests {
         assert!(near && from == "lightmap texels", "{:?}", budget(1_000));
         assert_eq!(budget(40_000), (false, 60_000, "geometry"));
         assert_eq!(budget(200_000), (false, 300_000, "geometry"));
-        assert_eq!(budget(800_000), (false, 1_000_000, "maximum"));
+        assert_eq!(budget(800_000), (false, LINES_BUDGET_MAX, "maximum"));
+        // The texels alone stay within the default maximum.
+        let dense = element_budget(&scene, None, texels_per_unit * 10.0, |_| 1_000);
+        assert_eq!(
+            (dense.elements, dense.from),
+            (*DEFAULT_BUDGET.end(), "maximum")
+        );
         // A budget given is the budget: the geometry is not meshed for it.
         let given = element_budget(&scene, Some(5_000), texels_per_unit, |_| {
             panic!("meshed the geometry for a given budget")

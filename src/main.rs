@@ -304,7 +304,7 @@ struct BakeArgs {
     /// Target number of mesh elements (triangles) over the whole scene, at least the input's
     /// triangle count [default: one element per 32 lightmap texels (at the atlas's first
     /// estimate of its density), 1.5 per input triangle or 1.5 per element of the geometry's
-    /// own coarsest meshing, whichever is most, within 5000..1000000; --stats reports it].
+    /// own coarsest meshing, whichever is most, within 5000..250000 (the lines' floor up to 1000000); --stats reports it].
     #[arg(long)]
     budget: Option<usize>,
     /// Discontinuity meshing: drop wedge pieces where their light's unoccluded irradiance is
