@@ -9,7 +9,8 @@
 //     difference in linear RGB below MAD_TOLERANCE), and must differ from three.js's picture
 //     of the same file with the lightmap removed (MAD at least APPLIED_MIN_MAD).
 //  4. Self-tests: broken files must be caught (TEXCOORD_0 dropped: the validator reports an
-//     error; MOZ_lightmap.texCoord wrong: the three.js comparison fails; MOZ_lightmap removed:
+//     error; MOZ_lightmap.texCoord wrong: three.js's picture differs from `penumbra render`'s
+//     of the unbroken file; MOZ_lightmap removed:
 //     the "lightmap applied" check fails; the default (sRGB-encoded) lightmap decoded as linear,
 //     or a `--encoding linear` lightmap decoded as sRGB: the comparison fails).
 //  Besides the fixtures as they are, three variants go through 2-3: cornell-box baked with
@@ -304,14 +305,15 @@ async function validate(file) {
 }
 
 /**
- * The three.js picture of `glb` against `penumbra render` of the same file, and against
- * three.js with the lightmap removed. Returns the numbers; `tag` names the output files.
+ * The three.js picture of `glb` against `penumbra render` of `truth` (the same file, or for a
+ * self-test the unbroken file it was made from), and against three.js with the lightmap
+ * removed. Returns the numbers; `tag` names the output files.
  */
-async function compare(browser, glb, tag, { lightmapColorSpace = 'file' } = {}) {
+async function compare(browser, glb, tag, { lightmapColorSpace = 'file' } = {}, truth = glb) {
   const { json } = readGlb(glb);
   const exposure = exposureOf(json);
   const ref = path.join(OUT, `${tag}-penumbra.png`);
-  penumbra(['render', glb, '--out', ref, '--width', String(SIZE), '--height', String(SIZE), '--camera', 'gltf', '--exposure', String(exposure)]);
+  penumbra(['render', truth, '--out', ref, '--width', String(SIZE), '--height', String(SIZE), '--camera', 'gltf', '--exposure', String(exposure)]);
   const shot = path.join(OUT, `${tag}-threejs.png`);
   const info = await browser.render(glb, shot, { exposure, lightmapColorSpace });
   const stripped = path.join(OUT, 'glb', `${tag}-nolightmap.glb`);
@@ -450,6 +452,7 @@ async function main() {
         name: 'MOZ_lightmap.texCoord 2 (a UV set that does not exist)',
         tag: 'broken-texcoord2', base: 'cornell-box', edit: breakages.lightmapTexCoord(2),
         caught: (r) => r.mad >= MAD_TOLERANCE, what: (r) => `mean |diff| ${fmt(r.mad)} vs tolerance ${MAD_TOLERANCE}`,
+
       },
       {
         // instanced's panel mesh has its own TEXCOORD_0; elsewhere TEXCOORD_0 is a copy of
@@ -479,7 +482,7 @@ async function main() {
       if (!fs.existsSync(view)) continue;
       const broken = path.join(OUT, 'glb', `${t.tag}.glb`);
       editGlb(view, broken, t.edit);
-      const r = await compare(browser, broken, t.tag, t.client);
+      const r = await compare(browser, broken, t.tag, t.client, view);
       check(`self-test: three.js checks catch ${t.name}`, t.caught(r), t.what(r));
     }
   } catch (e) {
