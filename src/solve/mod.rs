@@ -31,10 +31,12 @@
 //! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
 //! indirect light: progressive refinement, final gather), `matrix.rs` (classic radiosity and
 //! its Gauss-Seidel iteration, also the progressive solver's test oracle), `patches.rs` (the
-//! patches and the linear system these two share), `hierarchical.rs`; the form factors in `form_factors.rs` and `hemicube.rs`; the sky's
-//! direct light in `sky.rs`. [`radiosity`] is
-//! the entry point: the direct light, then the indirect solver. The shared physics (form
-//! factors, emitters, the punctual light model) is in [`crate::geometry`] and [`crate::light`].
+//! patches and the linear system these two share), `hierarchical/` (hierarchical radiosity, one
+//! file per part: the tree, the link estimates, the refinement, gather and push-pull, the
+//! vertex values); the form factors in `form_factors.rs` and `hemicube.rs`; the sky's direct
+//! light in `sky.rs`. [`radiosity`] is the entry point: the direct light, then the indirect
+//! solver. The shared physics (form factors, emitters, the punctual light model) is in
+//! [`crate::geometry`] and [`crate::light`].
 
 pub mod direct;
 pub mod form_factors;
