@@ -254,13 +254,12 @@ enum Decision {
     Drop,
 }
 impl Hierarchy {
-    /// The refinement oracle for the link `r ← s` (see the module doc): `b_s` is the source's
-    /// radiosity (W/m², scalar), `threshold` the most power a link may carry (W), `variation`
-    /// the most the source's irradiance may vary across the receiver's samples (W/m²);
-    /// `factors` the receiver samples' point form factors to the source where both ends are
-    /// surface nodes and the contour formula applies ([`Hierarchy::point_factors`]), else
-    /// `None` (a cluster end). Casts only the shadow rays the decision needs (counted in
-    /// `rays`).
+    /// The refinement oracle for the link `r ← s` (see the `hierarchical` module doc): `b_s` is the
+    /// source's radiosity (W/m², scalar), `threshold` the most power a link may carry (W),
+    /// `variation` the most the source's irradiance may vary across the receiver's samples (W/m²);
+    /// `factors` the receiver samples' point form factors to the source where both ends are surface
+    /// nodes and the contour formula applies ([`Hierarchy::point_factors`]), else `None` (a cluster
+    /// end). Casts only the shadow rays the decision needs (counted in `rays`).
     #[allow(clippy::too_many_arguments)]
     fn decide(
         &self,

@@ -262,7 +262,7 @@ fn edge_contour_sum(p: DVec3, n: DVec3, edges: &[Edge]) -> f64 {
         .sum()
 }
 impl Hierarchy {
-    /// The estimate of the link `r ← s` (see the module doc).
+    /// The estimate of the link `r ← s` (see the `hierarchical` module doc).
     pub fn transfer(&self, vis: &Visibility, r: u32, s: u32) -> Transfer {
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
@@ -300,8 +300,8 @@ impl Hierarchy {
         }
     }
 
-    /// The sampled disk estimate of the link `r ← s` (see the module doc), for a cluster end
-    /// or a large straddling source; its `bound` is left at zero (the caller has it).
+    /// The sampled disk estimate of the link `r ← s` (see the `hierarchical` module doc), for a
+    /// cluster end or a large straddling source; its `bound` is left at zero (the caller has it).
     pub(super) fn disk_transfer(&self, vis: &Visibility, r: u32, s: u32) -> Transfer {
         let ns = &self.nodes[s as usize];
         let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
@@ -335,7 +335,7 @@ impl Hierarchy {
         }
     }
 
-    /// True when the link `r ← s` can carry nothing (see the module doc).
+    /// True when the link `r ← s` can carry nothing (see the `hierarchical` module doc).
     pub(super) fn culled(&self, r: u32, s: u32) -> bool {
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
         if nr.polygon != NO_POLYGON && nr.polygon == ns.polygon {
@@ -351,8 +351,8 @@ impl Hierarchy {
         behind(nr, ns) || behind(ns, nr)
     }
 
-    /// The unoccluded point-to-source form factors at the receiver samples of `r ← s` when
-    /// both are surface nodes and the contour formula applies (see the module doc), else
+    /// The unoccluded point-to-source form factors at the receiver samples of `r ← s` when both are
+    /// surface nodes and the contour formula applies (see the `hierarchical` module doc), else
     /// `None`. Returns the per-sample values and their count.
     pub(super) fn point_factors(&self, r: u32, s: u32) -> Option<Factors> {
         let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);

@@ -489,7 +489,7 @@ fn enclosed(scene: &Scene, vis: &Visibility, p: &[DVec3; 3], n: DVec3, polygon: 
         })
 }
 
-/// Up to four sample points of a node (see the module doc).
+/// Up to four sample points of a node (see the `hierarchical` module doc).
 fn node_samples(n: &Node, elements: &[Element], vis: &Visibility) -> Vec<Sample> {
     let at = |p: DVec3, e: &Element| {
         let sp = SurfacePoint::new(p, e.normal, e.polygon, vis);

@@ -11,7 +11,7 @@ use glam::{DVec2, DVec3};
 /// widened by their spread on each side, and at least zero. The elements around a vertex are
 /// those that use it, or, when their centroids leave the gradient's direction undetermined
 /// (two triangles at a polygon's corner or edge, whose centroids lie along the edge), those
-/// that share a vertex with them. See the module doc.
+/// that share a vertex with them. See the `hierarchical` module doc.
 pub(super) fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<DVec3>> {
     let nv = m.vertices.len();
     // Vertex -> its elements (indices into `items`), compressed rows.
