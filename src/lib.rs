@@ -41,11 +41,9 @@ pub mod discontinuity;
 // Receiver meshes: uniform, discontinuity, adaptive.
 pub mod mesh;
 
-// Direct and indirect light at the mesh vertices: one solver per file under `solve/`.
+// Direct and indirect light at the mesh vertices: one solver per file under `solve/`, and the
+// exact visible emitter parts (`solve::backproject`).
 pub mod solve;
-
-// Exact visible emitter parts (used by `solve`).
-pub mod backproject;
 
 // Texels from the receiver meshes (buried sub-samples left out, dilation), and the
 // stitching of the seams between charts.

@@ -68,7 +68,7 @@ impl SurfacePoint {
 // Area emitters
 
 /// A planar area emitter as convex pieces in its own plane frame: for the unoccluded form factor
-/// and for the backprojection ([`crate::backproject`]).
+/// and for the backprojection ([`crate::solve::backproject`]).
 #[derive(Clone, Debug)]
 pub struct EmitterShape {
     /// The emitter's plane; `frame.n` is the emitting (front) side.

@@ -3,7 +3,7 @@
 //! vertices so the occluder search is shared.
 //!
 //! The exact method: the point-to-polygon form factor of the part of each emitter that a vertex
-//! sees ([`crate::backproject`]); occluders are culled per cluster of vertices by the shaft of
+//! sees ([`super::backproject`]); occluders are culled per cluster of vertices by the shaft of
 //! the cluster and the emitter (Haines, Wallace, "Shaft culling for efficient ray-cast
 //! radiosity", 1991). The sampled method (and the exact method's fallback past its caps): the
 //! exact unoccluded form factor times a visibility fraction from stratified shadow rays.
@@ -12,10 +12,10 @@
 use super::lightcuts::LightTree;
 use super::sky::Sky;
 use super::{DirectMethod, SolveOptions, evaluation_points};
-use crate::backproject::{EmitterShape, Limits, Occluders, Scratch, Shaft};
 use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint, punctual_unoccluded};
 use crate::mesh::ReceiverMesh;
 use crate::scene::{LightKind, PunctualLight, Scene};
+use crate::solve::backproject::{EmitterShape, Limits, Occluders, Scratch, Shaft};
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;

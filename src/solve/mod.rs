@@ -4,7 +4,7 @@
 //!   a uniform environment radiance, by cosine-distributed shadow rays; it then bounces like
 //!   the emitters' light in every solver). For area emitters, by default
 //!   ([`DirectMethod::Exact`]) the exact point-to-polygon form factor of the part of the emitter
-//!   that the vertex sees, by backprojection ([`crate::backproject`]); with
+//!   that the vertex sees, by backprojection ([`backproject`]); with
 //!   [`DirectMethod::Sampled`] (and as the fallback past an occluder cap) the exact unoccluded
 //!   form factor (Lambert's contour formula, clipped to the receiver's horizon) times a
 //!   visibility fraction from a fixed stratified set of shadow rays. Punctual lights: the exact
@@ -28,16 +28,18 @@
 //!   (the default), ray cast (Wallace et al. 1989), or hemicube ([`hemicube`]; Cohen and
 //!   Greenberg 1985), which also carries the area emitters' light.
 //!
-//! One solver per file: `direct.rs` (the direct light at the vertices), `progressive.rs` (the
-//! indirect light: progressive refinement, final gather), `matrix.rs` (classic radiosity and
-//! its Gauss-Seidel iteration, also the progressive solver's test oracle), `patches.rs` (the
-//! patches and the linear system these two share), `hierarchical/` (hierarchical radiosity, one
-//! file per part: the tree, the link estimates, the refinement, gather and push-pull, the
-//! vertex values); the form factors in `form_factors.rs` and `hemicube.rs`; the sky's direct
-//! light in `sky.rs`. [`radiosity`] is the entry point: the direct light, then the indirect
-//! solver. The shared physics (form factors, emitters, the punctual light model) is in
-//! [`crate::geometry`] and [`crate::light`].
+//! One solver per file: `direct.rs` (the direct light at the vertices; the exact visible part of
+//! each emitter in `backproject.rs`), `progressive.rs` (the indirect light: progressive
+//! refinement, final gather), `matrix.rs` (classic radiosity and its Gauss-Seidel iteration,
+//! also the progressive solver's test oracle), `patches.rs` (the patches and the linear system
+//! these two share), `hierarchical/` (hierarchical radiosity, one file per part: the tree, the
+//! link estimates, the refinement, gather and push-pull, the vertex values); the form factors
+//! in `form_factors.rs` and `hemicube.rs`; the sky's direct light in `sky.rs`. [`radiosity`] is
+//! the entry point: the direct light, then the indirect solver. The shared physics (form
+//! factors, emitters, the punctual light model) is in [`crate::geometry`] and
+//! [`crate::light`].
 
+pub mod backproject;
 pub mod direct;
 pub mod form_factors;
 pub mod hemicube;
@@ -57,9 +59,9 @@ pub use progressive::progressive;
 // users.
 pub use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint};
 
-use crate::backproject::Limits;
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
+use crate::solve::backproject::Limits;
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
 use std::f64::consts::PI;

@@ -4,9 +4,9 @@
 use crate::Rng;
 use crate::{bake, parse, quick};
 use glam::{DVec2, DVec3};
-use penumbra::backproject::{self, EmitterShape, Limits};
 use penumbra::fixtures::{self, GlbBuilder, Material};
 use penumbra::scene::Scene;
+use penumbra::solve::backproject::{self, EmitterShape, Limits};
 use penumbra::solve::{self, Direct, DirectMethod, SolveOptions, SurfacePoint};
 use penumbra::visibility::Visibility;
 use std::f64::consts::PI;
