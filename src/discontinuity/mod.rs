@@ -14,7 +14,7 @@
 //! Each wedge is intersected with the receivers its bounding box reaches (those whose bounding
 //! box its plane crosses), clipped to the wedge and to the receiver's triangles (a large
 //! receiver's, such as a ground plane cut around thousands of buildings, found through a grid
-//! of them: [`BoxGrid`]), and only the pieces whose generator is really visible from the
+//! of them: [`BoxGrid`](crate::geometry::BoxGrid)), and only the pieces whose generator is really visible from the
 //! receiver and from the emitter are kept (shadow rays at sample points, transitions bisected to
 //! 1e-6 of the scene extent). Pieces are ranked by significance, the share of the receiver's
 //! unoccluded irradiance that the wedge's emitter carries at the piece; pieces under the

@@ -12,8 +12,9 @@ use glam::DVec3;
 /// Keeps at most `max_pieces` wedge segments over the scene, the most significant (ties by
 /// event, then polygon); D0 segments all stay. A polygon's kept wedge segments end up in event
 /// order (then most significant first). Updates `kept` and `dropped_budget`. Applying it to
-/// the output of [`segments`] with no limit gives the output of [`segments`] with this limit,
-/// so the bake can trace the wedges before it knows its element budget.
+/// the output of [`segments`](super::segments) with no limit gives the output of
+/// [`segments`](super::segments) with this limit, so the bake can trace the wedges before it
+/// knows its element budget.
 pub fn keep_most_significant(
     segments: &mut [Vec<Segment>],
     max_pieces: usize,

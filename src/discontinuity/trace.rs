@@ -20,7 +20,7 @@ pub(super) struct Piece {
     pub(super) event: u32,
     /// Unoccluded irradiance of its light at its midpoint (luminance, W/m²).
     pub(super) significance: f64,
-    /// See [`Segment::feature`].
+    /// See [`Segment::feature`](super::Segment::feature).
     pub(super) feature: u64,
 }
 

@@ -27,7 +27,7 @@ pub(super) struct Wedge {
 }
 
 impl Wedge {
-    /// [`Segment::feature`] of the wedge's pieces: FNV-1a over the light and the occluder
+    /// [`Segment::feature`](super::Segment::feature) of the wedge's pieces: FNV-1a over the light and the occluder
     /// feature's coordinates (an edge's ends in a fixed order), never 0 for an area light.
     pub(super) fn feature(&self) -> u64 {
         let Light::Area(light) = self.light else {

@@ -73,7 +73,7 @@ pub(super) fn material(
 pub(super) struct TextureMeans {
     cache: BTreeMap<usize, DVec3>,
     pub(super) warnings: Vec<String>,
-    /// Bytes of the images decoded so far, counted as [`Limits::image_bytes`] counts them.
+    /// Bytes of the images decoded so far, counted as [`Limits::image_bytes`](super::Limits::image_bytes) counts them.
     decoded: u64,
 }
 
