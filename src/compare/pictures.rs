@@ -1,15 +1,21 @@
 //! The comparison's pictures: false-colour error maps and region maps over the lightmap grid,
 //! wireframe close-ups of one shadow, and the side-by-side strip with captions (text in DejaVu
-//! Sans, bundled by the `dejavu` crate, so PNGs draw the same on any machine).
+//! Sans, bundled by the `dejavu` crate, so PNGs draw the same on any machine); and
+//! [`write_pictures`], which renders and writes them for one measured scene.
 
-use super::Region;
+use super::runs::{Measured, nearest_budget};
+use super::{CompareOptions, Method, Region, compare_error};
 use crate::color::{linear_to_srgb, srgb_to_linear};
 use crate::error::{Error, Result};
 use crate::geometry::barycentric_2d;
 use crate::lightmap::{self, Lightmap, Locator};
+use crate::load::{self, Gltf};
+use crate::mesh::Mesher;
 use crate::mesh::ReceiverMesh;
 use crate::reference::ReferenceMap;
+use crate::render::{self, Camera, Shading};
 use crate::scene::{Polygon, point_in_triangle};
+use crate::solve::DirectMethod;
 use glam::{DVec2, DVec3};
 use image::RgbImage;
 use plotters::prelude::*;
@@ -364,4 +370,182 @@ pub fn strip(columns: &[Column], footer: &[String]) -> Result<RgbImage> {
 /// Encodes an RGB image as PNG.
 pub fn png(img: &RgbImage) -> Result<Vec<u8>> {
     crate::write::png_bytes(img.as_raw(), img.width(), img.height())
+}
+
+/// Renders the reference and the picture-budget bakes, the false-colour and region maps, the
+/// close-ups, and composes the strip. Returns the files written.
+pub(super) fn write_pictures(
+    m: &Measured,
+    o: &CompareOptions,
+    write: &dyn Fn(&str, &[u8]) -> Result<String>,
+) -> Result<Vec<String>> {
+    let mut files = Vec::new();
+    let w = o.picture_width;
+    let camera = Camera::from_gltf(&m.baked);
+    let scale = m.report.mean_lit_irradiance;
+    let ref_map = reference_lightmap(&m.reference);
+    let radiance = render::render_radiance(&m.baked, camera, w, w, Shading::Irradiance(&ref_map))?;
+    let exposure = render::auto_exposure(&radiance);
+    let ref_view = render::tone_map(&radiance, w, w, exposure);
+    let colour = |g: &Gltf, map: &Lightmap| -> Result<image::RgbImage> {
+        let c = render::render_radiance(g, camera, w, w, Shading::Colour(map))?;
+        Ok(render::tone_map(&c, w, w, 1.0))
+    };
+    let region_view = colour(&m.baked, &region_map(&m.reference, &m.regions))?;
+    files.push(write("regions.png", &png(&region_view)?)?);
+    let mut views = Vec::new();
+    for (method, bake, path) in &m.pictures {
+        let g = load::read(path)?;
+        let view = render::render(&g, camera, w, w, Some(exposure))?;
+        let error = colour(&g, &error_map(&bake.lightmap, &m.reference, scale))?;
+        files.push(write(
+            &format!("error-{}.png", method.name()),
+            &png(&error)?,
+        )?);
+        views.push((*method, bake, view, error));
+    }
+
+    // The close-up: the reference through the atlas, each mesh through its own interpolant.
+    let (_, first, _) = &m.pictures[0];
+    let (scene, atlas) = (&first.scene, &first.atlas);
+    let window = shadow_window(&scene.polygons, &m.texel_points, &m.regions);
+    let ref_value = |polygon: usize, q: DVec2| -> DVec3 {
+        let poly = &scene.polygons[polygon];
+        let Some((k, l)) = locate(poly, q) else {
+            return DVec3::ZERO;
+        };
+        let t = &scene.triangles[poly.triangles[k]];
+        let am = &atlas.meshes[t.instance];
+        let ids = &am.indices[3 * t.local_index..3 * t.local_index + 3];
+        let uv: DVec2 = (0..3)
+            .map(|c| DVec2::from(am.uv[ids[c] as usize].map(f64::from)) * l[c])
+            .sum();
+        let size = DVec2::new(atlas.width as f64, atlas.height as f64);
+        render::sample_map(&ref_map, uv / size)
+    };
+    let closeups = match &window {
+        Some(win) => {
+            let poly = &scene.polygons[win.polygon];
+            // White: the brightest reference value in the window.
+            let mut white: f64 = 0.0;
+            for i in 0..32 {
+                for j in 0..32 {
+                    let q = DVec2::new(
+                        win.min[0] + (i as f64 + 0.5) / 32.0 * win.side,
+                        win.min[1] + (j as f64 + 0.5) / 32.0 * win.side,
+                    );
+                    if poly.contains(q) {
+                        white = white.max(ref_value(win.polygon, q).element_sum() / 3.0);
+                    }
+                }
+            }
+            let white = if white > 0.0 { white } else { 1.0 };
+            let reference = closeup(poly, win, w, white, &|q| ref_value(win.polygon, q));
+            let mut meshes = Vec::new();
+            for (_, bake, _, _) in &views {
+                let mi = bake
+                    .meshes
+                    .iter()
+                    .position(|mesh| mesh.polygon == win.polygon)
+                    .ok_or_else(|| compare_error("a bake lost a receiver mesh".into()))?;
+                meshes.push(mesh_closeup(
+                    poly,
+                    win,
+                    w,
+                    white,
+                    &bake.meshes[mi],
+                    &bake.solution.irradiance[mi],
+                )?);
+            }
+            Some((reference, meshes))
+        }
+        None => None,
+    };
+
+    // The strip: the reference, then one column per mesher (exact direct light if baked).
+    let pct = |v: f64| format!("{:.1}%", 100.0 * v);
+    let noise = m.report.runs.first().map_or(0.0, |r| r.error.noise);
+    let mut columns = vec![Column {
+        title: "reference".into(),
+        caption: vec![
+            format!(
+                "path traced, {} spp, {:.0} s",
+                m.report.reference_spp, m.report.reference_seconds
+            ),
+            format!("noise {} of lit mean", pct(noise)),
+        ],
+        cells: [Some(ref_view), Some(region_view)]
+            .into_iter()
+            .chain([closeups.as_ref().map(|c| c.0.clone())])
+            .flatten()
+            .collect(),
+    }];
+    let picture_budget = nearest_budget(&o.budgets, o.picture_budget);
+    // One column per mesher (exact direct light, progressive, if baked), then one per other
+    // solver or form factors.
+    let mut shown: Vec<usize> = [Mesher::Uniform, Mesher::Adaptive, Mesher::Discontinuity]
+        .iter()
+        .filter_map(|&mesher| {
+            let default = |v: &(Method, _, _, _)| v.0.mesher == mesher && v.0.is_default_solve();
+            views
+                .iter()
+                .position(|v| default(v) && v.0.direct == DirectMethod::Exact)
+                .or_else(|| views.iter().position(default))
+        })
+        .collect();
+    shown.extend((0..views.len()).filter(|&k| !views[k].0.is_default_solve()));
+    for k in shown {
+        let (method, _, view, error) = &views[k];
+        let Some(run) = m
+            .report
+            .runs
+            .iter()
+            .find(|r| r.method == method.name() && r.budget == picture_budget)
+        else {
+            continue;
+        };
+        let penumbra = run
+            .regions
+            .get(&Region::Penumbra)
+            .map_or(String::new(), |e| format!(", penumbra {}", pct(e.rmse)));
+        let mut title = if method.is_default_solve() {
+            format!("{:?}", method.mesher).to_lowercase()
+        } else {
+            method.name()
+        };
+        if method.direct == DirectMethod::Sampled {
+            title.push_str(" (sampled)");
+        }
+        columns.push(Column {
+            title,
+            caption: vec![
+                format!("{} elements, {:.2} s", run.elements, run.seconds),
+                format!("RMSE {}{penumbra}", pct(run.error.rmse)),
+            ],
+            cells: [Some(view.clone()), Some(error.clone())]
+                .into_iter()
+                .chain([closeups.as_ref().map(|c| c.1[k].clone())])
+                .flatten()
+                .collect(),
+        });
+    }
+    let mut footer = vec![
+        format!(
+            "{}: every method at budget {picture_budget}, lightmap {}x{}; one exposure for every view; errors relative to the mean lit irradiance.",
+            m.report.scene, m.report.lightmap_width, m.report.lightmap_height
+        ),
+        format!(
+            "Row 2: bake minus reference (blue too dark, red too bright, saturating at +-{:.0}%); reference column: regions (lit yellow, penumbra orange, umbra blue, contact magenta).",
+            100.0 * ERROR_RANGE
+        ),
+    ];
+    if let Some(win) = &window {
+        footer.push(format!(
+            "Row 3: close-up ({:.3} units wide) of polygon {}: each mesh's own interpolant and wireframe (orange: discontinuity constraints); reference column: the reference.",
+            win.side, win.polygon
+        ));
+    }
+    let strip = strip(&columns, &footer)?;
+    files.push(write("strip.png", &png(&strip)?)?);
+    Ok(files)
 }
