@@ -364,12 +364,16 @@ fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
             }
         }
     }
+    // Per vertex: its triangles, grouped through the uncut edges they share at it. Each group
+    // is named by its first triangle (in `tris` order), so the copies do not depend on the
+    // order the unions run in.
+    let mut group: Vec<usize> = Vec::new();
+    let mut by_neighbour: Vec<(u32, usize)> = Vec::new();
+    let mut copy_of: Vec<u32> = Vec::new();
     for (v, tris) in incident.iter().enumerate() {
         if tris.len() < 2 {
             continue;
         }
-        // Union triangles sharing an uncut edge at v.
-        let mut group: Vec<usize> = (0..tris.len()).collect();
         fn root(g: &mut [usize], mut i: usize) -> usize {
             while g[i] != i {
                 g[i] = g[g[i]];
@@ -377,40 +381,39 @@ fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
             }
             i
         }
-        let others = |t: usize| -> Vec<u32> {
-            mesh.triangles[t]
-                .iter()
-                .copied()
-                .filter(|&x| x != v as u32)
-                .collect()
-        };
-        for i in 0..tris.len() {
-            for j in i + 1..tris.len() {
-                let (oi, oj) = (others(tris[i]), others(tris[j]));
-                if let Some(&u) = oi.iter().find(|u| oj.contains(u))
-                    && !cut(v as u32, u)
-                {
-                    let (ri, rj) = (root(&mut group, i), root(&mut group, j));
-                    group[ri.max(rj)] = ri.min(rj);
+        group.clear();
+        group.extend(0..tris.len());
+        // Two triangles at v share an edge (v, u) when both have u: sorted by u, they are
+        // neighbours in this list (linear in the fan, however many triangles meet at v).
+        by_neighbour.clear();
+        for (i, &t) in tris.iter().enumerate() {
+            for &u in &mesh.triangles[t] {
+                if u != v as u32 {
+                    by_neighbour.push((u, i));
                 }
             }
         }
+        by_neighbour.sort_unstable();
+        for pair in by_neighbour.windows(2) {
+            let [(u, i), (w, j)] = [pair[0], pair[1]];
+            if u == w && i != j && !cut(v as u32, u) {
+                let (ri, rj) = (root(&mut group, i), root(&mut group, j));
+                group[ri.max(rj)] = ri.min(rj);
+            }
+        }
         let first = root(&mut group, 0);
-        let mut copies: Vec<(usize, u32)> = Vec::new();
+        copy_of.clear();
+        copy_of.resize(tris.len(), u32::MAX);
         for (i, &t) in tris.iter().enumerate() {
             let r = root(&mut group, i);
             if r == first {
                 continue;
             }
-            let id = match copies.iter().find(|c| c.0 == r) {
-                Some(c) => c.1,
-                None => {
-                    mesh.vertices.push(mesh.vertices[v]);
-                    let id = (mesh.vertices.len() - 1) as u32;
-                    copies.push((r, id));
-                    id
-                }
-            };
+            if copy_of[r] == u32::MAX {
+                mesh.vertices.push(mesh.vertices[v]);
+                copy_of[r] = (mesh.vertices.len() - 1) as u32;
+            }
+            let id = copy_of[r];
             for c in mesh.triangles[t].iter_mut() {
                 if *c == v as u32 {
                     *c = id;
