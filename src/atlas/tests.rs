@@ -658,3 +658,81 @@ fn a_20k_triangle_connected_grid_packs_into_a_valid_mapping() {
     );
     check_mapping(&inputs, &atlas);
 }
+
+/// The meshes' triangles on page `p` only (the others dropped), for per-page checks.
+fn on_page(atlas: &Atlas, p: u32) -> Atlas {
+    let meshes = atlas
+        .meshes
+        .iter()
+        .map(|m| AtlasMesh {
+            indices: m
+                .indices
+                .chunks_exact(3)
+                .zip(&m.page)
+                .filter(|(_, page)| **page == p)
+                .flat_map(|(t, _)| t.iter().copied())
+                .collect(),
+            ..m.clone()
+        })
+        .collect();
+    Atlas {
+        meshes,
+        ..atlas.clone()
+    }
+}
+
+#[test]
+fn a_scene_of_many_pages_packs_in_groups_into_a_valid_atlas() {
+    // 48 unit quads at 64 texels per unit on 192² pages: four a page (67 texels a side with
+    // their padding), four pages' worth of surface (27 quads at xatlas's 75%) a group.
+    let meshes: Vec<_> = (0..48)
+        .map(|i| quad(2.0 * (i % 10) as f32, 2.0 * (i / 10) as f32, 0.0, 1.0, 1.0))
+        .collect();
+    let inputs = inputs(&meshes);
+    let opts = AtlasOptions {
+        page_size: 192,
+        ..options(Some(64.0), None, 2)
+    };
+    let groups = page_groups(&inputs, 64.0, 192);
+    assert_eq!(groups, [0..27, 27..48]);
+    assert_eq!(groups[0].start, 0);
+    assert_eq!(groups.last().map(|g| g.end), Some(inputs.len()));
+    assert!(groups.windows(2).all(|w| w[0].end == w[1].start));
+    let atlas = pack(&inputs, &opts).unwrap();
+    check_mapping(&inputs, &atlas);
+    assert_eq!(atlas.texels_per_unit, 64.0);
+    assert!(atlas.width <= 192 && atlas.height <= 192);
+    let mut used = std::collections::BTreeSet::new();
+    for mesh in &atlas.meshes {
+        assert!(mesh.page.iter().all(|&p| p < atlas.pages));
+        used.extend(mesh.page.iter().copied());
+        let area = uv_area(mesh);
+        assert!((area / 4096.0 - 1.0).abs() < 0.05, "density kept: {area}");
+    }
+    assert_eq!(used.len(), atlas.pages as usize, "every page is used");
+    for p in 0..atlas.pages {
+        let (gap, _) = check_charts(&on_page(&atlas, p));
+        assert!(gap >= 2.0, "page {p}: charts {gap} texels apart");
+    }
+    // The groups' partly filled last pages cost at most one page a group over one atlas.
+    let stats = check_inputs(&inputs).unwrap();
+    let sizing = Sizing::from_options(&opts).unwrap();
+    let one = pack_group(&inputs, &opts, sizing, &stats, &mut |_| {}).unwrap();
+    println!(
+        "grouped: {} pages, one atlas: {} pages",
+        atlas.pages, one.pages
+    );
+    assert!(atlas.pages <= one.pages + groups.len() as u32);
+    // The same bytes again (the groups run in parallel).
+    assert_eq!(pack(&inputs, &opts).unwrap(), atlas);
+}
+
+#[test]
+fn a_group_error_names_the_mesh_in_the_whole_input() {
+    let error = AtlasError::Internal {
+        mesh: 3,
+        reason: "x".into(),
+    }
+    .offset_mesh(10);
+    assert!(matches!(error, AtlasError::Internal { mesh: 13, .. }));
+}
