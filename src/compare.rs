@@ -26,7 +26,6 @@
 //! `d` is below [`CompareOptions::contact_texels`] texel widths; otherwise *lit* `V > 0.995`,
 //! *umbra* `V < 0.005`, *penumbra* between; *indirect* where no emitter faces the texel at all.
 
-pub mod accuracy;
 pub mod chart;
 mod metrics;
 pub mod pictures;
@@ -247,7 +246,7 @@ pub fn compare(
         crate::files::write_atomically(&out_dir.join(file), bytes).map(|_| file.to_string())
     };
     files.push("reference.exr".into());
-    m.reference.write_exr(&out_dir.join("reference.exr"))?;
+    crate::files::write_atomically(&out_dir.join("reference.exr"), &m.reference.exr_bytes()?)?;
     log("pictures");
     files.extend(write_pictures(&m, options, &write)?);
 

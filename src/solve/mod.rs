@@ -213,7 +213,7 @@ pub struct SolveStats {
     /// Power received directly by all patches, W (mean over RGB). The hierarchical solver
     /// counts the elements it solves, which leaves out those buried under closed geometry (a
     /// floor under a box): on interior-20 it reads 750 W where integrating the direct light
-    /// over every element gives 761 W (`examples/light_shown.rs`).
+    /// over every element gives 761 W (`penumbra measure light-shown`).
     pub(crate) direct_power: f64,
     /// Power absorbed by all patches, W (mean over RGB).
     pub absorbed_power: f64,

@@ -1,7 +1,7 @@
 //! A bake's float lightmap against the Monte Carlo reference of its own layout, by surface
 //! class and light: `penumbra reference BAKED.glb --out REF.exr --against BAKED.exr`.
 //!
-//! The measure is the one [`crate::compare`] documents (RMSE with the reference's variance
+//! The measure is the one `penumbra compare` documents (RMSE with the reference's variance
 //! removed), but relative to the mean reference irradiance `E` of all covered texels, so that
 //! scenes without a fully lit region (a city lit by street lamps) are measured too:
 //!
