@@ -32,10 +32,8 @@ pub mod pictures;
 mod report;
 mod runs;
 
-pub use metrics::{
-    ErrorStats, MeshError, MeshSample, Region, ShadowError, classify, lightmap_error,
-    mean_lit_irradiance, mesh_error, mesh_samples, shadow_error,
-};
+pub(crate) use metrics::{ErrorStats, MeshSample, mean_lit_irradiance};
+pub use metrics::{Region, classify, lightmap_error, mesh_error, mesh_samples, shadow_error};
 pub use runs::Method;
 
 use crate::error::{Error, Result};

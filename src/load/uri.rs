@@ -13,11 +13,11 @@ use std::io::Read;
 use std::path::{Component, Path, PathBuf};
 
 /// Why a URI was refused, or what reading its file found.
-pub type Refusal = String;
+pub(crate) type Refusal = String;
 
 /// The folders a glTF's URIs may lead into: the input's own, plus the ones allowed on purpose
 /// (`--allow-outside DIR`).
-pub struct Confinement<'a> {
+pub(crate) struct Confinement<'a> {
     /// Folders allowed besides the input's own, as given.
     pub allow: &'a [PathBuf],
 }

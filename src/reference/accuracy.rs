@@ -29,7 +29,7 @@ use std::path::Path;
 /// A texel is *ground* when it faces up and lies within this fraction of the scene's height
 /// span (the up-facing texels' height range) above the lowest up-facing texel: one storey in a
 /// city 50 m tall, a table top's thickness in a room.
-pub const GROUND_BAND: f64 = 0.04;
+pub(crate) const GROUND_BAND: f64 = 0.04;
 
 /// Error of one set of texels, relative to the mean reference irradiance of all covered texels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]

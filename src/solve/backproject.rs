@@ -94,7 +94,7 @@ impl Occluders {
 /// A convex region bounded by planes: a conservative stand-in for the convex hull of a point
 /// set (a cluster of receiving points and an emitter), used to cull occluders.
 #[derive(Clone, Debug, Default)]
-pub struct Shaft {
+pub(crate) struct Shaft {
     /// Outward unit normal and a point of each bounding plane.
     planes: Vec<(DVec3, DVec3)>,
     tol: f64,
@@ -255,7 +255,7 @@ impl PieceSet {
 /// Reusable buffers of [`Scratch::visible_form_factor`]: one per thread saves the allocations
 /// of every evaluation.
 #[derive(Clone, Debug, Default)]
-pub struct Scratch {
+pub(crate) struct Scratch {
     pieces: PieceSet,
     next: PieceSet,
     projected: PieceSet,

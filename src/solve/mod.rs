@@ -268,7 +268,7 @@ impl SurfacePoint {
 /// cut (a contact or hard shadow line, split per side) goes straight into its own side, even
 /// where its triangles are slivers along the line (toward one of their centroids it went
 /// nearly along the line, and its shadow ray grazed past the occluder's edge).
-pub fn evaluation_points(
+pub(crate) fn evaluation_points(
     scene: &Scene,
     vis: &Visibility,
     mesh: &ReceiverMesh,
