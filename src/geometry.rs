@@ -453,7 +453,12 @@ pub(crate) struct BoxGrid {
 impl BoxGrid {
     /// The grid of `dims` cells of size `cell` from `min`, over the items' `boxes` (min,
     /// max). Points outside it fall in its border cells.
-    pub fn new(min: DVec2, cell: DVec2, dims: (usize, usize), boxes: &[(DVec2, DVec2)]) -> Self {
+    pub(crate) fn new(
+        min: DVec2,
+        cell: DVec2,
+        dims: (usize, usize),
+        boxes: &[(DVec2, DVec2)],
+    ) -> Self {
         let mut grid = BoxGrid {
             min,
             cell,
@@ -482,7 +487,7 @@ impl BoxGrid {
     }
 
     /// How many cell entries [`BoxGrid::new`] would make (the cells each box meets, summed).
-    pub fn entries(
+    pub(crate) fn entries(
         min: DVec2,
         cell: DVec2,
         dims: (usize, usize),

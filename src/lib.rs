@@ -18,6 +18,7 @@
 // The docs describe how each stage works, private helpers included (their links resolve with
 // `cargo doc --document-private-items`).
 #![allow(rustdoc::private_intra_doc_links)]
+#![warn(unreachable_pub)]
 
 // The stages, in pipeline order.
 

@@ -39,7 +39,7 @@ impl Confinement<'_> {
     }
 
     /// The regular file a (percent-decoded) relative URI names, checked against the roots.
-    pub fn resolve(&self, gltf_path: &Path, decoded: &str) -> Result<PathBuf, Refusal> {
+    pub(crate) fn resolve(&self, gltf_path: &Path, decoded: &str) -> Result<PathBuf, Refusal> {
         let dir = match gltf_path.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => Path::new("."),

@@ -57,7 +57,7 @@ const OBJECT_MEMBERS: [&str; 13] = [
 ];
 
 /// Checks the shapes, then every index of `root` against the array it points into.
-pub fn check(root: &Value) -> Result<(), Invalid> {
+pub(super) fn check(root: &Value) -> Result<(), Invalid> {
     shapes(root, &mut String::new())?;
     for key in OBJECT_ARRAYS {
         for (i, v) in items(root, key) {
