@@ -485,11 +485,11 @@ fn scene_for(gltf: &Gltf, options: &BakeOptions) -> Result<(Scene, scene::cut::C
 /// its geometry (a density from the area alone gives a large flat ground the texels that its
 /// thousands of small props need); the charts go onto as many `--page-size` pages as they
 /// need, so any scene fits.
-pub const TEXELS_PER_TRIANGLE: f64 = 32.0;
+pub(crate) const TEXELS_PER_TRIANGLE: f64 = 32.0;
 
 /// Bounds of the default lightmap's texel count (see [`TEXELS_PER_TRIANGLE`]): from one 512²
 /// page to four 2048² pages' worth.
-pub const DEFAULT_TEXELS: std::ops::RangeInclusive<f64> = 262_144.0..=16_777_216.0;
+pub(crate) const DEFAULT_TEXELS: std::ops::RangeInclusive<f64> = 262_144.0..=16_777_216.0;
 
 /// The lightmap density (texels per scene unit) of a bake that gives neither
 /// `--texels-per-unit` nor `--resolution`: [`TEXELS_PER_TRIANGLE`] texels per triangle within
@@ -604,12 +604,12 @@ const ATLAS_AREA: f64 = 1000.0;
 /// The default element budget is one element per this many lightmap texels the surfaces cover
 /// (about an 8 x 8 texel square per two elements): a finer mesh than the lightmap can show
 /// costs time for nothing.
-pub const TEXELS_PER_ELEMENT: f64 = 32.0;
+pub(crate) const TEXELS_PER_ELEMENT: f64 = 32.0;
 
 /// The default element budget is at least this many elements per input triangle, and per
 /// element of the geometry's own coarsest meshing ([`mesh::geometry_floor`]), so that the light
 /// has elements of its own beyond the geometry's.
-pub const ELEMENTS_PER_TRIANGLE: f64 = 1.5;
+pub(crate) const ELEMENTS_PER_TRIANGLE: f64 = 1.5;
 
 /// How many times [`element_budget`] counts the geometry's floor, each time at the budget the
 /// last count raised it to.
@@ -620,12 +620,12 @@ const FLOOR_PASSES: usize = 3;
 /// (0.91% at 20 000, for about three times the solve). The maximum holds for the budget from the
 /// texels and the triangles; the discontinuity lines may raise it further, to
 /// [`LINES_BUDGET_MAX`].
-pub const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 5_000..=250_000;
+pub(crate) const DEFAULT_BUDGET: std::ops::RangeInclusive<usize> = 5_000..=250_000;
 
 /// The most elements the floor of the geometry and its discontinuity lines may raise the default
 /// budget to: a real city's hard shadow lines, all kept, take more than [`DEFAULT_BUDGET`]
 /// allows (Florence's 35 373 triangles: 522 071 elements).
-pub const LINES_BUDGET_MAX: usize = 1_000_000;
+pub(crate) const LINES_BUDGET_MAX: usize = 1_000_000;
 
 /// The element budget of a bake, and what chose it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

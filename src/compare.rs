@@ -26,17 +26,14 @@
 //! `d` is below [`CompareOptions::contact_texels`] texel widths; otherwise *lit* `V > 0.995`,
 //! *umbra* `V < 0.005`, *penumbra* between; *indirect* where no emitter faces the texel at all.
 
-pub mod accuracy;
 pub mod chart;
 mod metrics;
 pub mod pictures;
 mod report;
 mod runs;
 
-pub use metrics::{
-    ErrorStats, MeshError, MeshSample, Region, ShadowError, classify, lightmap_error,
-    mean_lit_irradiance, mesh_error, mesh_samples, shadow_error,
-};
+pub(crate) use metrics::{ErrorStats, MeshSample, mean_lit_irradiance};
+pub use metrics::{Region, classify, lightmap_error, mesh_error, mesh_samples, shadow_error};
 pub use runs::Method;
 
 use crate::error::{Error, Result};
@@ -247,7 +244,7 @@ pub fn compare(
         crate::files::write_atomically(&out_dir.join(file), bytes).map(|_| file.to_string())
     };
     files.push("reference.exr".into());
-    m.reference.write_exr(&out_dir.join("reference.exr"))?;
+    crate::files::write_atomically(&out_dir.join("reference.exr"), &m.reference.exr_bytes()?)?;
     log("pictures");
     files.extend(write_pictures(&m, options, &write)?);
 

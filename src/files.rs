@@ -248,7 +248,7 @@ impl Drop for Staged {
 
 /// The most bytes of a destination's name that its temporary file's name keeps: with the dot,
 /// the process id and the counter, the name stays well within 255 bytes.
-pub const TMP_STEM_BYTES: usize = 128;
+pub(crate) const TMP_STEM_BYTES: usize = 128;
 
 /// The longest prefix of `name` of at most `max` bytes that ends on a character boundary.
 fn truncated(name: &str, max: usize) -> &str {

@@ -370,7 +370,8 @@ pub fn triangle_area(p: &[DVec3; 3]) -> f64 {
 /// The six faces of a box as quads of [`box_corners`] indices (corner `c` has x from bit 0,
 /// y from bit 1, z from bit 2), counter-clockwise seen from outside: z = 0, z = 1, y = 0,
 /// y = 1, x = 0, x = 1.
-pub const BOX_FACES: [[u32; 4]; 6] = [
+#[cfg(test)]
+pub(crate) const BOX_FACES: [[u32; 4]; 6] = [
     [0, 2, 3, 1],
     [4, 5, 7, 6],
     [0, 1, 5, 4],
@@ -440,7 +441,7 @@ pub(crate) fn triangle_bounds(t: &[DVec2; 3]) -> (DVec2, DVec2) {
 /// A uniform grid of buckets over a 2D box (plane coordinates): cell `(x, y)` lists, in
 /// increasing order, the items whose bounding boxes meet it. Point location in a mesh and
 /// the triangles a segment passes near use it.
-pub struct BoxGrid {
+pub(crate) struct BoxGrid {
     min: DVec2,
     cell: DVec2,
     dims: (usize, usize),
@@ -452,7 +453,12 @@ pub struct BoxGrid {
 impl BoxGrid {
     /// The grid of `dims` cells of size `cell` from `min`, over the items' `boxes` (min,
     /// max). Points outside it fall in its border cells.
-    pub fn new(min: DVec2, cell: DVec2, dims: (usize, usize), boxes: &[(DVec2, DVec2)]) -> Self {
+    pub(crate) fn new(
+        min: DVec2,
+        cell: DVec2,
+        dims: (usize, usize),
+        boxes: &[(DVec2, DVec2)],
+    ) -> Self {
         let mut grid = BoxGrid {
             min,
             cell,
@@ -481,7 +487,7 @@ impl BoxGrid {
     }
 
     /// How many cell entries [`BoxGrid::new`] would make (the cells each box meets, summed).
-    pub fn entries(
+    pub(crate) fn entries(
         min: DVec2,
         cell: DVec2,
         dims: (usize, usize),

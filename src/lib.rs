@@ -18,6 +18,7 @@
 // The docs describe how each stage works, private helpers included (their links resolve with
 // `cargo doc --document-private-items`).
 #![allow(rustdoc::private_intra_doc_links)]
+#![warn(unreachable_pub)]
 
 // The stages, in pipeline order.
 
@@ -88,16 +89,24 @@ pub mod files;
 // Tools around the pipeline.
 
 // `penumbra compare`: every method against the Monte Carlo reference over a budget sweep, by
-// region; report, charts, picture strip, failure sweep.
+// region; report, charts, picture strip, failure sweep (feature `measure`).
+#[cfg(feature = "measure")]
 pub mod compare;
+
+// `penumbra measure ...`: the solvers, the light tree and the meshes measured one at a time
+// (feature `measure`).
+#[cfg(feature = "measure")]
+pub mod measure;
 
 // Debug views (SVG).
 pub mod debug;
 
-// Generated test scenes, and the failure-sweep family.
+// Generated test scenes, and the failure-sweep family (feature `fixtures`; the unit tests
+// always have them).
+#[cfg(any(test, feature = "fixtures"))]
 pub mod fixtures;
 
-// Monte Carlo reference for a baked lightmap.
+// Monte Carlo reference for a baked lightmap, and a bake's error against it.
 pub mod reference;
 
 // Pictures of a baked glb.

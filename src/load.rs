@@ -56,7 +56,7 @@ pub struct Gltf {
 
 /// Required extensions that change how geometry is stored or instanced, which this loader does
 /// not implement.
-pub const UNREADABLE_EXTENSIONS: [&str; 3] = [
+pub(crate) const UNREADABLE_EXTENSIONS: [&str; 3] = [
     "KHR_draco_mesh_compression",
     "EXT_meshopt_compression",
     "EXT_mesh_gpu_instancing",
@@ -631,26 +631,26 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
 }
 
 /// The deepest a node may lie in the node hierarchy (its root at depth 0).
-pub const MAX_DEPTH: usize = 1024;
+pub(crate) const MAX_DEPTH: usize = 1024;
 
 /// The largest albedo a surface is given: an albedo of 1 reflects everything it receives, so
 /// the bounces in a closed room never converge.
-pub const MAX_ALBEDO: f64 = 0.99;
+pub(crate) const MAX_ALBEDO: f64 = 0.99;
 
 /// The largest scene a bake takes, in scene units across (the bounding box diagonal): every
 /// tolerance is relative to it, and the lightmap atlas and the BVH work in f32.
-pub const MAX_EXTENT: f64 = 1e9;
+pub(crate) const MAX_EXTENT: f64 = 1e9;
 
 /// The smallest scene a bake takes, in scene units across (the bounding box diagonal): the
 /// irradiance of a punctual light grows as the inverse square of the scale, past what the f32
 /// lightmap holds, and spade's refinement loses precision near f64's smallest numbers. A
 /// micrometre-sized scene (1e-6) bakes.
-pub const MIN_EXTENT: f64 = 1e-9;
+pub(crate) const MIN_EXTENT: f64 = 1e-9;
 
 /// The largest ratio of the scene's extent to its typical (median) triangle. The geometric
 /// tolerances of input geometry are 1e-6 of the extent ([`crate::scene::tolerance::INPUT`]); past this ratio most triangles would fall below
 /// them and vanish from the bake. A stray vertex far from everything else is the usual cause.
-pub const MAX_EXTENT_RATIO: f64 = 1e6;
+pub(crate) const MAX_EXTENT_RATIO: f64 = 1e6;
 
 /// Refuses scenes whose extent no bake can resolve ([`MIN_EXTENT`], [`MAX_EXTENT`],
 /// [`MAX_EXTENT_RATIO`]),

@@ -102,6 +102,10 @@ enum Command {
     /// each lightmap against a Monte Carlo reference (overall and by region), and write
     /// report.json/.md, log-log charts (SVG and PNG), a picture strip and a failure sweep.
     Compare(CompareArgs),
+    /// Measure one part of the bake on one scene (the solvers, the light tree, the meshes) and
+    /// print the figures on stdout.
+    #[command(subcommand)]
+    Measure(penumbra::measure::Measure),
 }
 
 #[derive(Args)]
@@ -436,6 +440,7 @@ fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Mesh(args) => mesh(args),
         Command::Reference(args) => reference(args),
         Command::Compare(args) => compare(args),
+        Command::Measure(measure) => measure.run(),
     }
 }
 
@@ -524,16 +529,16 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
     let seconds = start.elapsed().as_secs_f64();
     let accuracy = match &args.against {
         Some(exr) => {
-            let bake = penumbra::compare::accuracy::read_lightmap(
+            let bake = penumbra::reference::accuracy::read_lightmap(
                 exr,
                 map.width,
                 map.height,
                 layout.pages,
             )?;
-            let report = penumbra::compare::accuracy::measure(&bake, &map, &layout);
+            let report = penumbra::reference::accuracy::measure(&bake, &map, &layout);
             if args.error_map.is_some() {
                 let texels =
-                    penumbra::compare::accuracy::error_map(&bake, &map, &layout, report.mean);
+                    penumbra::reference::accuracy::error_map(&bake, &map, &layout, report.mean);
                 let bytes = penumbra::write::exr_bytes(&texels, map.width, map.height)?;
                 staged.add(paths.last().expect("--error-map is named"), &bytes)?;
             }
@@ -575,7 +580,7 @@ fn reference(args: ReferenceArgs) -> anyhow::Result<()> {
         let _ = write!(
             std::io::stderr(),
             "{}",
-            penumbra::compare::accuracy::text(a)
+            penumbra::reference::accuracy::text(a)
         );
     }
     staged.commit()?;

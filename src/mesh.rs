@@ -101,10 +101,15 @@ impl ReceiverMesh {
 }
 
 /// Minimum angle for quality refinement, degrees.
-pub const ANGLE_LIMIT_DEG: f64 = 25.0;
+pub(crate) const ANGLE_LIMIT_DEG: f64 = 25.0;
 
 /// Triangulates one polygon without extra constraints; see [`triangulate_with`].
-pub fn triangulate(id: usize, polygon: &Polygon, max_area: f64, vertex_cap: usize) -> ReceiverMesh {
+pub(crate) fn triangulate(
+    id: usize,
+    polygon: &Polygon,
+    max_area: f64,
+    vertex_cap: usize,
+) -> ReceiverMesh {
     triangulate_with(id, polygon, Lines::default(), max_area, vertex_cap).0
 }
 
@@ -424,12 +429,12 @@ fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
 }
 
 /// The element count may exceed the budget by this fraction.
-pub const BUDGET_SLACK: f64 = 0.05;
+pub(crate) const BUDGET_SLACK: f64 = 0.05;
 
 /// When not every discontinuity fits, the wedge pieces kept may take at most this share of what
 /// the coarsest meshing without them leaves of the budget; the rest refines between the lines
 /// (at 0.75 the Cornell box's walls got 8 elements at a budget of 250: 20% error where lit).
-pub const DM_SHARE: f64 = 0.5;
+pub(crate) const DM_SHARE: f64 = 0.5;
 
 /// The coarsest area cap the budget search uses, as a multiple of the average element area
 /// (elements 8x the side of a uniform mesh's): coarser meshes cost no fewer elements on
@@ -438,16 +443,16 @@ const COARSEST: f64 = 64.0;
 
 /// The share of the budget above the coarsest meshing that the discontinuity mesher leaves to
 /// refinement where the light varies most.
-pub const LIGHT_SHARE: f64 = 0.2;
+pub(crate) const LIGHT_SHARE: f64 = 0.2;
 
 /// Rounds of light-driven refinement after discontinuity meshing (each evaluates the direct
 /// light on the whole mesh).
-pub const LIGHT_ROUNDS: usize = 3;
+pub(crate) const LIGHT_ROUNDS: usize = 3;
 
 /// Elements split by [`adaptive`] and by the discontinuity mesher's refinement when their
 /// error (the light's spread over their vertices, or the light they miss between them: see
 /// `refine_by_light`) is more than this fraction of the brightest vertex.
-pub const LIGHT_TOLERANCE: f64 = 0.01;
+pub(crate) const LIGHT_TOLERANCE: f64 = 0.01;
 
 /// The light-driven refinement looks for light missed between an element's vertices in the
 /// elements larger than this fraction of the average element: in smaller ones the vertices
@@ -455,16 +460,16 @@ pub const LIGHT_TOLERANCE: f64 = 0.01;
 /// meshes as looking in every element, and the extra direct light costs 0.12 s of mesh stage on
 /// bevy_DepthOfFieldExample (2048 emitters) instead of 0.95 s; above the average element
 /// (1.0), the two-room house at 2 000 elements showed 92% of its lamps' light instead of 96%.
-pub const MISSED_AREA: f64 = 0.5;
+pub(crate) const MISSED_AREA: f64 = 0.5;
 
 /// The direct light (W/m², linear RGB) at every vertex of a set of meshes.
-pub type Evaluate<'a> = dyn Fn(&[ReceiverMesh]) -> Vec<Vec<glam::DVec3>> + 'a;
+pub(crate) type Evaluate<'a> = dyn Fn(&[ReceiverMesh]) -> Vec<Vec<glam::DVec3>> + 'a;
 
 /// Most meshings of the whole scene [`to_budget`] tries while looking for its area cap.
 const BUDGET_PASSES: usize = 10;
 
 /// The elements of a set of meshes.
-pub fn element_count(meshes: &[ReceiverMesh]) -> usize {
+pub(crate) fn element_count(meshes: &[ReceiverMesh]) -> usize {
     meshes.iter().map(|m| m.triangles.len()).sum()
 }
 
@@ -802,7 +807,7 @@ fn line_spacing(scene: &Scene, budget: usize) -> (f64, f64) {
 /// the angle bound refines thin or notched polygons (boards, walls with doors): the default
 /// element budget leaves room above it (`bake::element_budget`), and the discontinuity mesher
 /// gives its wedges a share of what is left above it ([`DM_SHARE`]).
-pub fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
+pub(crate) fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
     let d0: Vec<Vec<Segment>> = segments
         .iter()
         .map(|segs| {
@@ -819,7 +824,7 @@ pub fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -
 /// [`geometry_floor`], with the wedge pieces too. The default element budget stays above it
 /// (`bake::element_budget`), so that no line the discontinuity stage kept is dropped for the
 /// budget and the open areas between the lines are refined all the same.
-pub fn lines_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
+pub(crate) fn lines_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
     let (snap, clearance) = line_spacing(scene, budget);
     let d0 = segments;
     let coarsest = element_area(scene, budget) * COARSEST;
@@ -840,7 +845,7 @@ pub fn lines_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> u
 
 /// Triangulates a polygon's outline plus the given interior points, with no refinement (the
 /// caller chose the points). Faces outside the polygon are dropped.
-pub fn triangulate_points(id: usize, polygon: &Polygon, points: &[DVec2]) -> ReceiverMesh {
+pub(crate) fn triangulate_points(id: usize, polygon: &Polygon, points: &[DVec2]) -> ReceiverMesh {
     let outline = merge_collinear(&polygon.boundary);
     let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
     for [a, b] in &outline {

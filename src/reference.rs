@@ -53,6 +53,8 @@
 //! Every texel has its own random stream, seeded from the seed and the texel index, so the
 //! result does not depend on the thread count.
 
+pub mod accuracy;
+
 use crate::error::{Error, Result};
 use crate::light::luminance;
 use crate::load::{self, Gltf};
@@ -64,7 +66,6 @@ use crate::write::binding::{self, Binding};
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 use std::f64::consts::PI;
-use std::path::Path;
 
 /// What [`reference`](fn@reference) is told.
 #[derive(Clone, Debug, PartialEq)]
@@ -161,11 +162,6 @@ impl ReferenceMap {
     /// `mean` (H, W/m², linear RGB) as OpenEXR bytes.
     pub fn exr_bytes(&self) -> Result<Vec<u8>> {
         crate::write::exr_bytes(&self.mean, self.width, self.height)
-    }
-
-    /// Writes `mean` (H, W/m², linear RGB) as OpenEXR, atomically.
-    pub(crate) fn write_exr(&self, path: &Path) -> Result<()> {
-        crate::files::write_atomically(path, &self.exr_bytes()?)
     }
 }
 

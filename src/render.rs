@@ -184,7 +184,7 @@ pub fn read_irradiance(path: &std::path::Path) -> Result<Lightmap> {
     while crate::bake::exr_page_path(path, pages).is_file() {
         pages += 1;
     }
-    let texels = crate::compare::accuracy::read_lightmap(path, width, height * pages, pages)?;
+    let texels = crate::reference::accuracy::read_lightmap(path, width, height * pages, pages)?;
     Ok(Lightmap {
         width,
         height,

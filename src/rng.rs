@@ -4,7 +4,7 @@
 //! their inputs from it.
 
 /// The increment of the state per draw: 2^64 divided by the golden ratio, odd.
-pub const GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
+pub(crate) const GAMMA: u64 = 0x9E37_79B9_7F4A_7C15;
 
 /// A SplitMix64 stream; the tuple field is its state (the seed, before the first draw).
 #[derive(Clone, Debug)]

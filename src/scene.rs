@@ -16,16 +16,16 @@ pub mod tolerance {
     /// found again, a box flat in one axis): f64 rounds each operation to about 1e-16 of the
     /// magnitudes involved, so 1e-9 leaves room for millions of operations and is still far
     /// below any modelled feature.
-    pub const COINCIDENT: f64 = 1e-9;
+    pub(crate) const COINCIDENT: f64 = 1e-9;
     /// Input geometry that stands for the same point or plane (the triangles of one planar
     /// polygon, a point set in from an edge): glTF stores coordinates as f32, rounded to about
     /// 6e-8 of their magnitude, so 1e-6 is above that with a margin of about 16. A typical
     /// triangle is larger than this ([`crate::load::MAX_EXTENT_RATIO`]).
-    pub const INPUT: f64 = 1e-6;
+    pub(crate) const INPUT: f64 = 1e-6;
     /// How far rays start off their surfaces and stop short of their targets
     /// ([`crate::visibility::Visibility::epsilon`]): the BVH intersects in f32, about 1e-7 of
     /// the extent, and 1e-5 is a hundred times that.
-    pub const RAY: f64 = 1e-5;
+    pub(crate) const RAY: f64 = 1e-5;
 }
 
 /// A Lambertian surface material.
@@ -292,7 +292,7 @@ impl Instance {
 }
 
 /// A warning that does not stop the bake (skipped items, degenerate triangles).
-pub type Warning = String;
+pub(crate) type Warning = String;
 
 /// The whole scene.
 #[derive(Clone, Debug)]

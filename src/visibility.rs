@@ -53,10 +53,10 @@ pub struct Visibility {
 /// distances that differ by the f32 rounding of the intersection, about 1e-7 of the scene's
 /// extent; epsilon is [`crate::scene::tolerance::RAY`] = 1e-5 of it, so the window is 1e-6 of
 /// the extent.
-pub const TIE: f64 = 0.1;
+pub(crate) const TIE: f64 = 0.1;
 
 /// Slanted rays of [`Visibility::buried`], besides the one along the normal.
-pub const BURIED_RAYS: usize = 8;
+pub(crate) const BURIED_RAYS: usize = 8;
 
 /// A ray's closest intersection.
 #[derive(Clone, Copy, Debug, PartialEq)]

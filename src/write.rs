@@ -28,7 +28,7 @@
 //! [`crate::files`] writes them (temporary file, then rename), so a failure never leaves a half
 //! file. [`binding`] reads the lightmap binding back from a written file.
 
-pub mod binding;
+pub(crate) mod binding;
 
 use crate::atlas::{Atlas, AtlasMesh};
 use crate::error::{Error, Result};

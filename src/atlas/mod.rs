@@ -110,7 +110,7 @@ compile_error!(
 ///
 /// Measured on one connected 20k-triangle grid (charting + parameterization, 2 cores): no limit
 /// 47 s flat / 157 s bumpy; 2000: 3.0 s / 9.5 s; 1000: 1.0 s / 4.5 s; 500: 0.6 s / 2.5 s.
-pub const TRIANGLES_PER_CHART: f64 = 1000.0;
+pub(crate) const TRIANGLES_PER_CHART: f64 = 1000.0;
 
 /// Triangles whose area is below this fraction of the whole input's are left out of the
 /// charts, as degenerate ones are: at the largest density [`check_density`] allows, such a
@@ -124,7 +124,7 @@ const SPECK_AREA: f64 = 1e-9;
 const BOUNDARY_MARGIN: f64 = 0.8;
 
 /// Largest atlas side, in texels, that [`pack`] accepts or produces.
-pub const MAX_RESOLUTION: u32 = 16384;
+pub(crate) const MAX_RESOLUTION: u32 = 16384;
 
 /// Atlas side used when neither `texels_per_unit` nor `resolution` is given.
 pub const DEFAULT_RESOLUTION: u32 = 1024;
@@ -346,7 +346,7 @@ pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, 
 /// density the sizing packing estimates fills the fixed page (the final density is within a
 /// few percent of it, after some seconds more of packing on large scenes). Not called when
 /// packing fails before that.
-pub fn pack_estimating(
+pub(crate) fn pack_estimating(
     inputs: &[AtlasInput<'_>],
     options: &AtlasOptions,
     estimate: &mut dyn FnMut(f32),
@@ -843,7 +843,7 @@ fn pack_group(
 /// Refuses a density at which `area` (scene units²) would need more texels than one
 /// [`MAX_RESOLUTION`]² page holds ([`AtlasError::TooLarge`]): xatlas packs at about 75%
 /// utilization, and this is checked before it allocates huge pages.
-pub fn check_density(area: f64, texels_per_unit: f32) -> Result<(), AtlasError> {
+pub(crate) fn check_density(area: f64, texels_per_unit: f32) -> Result<(), AtlasError> {
     let side = (area / 0.75).sqrt() * f64::from(texels_per_unit);
     if side > f64::from(MAX_RESOLUTION) {
         return Err(AtlasError::TooLarge {

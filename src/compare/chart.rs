@@ -7,7 +7,7 @@ use plotters::prelude::*;
 
 /// One curve.
 #[derive(Clone, Debug)]
-pub struct Series {
+pub(crate) struct Series {
     pub label: String,
     pub colour: (u8, u8, u8),
     /// Dashed (e.g. sampled direct light) rather than solid.

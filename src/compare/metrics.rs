@@ -24,7 +24,7 @@ pub enum Region {
 }
 
 impl Region {
-    pub const ALL: [Region; 5] = [
+    pub(crate) const ALL: [Region; 5] = [
         Region::Lit,
         Region::Penumbra,
         Region::Umbra,
@@ -134,7 +134,7 @@ pub fn lightmap_error(
 
 /// Mean reference irradiance (channel mean) of the lit texels; of all directly lit texels if
 /// none is fully lit; of all covered texels if none is.
-pub fn mean_lit_irradiance(reference: &ReferenceMap, regions: &[Option<Region>]) -> f64 {
+pub(crate) fn mean_lit_irradiance(reference: &ReferenceMap, regions: &[Option<Region>]) -> f64 {
     let mean_of = |keep: &dyn Fn(Region) -> bool| {
         let (mut sum, mut n) = (0.0, 0usize);
         for (i, r) in regions.iter().enumerate() {

@@ -41,7 +41,7 @@ fn linear(rgb: [u8; 3]) -> DVec3 {
 }
 
 /// Signed relative error of the false-colour maps at which the colour saturates.
-pub const ERROR_RANGE: f64 = 0.25;
+pub(crate) const ERROR_RANGE: f64 = 0.25;
 
 /// The diverging colour of a signed relative error: white at 0, red where the bake is too
 /// bright, blue where it is too dark, saturated at ±[`ERROR_RANGE`]. Linear RGB.
@@ -109,7 +109,7 @@ fn filled(reference: &ReferenceMap, texels: Vec<DVec3>) -> Lightmap {
 
 /// A square window of one polygon's plane, scene units.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
-pub struct Window {
+pub(crate) struct Window {
     pub polygon: usize,
     pub min: [f64; 2],
     pub side: f64,

@@ -27,7 +27,6 @@ mod trace;
 mod wedges;
 
 pub use significance::keep_most_significant;
-pub use trace::GENERATOR_SAMPLES;
 
 use crate::scene::Scene;
 use crate::visibility::Visibility;
@@ -41,11 +40,11 @@ use wedges::{Pass, Topology, wedges};
 
 /// Geometric tolerance of the stage, relative to the scene's extent: contacts closer than this
 /// count as touching, and the mesher merges segments closer than this.
-pub const TOLERANCE: f64 = 1e-6;
+pub(crate) const TOLERANCE: f64 = 1e-6;
 
 /// A surface parallel to a receiver and closer to its front than this (relative to the scene's
 /// extent) is treated as lying on it: its outline is a contact (D0) line.
-pub const NEAR_CONTACT: f64 = 1e-3;
+pub(crate) const NEAR_CONTACT: f64 = 1e-3;
 
 /// What made a discontinuity segment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
@@ -63,7 +62,7 @@ pub enum Kind {
 impl Kind {
     /// A jump in the light (a contact, a punctual light's hard shadow): it cannot be
     /// interpolated across, so the mesher always keeps it and values its vertices per side.
-    pub fn is_jump(self) -> bool {
+    pub(crate) fn is_jump(self) -> bool {
         matches!(self, Kind::D0 | Kind::Punctual)
     }
 }
@@ -108,7 +107,7 @@ pub struct DmStats {
     pub kept: usize,
     /// Wedge pieces whose generator was hidden.
     pub hidden: usize,
-    /// Wedges whose generator the light does not see at any of [`GENERATOR_SAMPLES`] points
+    /// Wedges whose generator the light does not see at any of [`GENERATOR_SAMPLES`](trace::GENERATOR_SAMPLES) points
     /// (an occluder behind a wall, in another room): not intersected with any receiver, as
     /// every piece of them would be hidden.
     pub unseen: usize,

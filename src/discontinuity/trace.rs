@@ -130,7 +130,7 @@ fn split_by_visibility(
 }
 
 /// Points along a wedge's generator at which [`light_sees_generator`] looks.
-pub const GENERATOR_SAMPLES: usize = 9;
+pub(crate) const GENERATOR_SAMPLES: usize = 9;
 
 /// Does the light see the wedge's generator at one of [`GENERATOR_SAMPLES`] points along it,
 /// with the same rays [`generator_visible`] casts towards the light? A VE wedge: its emitter

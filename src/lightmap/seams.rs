@@ -54,11 +54,11 @@ use serde::Serialize;
 /// product (8.1 degrees): the planar pieces of one surface, and the facets of a finely
 /// tessellated curved one. (The seamoptimizer library's example stitches "triangles that are
 /// on the same plane" at the same threshold.)
-pub const SMOOTH_COS: f64 = 0.99;
+pub(crate) const SMOOTH_COS: f64 = 0.99;
 
 /// Weight of the term holding each stitched texel to its baked value, relative to a seam
 /// sample's (see the module documentation).
-pub const LAMBDA: f64 = 0.1;
+pub(crate) const LAMBDA: f64 = 0.1;
 
 /// Two UV ends closer than this (texels) are the same place.
 const SAME_UV: f64 = 1e-3;

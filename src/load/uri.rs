@@ -13,11 +13,11 @@ use std::io::Read;
 use std::path::{Component, Path, PathBuf};
 
 /// Why a URI was refused, or what reading its file found.
-pub type Refusal = String;
+pub(crate) type Refusal = String;
 
 /// The folders a glTF's URIs may lead into: the input's own, plus the ones allowed on purpose
 /// (`--allow-outside DIR`).
-pub struct Confinement<'a> {
+pub(crate) struct Confinement<'a> {
     /// Folders allowed besides the input's own, as given.
     pub allow: &'a [PathBuf],
 }
@@ -39,7 +39,7 @@ impl Confinement<'_> {
     }
 
     /// The regular file a (percent-decoded) relative URI names, checked against the roots.
-    pub fn resolve(&self, gltf_path: &Path, decoded: &str) -> Result<PathBuf, Refusal> {
+    pub(crate) fn resolve(&self, gltf_path: &Path, decoded: &str) -> Result<PathBuf, Refusal> {
         let dir = match gltf_path.parent() {
             Some(d) if !d.as_os_str().is_empty() => d,
             _ => Path::new("."),

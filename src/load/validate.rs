@@ -17,7 +17,7 @@
 use serde_json::Value;
 
 /// A problem found: the item's JSON path, and what is wrong with it.
-pub struct Invalid {
+pub(crate) struct Invalid {
     pub item: String,
     pub(crate) reason: String,
 }
@@ -57,7 +57,7 @@ const OBJECT_MEMBERS: [&str; 13] = [
 ];
 
 /// Checks the shapes, then every index of `root` against the array it points into.
-pub fn check(root: &Value) -> Result<(), Invalid> {
+pub(super) fn check(root: &Value) -> Result<(), Invalid> {
     shapes(root, &mut String::new())?;
     for key in OBJECT_ARRAYS {
         for (i, v) in items(root, key) {

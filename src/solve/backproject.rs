@@ -94,7 +94,7 @@ impl Occluders {
 /// A convex region bounded by planes: a conservative stand-in for the convex hull of a point
 /// set (a cluster of receiving points and an emitter), used to cull occluders.
 #[derive(Clone, Debug, Default)]
-pub struct Shaft {
+pub(crate) struct Shaft {
     /// Outward unit normal and a point of each bounding plane.
     planes: Vec<(DVec3, DVec3)>,
     tol: f64,
@@ -103,7 +103,7 @@ pub struct Shaft {
 impl Shaft {
     /// The face planes of the convex hull of `points` (brute force over point triples: for a
     /// dozen points or so). A degenerate set gives fewer planes, so a larger region.
-    pub fn hull(points: &[DVec3]) -> Shaft {
+    pub(crate) fn hull(points: &[DVec3]) -> Shaft {
         let c = points.iter().copied().sum::<DVec3>() / points.len().max(1) as f64;
         let scale = points.iter().map(|q| q.distance(c)).fold(0.0, f64::max);
         // Coincidence to rounding, relative to the points' own size.
@@ -165,7 +165,7 @@ impl Shaft {
     }
 
     /// The distance by which a polygon must be beyond a plane to be excluded (scene units).
-    pub fn tolerance(&self) -> f64 {
+    pub(crate) fn tolerance(&self) -> f64 {
         self.tol
     }
 }
@@ -255,7 +255,7 @@ impl PieceSet {
 /// Reusable buffers of [`Scratch::visible_form_factor`]: one per thread saves the allocations
 /// of every evaluation.
 #[derive(Clone, Debug, Default)]
-pub struct Scratch {
+pub(crate) struct Scratch {
     pieces: PieceSet,
     next: PieceSet,
     projected: PieceSet,
@@ -388,7 +388,7 @@ impl Scratch {
     /// projection first. Lambert's contour formula over the remaining pieces gives the form
     /// factor. When no occluder projects with area, `unoccluded` (if given) is returned as the
     /// form factor instead of recomputing it.
-    pub fn visible_form_factor<'a>(
+    pub(crate) fn visible_form_factor<'a>(
         &mut self,
         p: DVec3,
         n: DVec3,

@@ -54,7 +54,7 @@ impl FormFactors {
 const RAYCAST_SPLIT: usize = 4;
 
 /// Sample points (disks) per patch of [`FormFactors::Raycast`].
-pub const RAYCAST_SAMPLES: usize = RAYCAST_SPLIT * RAYCAST_SPLIT;
+pub(crate) const RAYCAST_SAMPLES: usize = RAYCAST_SPLIT * RAYCAST_SPLIT;
 
 /// The culls shared by the point-to-patch factors: a planar polygon does not see itself; the
 /// receiver behind (or in the plane of) the patch; the patch entirely below the receiver's

@@ -44,7 +44,7 @@ use std::f64::consts::PI;
 pub const DEFAULT_RESOLUTION: u32 = 64;
 
 /// Smallest and largest resolution accepted (even values only).
-pub const RESOLUTION_RANGE: std::ops::RangeInclusive<u32> = 2..=2048;
+pub(crate) const RESOLUTION_RANGE: std::ops::RangeInclusive<u32> = 2..=2048;
 
 /// The five faces, as `(forward, right, up)` in the point's frame `(u, v, n)`: index 0 is the
 /// top face, 1 to 4 the sides. Local coordinates of a point `q` (relative to the hemicube's

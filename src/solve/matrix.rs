@@ -31,10 +31,10 @@ use std::time::Instant;
 pub const DEFAULT_MEMORY_MIB: u64 = 1024;
 
 /// Bytes per matrix entry (f64).
-pub const BYTES_PER_ENTRY: u64 = 8;
+pub(crate) const BYTES_PER_ENTRY: u64 = 8;
 
 /// Most Gauss-Seidel sweeps of an unbounded solve.
-pub const MAX_SWEEPS: usize = 1000;
+pub(crate) const MAX_SWEEPS: usize = 1000;
 
 /// Gauss-Seidel stops when a sweep changes the power by less than this fraction of
 /// `--tolerance` (relative to the source power): a sweep costs `n²` multiplications, far less

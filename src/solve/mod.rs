@@ -213,7 +213,7 @@ pub struct SolveStats {
     /// Power received directly by all patches, W (mean over RGB). The hierarchical solver
     /// counts the elements it solves, which leaves out those buried under closed geometry (a
     /// floor under a box): on interior-20 it reads 750 W where integrating the direct light
-    /// over every element gives 761 W (`examples/light_shown.rs`).
+    /// over every element gives 761 W (`penumbra measure light-shown`).
     pub(crate) direct_power: f64,
     /// Power absorbed by all patches, W (mean over RGB).
     pub absorbed_power: f64,
@@ -268,7 +268,7 @@ impl SurfacePoint {
 /// cut (a contact or hard shadow line, split per side) goes straight into its own side, even
 /// where its triangles are slivers along the line (toward one of their centroids it went
 /// nearly along the line, and its shadow ray grazed past the occluder's edge).
-pub fn evaluation_points(
+pub(crate) fn evaluation_points(
     scene: &Scene,
     vis: &Visibility,
     mesh: &ReceiverMesh,

@@ -48,7 +48,7 @@ use std::time::Instant;
 pub const DEFAULT_SAMPLES: usize = 256;
 
 /// The range of `--sky-samples`.
-pub const SAMPLES_RANGE: std::ops::RangeInclusive<usize> = 1..=65536;
+pub(crate) const SAMPLES_RANGE: std::ops::RangeInclusive<usize> = 1..=65536;
 
 /// `--stats`: `solve.sky`.
 #[derive(Clone, Debug, Default, serde::Serialize)]

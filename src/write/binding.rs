@@ -12,7 +12,7 @@ use gltf::accessor::Dimensions;
 
 /// How one primitive samples its lightmap.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Binding {
+pub(crate) struct Binding {
     /// The UV set, `TEXCOORD_<tex_coord>` (`MOZ_lightmap.texCoord`; 1 when absent, the set
     /// lightmaps conventionally use and the one the writer fills).
     pub(crate) tex_coord: u32,

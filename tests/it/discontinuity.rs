@@ -595,7 +595,7 @@ fn a_closed_house_shows_all_its_lamps_light_at_a_tight_budget() {
 fn at_scale_the_discontinuity_mesh_shows_the_direct_light_better_than_uniform_meshing() {
     // Not only on the Cornell box: a 6 000-triangle town under the sun and 20x20 boxes under an
     // area light, at 20 000 elements. `compare::mesh_samples` compares what the lightmap shows
-    // inside every element with the exact direct light there (`examples/mesh_error.rs`).
+    // inside every element with the exact direct light there (`penumbra measure mesh-error`).
     // Measured RMSE, uniform against discontinuity: town 12.1% against 10.2% of the lit mean,
     // box grid 26.8% against 18.9%. The town's sun shadow lines all stay in the mesh, beside
     // the outline too, where each costs a row of thin elements out of the fixed budget (at the

@@ -74,10 +74,10 @@ fn small_osm_like_city_bakes_to_the_reference_sun_light() {
     };
     let (map, layout) = penumbra::reference::reference_and_layout(&baked, &options).unwrap();
     let texels =
-        penumbra::compare::accuracy::read_lightmap(&exr, map.width, map.height, layout.pages)
+        penumbra::reference::accuracy::read_lightmap(&exr, map.width, map.height, layout.pages)
             .unwrap();
-    let report = penumbra::compare::accuracy::measure(&texels, &map, &layout);
-    print!("{}", penumbra::compare::accuracy::text(&report));
+    let report = penumbra::reference::accuracy::measure(&texels, &map, &layout);
+    print!("{}", penumbra::reference::accuracy::text(&report));
     // Measured: 2.11% RMSE over all texels, ground lit 1.15%, ground shadow 1.34%, walls lit
     // 4.87% (6.34%, 1.12%, 9.33% and 11.96% when shadow lines beside the outline were pulled
     // in or left out).

@@ -163,7 +163,7 @@ fn rms_max(e: &[f64]) -> (f64, f64) {
 
 /// The sky's visible fraction `V` at ground points near and far from the box, and at the
 /// box's walls, against the closed form. Measured with 256 rays (the default): RMS 0.0034,
-/// largest 0.016 and bias 2e-5 on the ground, RMS 0.0035 on the wall (`examples/sky_noise.rs`
+/// largest 0.016 and bias 2e-5 on the ground, RMS 0.0035 on the wall (`cargo bench --bench sky`
 /// has more). An estimator without the cosine weighting (uniform directions) is off by 0.021
 /// RMS, more than three times the tolerance.
 #[test]

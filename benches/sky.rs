@@ -3,13 +3,13 @@
 //! ray count, against the closed form `fixtures::box_on_ground_open_sky`.
 //!
 //! ```text
-//! cargo run --release --example sky_noise
+//! cargo bench --bench sky
 //! ```
 //!
 //! Prints, per ray count, the RMS and largest error of `V` (a fraction of `pi L_sky`; on the
 //! ground also the mean error, the bias) over ground points (a grid), over contact points (1 mm
 //! off the walls' bases, where the box blocks half) and over points of a wall, and the time per
-//! point on one thread. The README's "The sky" quotes it.
+//! point on one thread (no flags). docs/how-it-works.md ("The sky") quotes it.
 
 use glam::DVec3;
 use penumbra::fixtures;

@@ -1,7 +1,7 @@
 //! A bake's float lightmap against the Monte Carlo reference of its own layout, by surface
 //! class and light: `penumbra reference BAKED.glb --out REF.exr --against BAKED.exr`.
 //!
-//! The measure is the one [`crate::compare`] documents (RMSE with the reference's variance
+//! The measure is the one `penumbra compare` documents (RMSE with the reference's variance
 //! removed), but relative to the mean reference irradiance `E` of all covered texels, so that
 //! scenes without a fully lit region (a city lit by street lamps) are measured too:
 //!
@@ -29,7 +29,7 @@ use std::path::Path;
 /// A texel is *ground* when it faces up and lies within this fraction of the scene's height
 /// span (the up-facing texels' height range) above the lowest up-facing texel: one storey in a
 /// city 50 m tall, a table top's thickness in a room.
-pub const GROUND_BAND: f64 = 0.04;
+pub(crate) const GROUND_BAND: f64 = 0.04;
 
 /// Error of one set of texels, relative to the mean reference irradiance of all covered texels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]

@@ -2,7 +2,7 @@
 //! 64 and 256 shadow rays, on the Cornell box and on grids of boxes under an area light.
 //!
 //! ```text
-//! cargo run --release --example bench_direct [-- --budget N --reps R]
+//! cargo bench --bench direct [-- --budget N --reps R]
 //! ```
 //!
 //! For each scene and method: the wall time of the direct light at every vertex of a uniform
@@ -187,14 +187,15 @@ fn unoccluded(
 fn main() {
     let mut budget = 20_000;
     let mut reps = 3;
-    let mut args = std::env::args().skip(1);
+    // `cargo bench` passes --bench; filters are not supported.
+    let mut args = std::env::args().skip(1).filter(|a| a != "--bench");
     while let Some(a) = args.next() {
         let value = args.next().and_then(|v| v.parse().ok());
         match (a.as_str(), value) {
             ("--budget", Some(v)) => budget = v,
             ("--reps", Some(v)) => reps = v,
             _ => {
-                eprintln!("usage: bench_direct [--budget N] [--reps R]");
+                eprintln!("usage: cargo bench --bench direct [-- --budget N --reps R]");
                 std::process::exit(2);
             }
         }
