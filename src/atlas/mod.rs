@@ -152,8 +152,16 @@ const BRACKET: f32 = 1.05;
 /// `1 - ESTIMATE_MARGIN`.
 const ESTIMATE_MARGIN: f32 = 0.98;
 
-/// xatlas's `PackOptions::attempts` (its default): random placements tried per chart.
+/// xatlas's `PackOptions::attempts` (its default): random placements tried per chart, on a
+/// fixed page (whose density search wants the tightest packing).
 const PACK_ATTEMPTS_PER_CHART: i32 = 4096;
+
+/// Random placements per chart and page with a fixed density. xatlas tries a chart on each open
+/// page in turn, `attempts` times on a page it does not fit, so the packing's time grows with
+/// the pages times the charts times this. Measured on town-100k at 8 texels/m (16 pages of
+/// 2048², one atlas): 4 096 placements 67 s; 512, 22 s; 256, 13 s, all 16 pages; 128, 9 s
+/// and 17 pages.
+const PAGES_PACK_ATTEMPTS: i32 = 256;
 
 /// Random placements per chart in the sizing packing (see [`pack`]): a fixed page's first
 /// packing, into one page that grows to hold every chart, which only measures how tightly the
@@ -379,8 +387,10 @@ pub(crate) fn pack_estimating(
 /// xatlas atlas; a larger scene is packed in groups of consecutive meshes, in parallel
 /// ([`page_groups`]). xatlas tries each chart on every page it has open, so one atlas of
 /// `n` pages packs in time about `n x charts`: groups make it linear in the scene, and use
-/// every core. The price is the groups' last pages, each partly filled.
-const GROUP_PAGES: f64 = 4.0;
+/// every core. The price is the groups' last pages, each partly filled: town-100k at 8
+/// texels/m took 22 pages in groups of 4 pages' worth, 18 in groups of 8, 16 in one atlas
+/// (5.3 s in groups of 8 against 13.3 s in one, at [`PAGES_PACK_ATTEMPTS`]).
+const GROUP_PAGES: f64 = 16.0;
 
 /// The inputs, cut into runs of consecutive meshes of about [`GROUP_PAGES`] pages' worth of
 /// surface each at `texels_per_unit` (xatlas fills about 75% of a page). One run when the
@@ -612,7 +622,7 @@ fn pack_group(
     let mut pack_options = ffi::PackOptions {
         attempts: match sizing {
             Sizing::Fixed { .. } => SIZING_PACK_ATTEMPTS,
-            Sizing::Pages { .. } => PACK_ATTEMPTS_PER_CHART,
+            Sizing::Pages { .. } => PAGES_PACK_ATTEMPTS,
         },
         texels_per_unit: match sizing {
             // xatlas's own guess: the page at 75% utilization.

@@ -683,10 +683,10 @@ fn on_page(atlas: &Atlas, p: u32) -> Atlas {
 
 #[test]
 fn a_scene_of_many_pages_packs_in_groups_into_a_valid_atlas() {
-    // 48 unit quads at 64 texels per unit on 192² pages: four a page (67 texels a side with
-    // their padding), four pages' worth of surface (27 quads at xatlas's 75%) a group.
-    let meshes: Vec<_> = (0..48)
-        .map(|i| quad(2.0 * (i % 10) as f32, 2.0 * (i / 10) as f32, 0.0, 1.0, 1.0))
+    // 170 unit quads at 64 texels per unit on 192² pages: four a page (67 texels a side with
+    // their padding), sixteen pages' worth of surface (108 quads at xatlas's 75%) a group.
+    let meshes: Vec<_> = (0..170)
+        .map(|i| quad(2.0 * (i % 16) as f32, 2.0 * (i / 16) as f32, 0.0, 1.0, 1.0))
         .collect();
     let inputs = inputs(&meshes);
     let opts = AtlasOptions {
@@ -694,7 +694,7 @@ fn a_scene_of_many_pages_packs_in_groups_into_a_valid_atlas() {
         ..options(Some(64.0), None, 2)
     };
     let groups = page_groups(&inputs, 64.0, 192);
-    assert_eq!(groups, [0..27, 27..48]);
+    assert_eq!(groups, [0..108, 108..170]);
     assert_eq!(groups[0].start, 0);
     assert_eq!(groups.last().map(|g| g.end), Some(inputs.len()));
     assert!(groups.windows(2).all(|w| w[0].end == w[1].start));
