@@ -1,0 +1,396 @@
+//! One polygon's constrained Delaunay triangulation (spade): its outline and discontinuity
+//! lines as constraints, refined to an area cap and an angle bound, then cut along the lines
+//! where the light jumps.
+
+use super::arrangement;
+use super::lines::{Obstacles, keep_clear, merge_collinear};
+use super::safe_frame::in_safe_frame;
+use super::{Constraint, Inserted, Lines, ReceiverMesh};
+use crate::discontinuity::{Kind, Segment};
+use crate::scene::Polygon;
+use glam::DVec2;
+use spade::handles::FixedVertexHandle;
+use spade::{
+    AngleLimit, ConstrainedDelaunayTriangulation, Point2, RefinementParameters, Triangulation,
+};
+
+/// Minimum angle for quality refinement, degrees.
+pub(crate) const ANGLE_LIMIT_DEG: f64 = 25.0;
+
+/// Triangulates one polygon without extra constraints; see [`triangulate_with`].
+pub(crate) fn triangulate(
+    id: usize,
+    polygon: &Polygon,
+    max_area: f64,
+    vertex_cap: usize,
+) -> ReceiverMesh {
+    triangulate_with(id, polygon, Lines::default(), max_area, vertex_cap).0
+}
+
+/// Triangulates one polygon: its boundary and the discontinuity `lines.segments` (plane
+/// coordinates) as constraints, the `lines.points` as vertices, refined so that no triangle is larger than `max_area` (scene units²) and,
+/// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. At most
+/// `vertex_cap` vertices are added by refinement.
+///
+/// Points closer than `lines.snap` (scene units; at least 1e-9 of the polygon's size) are merged,
+/// and segments within `snap` of each other (or of the outline) become one: use the tolerance the
+/// segments were computed to, so near-coincident events do not force slivers.
+///
+/// A wedge segment (any kind but D0) that runs along the outline, a D0 line or a stronger wedge
+/// segment (higher [`Segment::significance`]), both its ends within `lines.clearance`
+/// of it, is left out: two constraints closer than an element cannot both be resolved, and
+/// Delaunay refinement splits such a pair against each other until its triangles have good
+/// angles (a thin slab's penumbra line 1 cm from its contact line took three times the budget).
+/// Use about half an element's side; segments that only meet or cross stay, except along the
+/// other boundary of their own penumbra (`Obstacles::apart_from_its_pair`).
+///
+/// The constraints go through [`arrangement::build`] first, so they never cross when inserted
+/// with spade's `try_add_constraint`. Faces outside the polygon (holes, concavities) are dropped
+/// by testing each face's centroid against the polygon's own triangles (spade's
+/// `exclude_outer_faces` is wrong once interior constraints exist). Vertices on D0 (contact)
+/// segments are split, one copy per side, so values never interpolate across a contact.
+/// Returns the mesh and what became of the segments ([`Inserted`]).
+///
+/// A polygon whose extent is outside [`SAFE_EXTENT`] is triangulated in a frame scaled into it
+/// (`safe_frame::in_safe_frame`). A panic of the triangulation (spade's refinement panics on a loss of
+/// precision) unwinds as a [`MeshFailure`] that names the polygon.
+pub fn triangulate_with(
+    id: usize,
+    polygon: &Polygon,
+    lines: Lines<'_>,
+    max_area: f64,
+    vertex_cap: usize,
+) -> (ReceiverMesh, Inserted) {
+    in_safe_frame(
+        id,
+        polygon,
+        lines,
+        max_area,
+        vertex_cap,
+        triangulate_in_frame,
+    )
+}
+
+/// [`triangulate_with`] in the polygon's own frame.
+fn triangulate_in_frame(
+    id: usize,
+    polygon: &Polygon,
+    lines: Lines<'_>,
+    max_area: f64,
+    vertex_cap: usize,
+) -> (ReceiverMesh, Inserted) {
+    let Lines {
+        segments,
+        snap,
+        clearance,
+        points,
+    } = lines;
+    let (lo, hi) = polygon.triangles_plane.iter().flatten().fold(
+        (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(*p), hi.max(*p)),
+    );
+    let diameter = (hi - lo).length().max(1e-300);
+    let tol = (1e-9 * diameter).max(snap);
+    // The outline with collinear runs merged, and the segments kept clear of it by `gap`: a
+    // point of the outline between two collinear outline edges is, after rounding, a hair
+    // inside or outside their line; spade's convex hull then bridges it with a zero-area face
+    // outside the polygon, which refinement splits without end.
+    let outline = merge_collinear(&polygon.boundary);
+    let gap = (0.05 * max_area.max(0.0).sqrt()).max(tol * 10.0);
+    // A hard shadow line keeps to twice the snapping distance from the outline: a strip of
+    // shadow a few centimetres wide at a wall's foot still gets its line (at ten times, a real
+    // city's 7 cm strips were left out and their walls baked dark in fans from the foot).
+    let jump_gap = gap.min(tol * 2.0);
+    // Tags: `None` for the outline, the segment's kind and event otherwise.
+    type Tagged = (DVec2, DVec2, Option<(Kind, u32)>);
+    let mut input: Vec<Tagged> = outline.iter().map(|[a, b]| (*a, *b, None)).collect();
+    // The jumps in the light first (D0 contacts, punctual lights' hard shadows: never left
+    // out, they cannot be interpolated), then the wedges strongest first, each kept clear of
+    // what went before.
+    let jumps = Kind::is_jump;
+    let mut order: Vec<&Segment> = segments.iter().collect();
+    order.sort_by(|s, t| {
+        jumps(t.kind)
+            .cmp(&jumps(s.kind))
+            .then(t.significance.total_cmp(&s.significance))
+    });
+    let mut obstacles = Obstacles::new(lo, hi, clearance, order.len() + outline.len());
+    for &[p, q] in &outline {
+        obstacles.push(p, q, 0);
+    }
+    let mut crowded = 0;
+    for s in order {
+        let pieces = if jumps(s.kind) {
+            vec![(s.a, s.b)]
+        } else if obstacles.along(s.a, s.b) {
+            Vec::new()
+        } else {
+            obstacles.apart_from_its_pair(s.a, s.b, s.feature)
+        };
+        if pieces.is_empty() {
+            crowded += 1;
+        }
+        for (a, b) in pieces {
+            // A hard shadow line kept beside the outline costs a row of thin elements; one left
+            // out, or pulled away from it, lets the outline's vertices carry the other side's
+            // light over whole elements (a roof's strip of shadow along its parapet darkened
+            // it all). A contact line there mostly bounds a buried strip (a wall's foot on a
+            // floor that runs under it), where the thin row would buy nothing.
+            let punctual = s.kind == Kind::Punctual;
+            let gap = if punctual { jump_gap } else { gap };
+            if let Some((a, b)) = keep_clear(a, b, &outline, gap, punctual) {
+                input.push((a, b, Some((s.kind, s.event))));
+                obstacles.push(a, b, s.feature);
+            }
+        }
+    }
+    let arr = arrangement::build(&input, tol);
+    let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
+    let handles: Vec<Option<FixedVertexHandle>> = arr
+        .points
+        .iter()
+        .map(|p| cdt.insert(Point2::new(p.x, p.y)).ok())
+        .collect();
+    let mut refused = 0;
+    for &(a, b, _) in &arr.edges {
+        if let (Some(va), Some(vb)) = (handles[a as usize], handles[b as usize])
+            && va != vb
+            && cdt.try_add_constraint(va, vb).is_empty()
+            && !cdt.exists_constraint(va, vb)
+        {
+            refused += 1;
+        }
+    }
+    for p in points {
+        if polygon.contains(*p) {
+            let _ = cdt.insert(Point2::new(p.x, p.y));
+        }
+    }
+    // A polygon no larger than one element, with nothing inside, stays its outline's
+    // triangulation: refining its slivers for their angles (a tessellated sphere's poles) would
+    // spend the budget where the light is smooth at the element's scale anyway.
+    let refine =
+        polygon.area > max_area || !arr.edges.iter().all(|e| e.2.is_none()) || !points.is_empty();
+    if refine && cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
+        // Two passes: the area cap first, then the angles with at most half as many vertices
+        // again. In one pass, constraints that meet at small angles or run close together (a
+        // thin slab's contact and penumbra lines) can take every vertex the cap allows in
+        // fans around them and leave the rest of the polygon coarse.
+        let params = |angle: AngleLimit, vertices: usize| {
+            RefinementParameters::<f64>::new()
+                .with_angle_limit(angle)
+                .with_max_allowed_area(max_area.max(polygon.area * 1e-9))
+                .with_min_required_area(max_area * 1e-3)
+                .with_max_additional_vertices(vertices)
+                .exclude_outer_faces(segments.is_empty())
+        };
+        let before = cdt.num_vertices();
+        cdt.refine(params(AngleLimit::from_deg(0.0), vertex_cap));
+        let added = cdt.num_vertices() - before;
+        let angle_cap = (added / 2).max(vertex_cap / 4);
+        cdt.refine(params(AngleLimit::from_deg(ANGLE_LIMIT_DEG), angle_cap));
+    }
+    let (mut mesh, remap) = inside_faces(id, polygon, &cdt);
+    let mut constraint_edges: Vec<(u32, u32)> = cdt
+        .undirected_edges()
+        .filter(|e| e.is_constraint_edge())
+        .filter_map(|e| {
+            let [a, b] = e.vertices().map(|v| remap[v.fix().index()]);
+            (a != u32::MAX && b != u32::MAX).then_some((a.min(b), a.max(b)))
+        })
+        .collect();
+    // Follow each segment's arrangement edge along the final constraint edges (refinement may
+    // have split it) to tag them with the segment's kind and event.
+    constraint_edges.sort_unstable();
+    constraint_edges.dedup();
+    let mut along: Vec<Vec<u32>> = vec![Vec::new(); mesh.vertices.len()];
+    for &(a, b) in &constraint_edges {
+        along[a as usize].push(b);
+        along[b as usize].push(a);
+    }
+    for &(pa, pb, tag) in &arr.edges {
+        let Some((kind, event)) = tag else { continue };
+        let final_id = |p: u32| {
+            handles[p as usize]
+                .map(|h| remap[h.index()])
+                .filter(|&i| i != u32::MAX)
+        };
+        let (Some(mut cur), Some(end)) = (final_id(pa), final_id(pb)) else {
+            continue;
+        };
+        let target = mesh.vertices[end as usize];
+        for _ in 0..along.len() {
+            if cur == end {
+                break;
+            }
+            let here = mesh.vertices[cur as usize];
+            let dir = (target - here).normalize_or_zero();
+            let next = along[cur as usize].iter().copied().find(|&n| {
+                let step = mesh.vertices[n as usize] - here;
+                step.length() > 0.0
+                    && step.normalize().dot(dir) > 1.0 - 1e-6
+                    && mesh.vertices[n as usize].distance(target) < here.distance(target)
+            });
+            let Some(next) = next else { break };
+            mesh.constraints.push(Constraint {
+                a: cur,
+                b: next,
+                kind,
+                event,
+            });
+            cur = next;
+        }
+    }
+    // Cut along the lines where the light jumps (D0 contacts, punctual lights' hard shadows),
+    // and at their vertices also along every other discontinuity line that leaves them: where
+    // an occluder's edge touches the receiver (a box corner on the floor) the umbra and
+    // penumbra lines start at the contact, the penumbra there is zero wide, and one vertex
+    // value cannot be both the lit and the shadowed limit.
+    let mut on_jump = vec![false; mesh.vertices.len()];
+    for c in mesh.constraints.iter().filter(|c| jumps(c.kind)) {
+        on_jump[c.a as usize] = true;
+        on_jump[c.b as usize] = true;
+    }
+    let mut cuts: Vec<(u32, u32)> = mesh
+        .constraints
+        .iter()
+        .filter(|c| jumps(c.kind) || on_jump[c.a as usize] || on_jump[c.b as usize])
+        .map(|c| (c.a.min(c.b), c.a.max(c.b)))
+        .collect();
+    if !cuts.is_empty() {
+        cuts.sort_unstable();
+        cuts.dedup();
+        split_along(&mut mesh, &cuts);
+    }
+    (mesh, Inserted { refused, crowded })
+}
+
+/// Duplicates the vertices on the `cuts` edges so that the triangles on either side of a cut
+/// have their own copy: the fan around each such vertex is split into the groups connected
+/// through uncut edges, and every group but the first gets a new vertex at the same place.
+fn split_along(mesh: &mut ReceiverMesh, cuts: &[(u32, u32)]) {
+    let cut = |a: u32, b: u32| cuts.binary_search(&(a.min(b), a.max(b))).is_ok();
+    let mut on_cut = vec![false; mesh.vertices.len()];
+    for &(a, b) in cuts {
+        on_cut[a as usize] = true;
+        on_cut[b as usize] = true;
+    }
+    let mut incident: Vec<Vec<usize>> = vec![Vec::new(); mesh.vertices.len()];
+    for (t, tri) in mesh.triangles.iter().enumerate() {
+        for &v in tri {
+            if on_cut[v as usize] {
+                incident[v as usize].push(t);
+            }
+        }
+    }
+    // Per vertex: its triangles, grouped through the uncut edges they share at it. Each group
+    // is named by its first triangle (in `tris` order), so the copies do not depend on the
+    // order the unions run in.
+    let mut group: Vec<usize> = Vec::new();
+    let mut by_neighbour: Vec<(u32, usize)> = Vec::new();
+    let mut copy_of: Vec<u32> = Vec::new();
+    for (v, tris) in incident.iter().enumerate() {
+        if tris.len() < 2 {
+            continue;
+        }
+        fn root(g: &mut [usize], mut i: usize) -> usize {
+            while g[i] != i {
+                g[i] = g[g[i]];
+                i = g[i];
+            }
+            i
+        }
+        group.clear();
+        group.extend(0..tris.len());
+        // Two triangles at v share an edge (v, u) when both have u: sorted by u, they are
+        // neighbours in this list (linear in the fan, however many triangles meet at v).
+        by_neighbour.clear();
+        for (i, &t) in tris.iter().enumerate() {
+            for &u in &mesh.triangles[t] {
+                if u != v as u32 {
+                    by_neighbour.push((u, i));
+                }
+            }
+        }
+        by_neighbour.sort_unstable();
+        for pair in by_neighbour.windows(2) {
+            let [(u, i), (w, j)] = [pair[0], pair[1]];
+            if u == w && i != j && !cut(v as u32, u) {
+                let (ri, rj) = (root(&mut group, i), root(&mut group, j));
+                group[ri.max(rj)] = ri.min(rj);
+            }
+        }
+        let first = root(&mut group, 0);
+        copy_of.clear();
+        copy_of.resize(tris.len(), u32::MAX);
+        for (i, &t) in tris.iter().enumerate() {
+            let r = root(&mut group, i);
+            if r == first {
+                continue;
+            }
+            if copy_of[r] == u32::MAX {
+                mesh.vertices.push(mesh.vertices[v]);
+                copy_of[r] = (mesh.vertices.len() - 1) as u32;
+            }
+            let id = copy_of[r];
+            for c in mesh.triangles[t].iter_mut() {
+                if *c == v as u32 {
+                    *c = id;
+                }
+            }
+        }
+    }
+}
+
+/// Triangulates a polygon's outline plus the given interior points, with no refinement (the
+/// caller chose the points). Faces outside the polygon are dropped.
+pub(crate) fn triangulate_points(id: usize, polygon: &Polygon, points: &[DVec2]) -> ReceiverMesh {
+    let outline = merge_collinear(&polygon.boundary);
+    let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
+    for [a, b] in &outline {
+        if let (Ok(va), Ok(vb)) = (
+            cdt.insert(Point2::new(a.x, a.y)),
+            cdt.insert(Point2::new(b.x, b.y)),
+        ) && va != vb
+        {
+            cdt.try_add_constraint(va, vb);
+        }
+    }
+    for p in points {
+        let _ = cdt.insert(Point2::new(p.x, p.y));
+    }
+    inside_faces(id, polygon, &cdt).0
+}
+
+/// The faces of `cdt` inside the polygon (centroid test against its own triangles, nonzero
+/// area) as a mesh, and the map from spade vertex index to mesh vertex (`u32::MAX`: unused).
+fn inside_faces(
+    id: usize,
+    polygon: &Polygon,
+    cdt: &ConstrainedDelaunayTriangulation<Point2<f64>>,
+) -> (ReceiverMesh, Vec<u32>) {
+    let mut mesh = ReceiverMesh {
+        polygon: id,
+        ..Default::default()
+    };
+    let mut remap = vec![u32::MAX; cdt.num_vertices()];
+    for face in cdt.inner_faces() {
+        let pos = face.positions().map(|p| DVec2::new(p.x, p.y));
+        if (pos[1] - pos[0]).perp_dot(pos[2] - pos[0]) <= 0.0
+            || !polygon.contains((pos[0] + pos[1] + pos[2]) / 3.0)
+        {
+            continue;
+        }
+        let ids = face.vertices().map(|v| {
+            let i = v.fix().index();
+            if remap[i] == u32::MAX {
+                remap[i] = mesh.vertices.len() as u32;
+                mesh.vertices
+                    .push(DVec2::new(v.position().x, v.position().y));
+            }
+            remap[i]
+        });
+        mesh.triangles.push(ids);
+    }
+    (mesh, remap)
+}
