@@ -90,9 +90,9 @@ pub(super) fn boxes_area<'a>(boxes: impl Iterator<Item = &'a ChartBox>, padding:
 /// `ceil` on average). The estimate is the `s` at which all boxes together take `full` (a
 /// quadratic in `s`). `full` is read off a packing: the sizing packing's utilization (every
 /// box's area over the grown page's) times the page, or an overflowing packing's first page's
-/// boxes. Where the search used to halve a bracket five or six times from a `1/sqrt(pages)`
-/// guess, this guess is usually within a few per cent, so one to three packings follow it
-/// (measured on the box grids, the towns and the interior).
+/// boxes. The guess is usually within a few per cent, so one to three packings follow it
+/// (measured on the box grids, the towns and the interior; halving a bracket from a
+/// `1/sqrt(pages)` guess takes five or six).
 pub(super) fn fitting_density(
     boxes: &[ChartBox],
     tried: f32,

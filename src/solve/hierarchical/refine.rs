@@ -185,9 +185,9 @@ pub struct Linked {
 ///
 /// The links are kept in runs, in order: parts refined in parallel are appended by moving
 /// their runs, not their links, and the runs are copied once, into one vector of the exact
-/// size, by `Refined::sorted`. (Appending the links themselves copied them once per level of
-/// the parallel split and regrew each vector as it went: on box-grid-20 that was half the
-/// bake's page faults.)
+/// size, by `Refined::sorted`. (Appending the links themselves would copy them once per level
+/// of the parallel split and regrow each vector as it went: on box-grid-20, half the bake's
+/// page faults.)
 #[derive(Debug, Default)]
 struct Refined {
     /// Finished runs of links, in order.
