@@ -736,3 +736,92 @@ fn a_group_error_names_the_mesh_in_the_whole_input() {
     .offset_mesh(10);
     assert!(matches!(error, AtlasError::Internal { mesh: 13, .. }));
 }
+
+/// Generated worst cases with a fixed density on small pages: each packs, with a valid
+/// mapping, the density kept, and no two charts overlapping on any page.
+#[test]
+fn worst_case_scenes_fit_with_a_fixed_density() {
+    // A fan of 2 000 slivers around one vertex (a disc of radius 4).
+    let n = 2000;
+    let mut fan = TestMesh {
+        positions: vec![[0.0, 0.0, 0.0]],
+        indices: Vec::new(),
+    };
+    for k in 0..=n {
+        let a = std::f32::consts::TAU * k as f32 / n as f32;
+        fan.positions.push([4.0 * a.cos(), 4.0 * a.sin(), 0.0]);
+        if k > 0 {
+            fan.indices.extend([0, k as u32, k as u32 + 1]);
+        }
+    }
+    // Long thin triangles: 200 needles 6 units long and 1 mm wide, side by side.
+    let needles = TestMesh {
+        positions: (0..200)
+            .flat_map(|i| {
+                let x = 0.01 * i as f32;
+                [[x, 0.0, 1.0], [x + 0.001, 0.0, 1.0], [x, 6.0, 1.0]]
+            })
+            .collect(),
+        indices: (0..600).collect(),
+    };
+    // A large ground beside 3 000 disconnected specks of a few texels each.
+    let ground = quad(-6.0, -6.0, -1.0, 5.0, 5.0);
+    let specks: Vec<TestMesh> = (0..3000)
+        .map(|i| {
+            let (x, y) = ((i % 60) as f32 * 0.2, (i / 60) as f32 * 0.2);
+            quad(x, y, 2.0, 0.05, 0.05)
+        })
+        .collect();
+    let cases: Vec<(&str, Vec<&TestMesh>)> = vec![
+        ("fan", vec![&fan]),
+        ("needles", vec![&needles]),
+        (
+            "ground and specks",
+            std::iter::once(&ground).chain(&specks).collect(),
+        ),
+    ];
+    for (name, meshes) in cases {
+        let inputs: Vec<AtlasInput<'_>> = meshes.iter().map(|m| m.input()).collect();
+        let opts = AtlasOptions {
+            page_size: 512,
+            ..options(Some(64.0), None, 2)
+        };
+        let atlas = pack(&inputs, &opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+        check_mapping(&inputs, &atlas);
+        assert_eq!(atlas.texels_per_unit, 64.0, "{name}");
+        if name == "needles" {
+            // A needle is a fraction of a texel wide, and xatlas gives its chart at least a
+            // texel across: its length keeps the density (6 units, 384 texels).
+            for t in atlas.meshes[0].indices.chunks_exact(3) {
+                let uv = [0, 1, 2].map(|k| atlas.meshes[0].uv[t[k] as usize]);
+                let longest = (0..3)
+                    .map(|k| {
+                        let (a, b) = (uv[k], uv[(k + 1) % 3]);
+                        ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+                    })
+                    .fold(0.0, f32::max);
+                assert!(
+                    (longest / 384.0 - 1.0).abs() < 0.05,
+                    "needle {longest} texels long"
+                );
+            }
+        } else {
+            // The first mesh (the fan, the ground) keeps the density; the specks, a few texels
+            // each, are rounded up to whole texels by xatlas.
+            let uv = uv_area(&atlas.meshes[0]);
+            let area: f64 = triangle_areas(&inputs[0]).sum();
+            let ratio = f64::from(uv) / (area * 64.0 * 64.0);
+            assert!(
+                (ratio - 1.0).abs() < 0.05,
+                "{name}: texels/area ratio {ratio}"
+            );
+        }
+        for p in 0..atlas.pages {
+            check_charts(&on_page(&atlas, p));
+        }
+        println!(
+            "{name}: {} pages of {}x{}",
+            atlas.pages, atlas.width, atlas.height
+        );
+    }
+}
