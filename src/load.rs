@@ -18,8 +18,11 @@ use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 use std::path::{Path, PathBuf};
 
+pub(crate) mod extensions;
+pub(crate) mod instancing;
 mod limits;
 mod materials;
+pub(crate) mod meshopt;
 pub mod uri;
 mod validate;
 
@@ -45,22 +48,17 @@ pub struct Gltf {
     pub path: PathBuf,
     /// The parsed document.
     pub document: gltf::Document,
-    /// The data of every buffer, in buffer order (the GLB binary chunk, a data URI, or a file).
+    /// The data of every buffer, in buffer order (the GLB binary chunk, a data URI, or a file;
+    /// empty for a meshopt fallback buffer).
     pub buffers: Vec<Vec<u8>>,
+    /// Per buffer view, its decoded bytes when it is meshopt-compressed ([`meshopt`]).
+    pub(crate) decoded_views: Vec<Option<Vec<u8>>>,
     /// The JSON as written in the file, key order kept: the writer edits this, so everything it
     /// does not touch (extensions, extras, unknown properties) survives as it was.
     pub json: serde_json::Value,
     /// The limits and folders it was read with; its images are read and decoded with them too.
     pub options: LoadOptions,
 }
-
-/// Required extensions that change how geometry is stored or instanced, which this loader does
-/// not implement.
-pub(crate) const UNREADABLE_EXTENSIONS: [&str; 3] = [
-    "KHR_draco_mesh_compression",
-    "EXT_meshopt_compression",
-    "EXT_mesh_gpu_instancing",
-];
 
 /// Reads and parses a `.glb` or `.gltf` file and all of its buffers, with the default
 /// [`LoadOptions`].
@@ -100,13 +98,11 @@ pub(crate) fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions
         return Err(not_gltf("the file is empty".into()));
     }
     // The JSON first, checked where the gltf crate would panic (see `validate`).
-    let json_bytes = if bytes.starts_with(b"glTF") {
-        gltf::binary::Glb::from_slice(&bytes)
-            .map_err(|e| not_gltf(e.to_string()))?
-            .json
-            .into_owned()
+    let (json_bytes, mut blob) = if bytes.starts_with(b"glTF") {
+        let glb = gltf::binary::Glb::from_slice(&bytes).map_err(|e| not_gltf(e.to_string()))?;
+        (glb.json.into_owned(), glb.bin.map(|b| b.into_owned()))
     } else {
-        bytes.clone()
+        (bytes.clone(), None)
     };
     let json: serde_json::Value =
         serde_json::from_slice(&json_bytes).map_err(|e| not_gltf(e.to_string()))?;
@@ -114,38 +110,28 @@ pub(crate) fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions
         // The writer edits this object in place.
         return Err(not_gltf("the JSON root is not an object".into()));
     }
-    validate::check(&json).map_err(|e| Error::BadItem {
+    let invalid = |e: validate::Invalid| Error::BadItem {
         path: path.to_path_buf(),
         item: e.item,
         reason: e.reason,
-    })?;
-    limits::check_counts(&json, &options.limits).map_err(|e| Error::BadItem {
-        path: path.to_path_buf(),
-        item: e.item,
-        reason: e.reason,
-    })?;
-    let gltf = gltf::Gltf::from_slice(&bytes).map_err(|e| not_gltf(e.to_string()))?;
-    // Extensions whose geometry this loader cannot read: baking the fallback-less data would
-    // give garbage, so say so.
-    for ext in gltf.document.extensions_required() {
-        if UNREADABLE_EXTENSIONS.contains(&ext) {
-            return Err(Error::BadItem {
-                path: path.to_path_buf(),
-                item: "extensionsRequired".into(),
-                reason: format!(
-                    "requires {ext}, which penumbra cannot read (decompress the file first, e.g. with gltf-transform)"
-                ),
-            });
-        }
-    }
-    let mut blob = gltf.blob;
-    let document = gltf.document;
+    };
+    validate::check(&json).map_err(invalid)?;
+    limits::check_counts(&json, &options.limits).map_err(invalid)?;
+    extensions::check_required(&json).map_err(invalid)?;
+    let root: gltf::json::Root = serde_json::from_value(extensions::for_parsing(&json))
+        .map_err(|e| not_gltf(e.to_string()))?;
+    let document = gltf::Document::from_json(root).map_err(|e| not_gltf(e.to_string()))?;
     let mut buffers = Vec::new();
     // What the input and its buffer files hold together: each file is read within the limit
     // that is left.
     let mut total = bytes.len() as u64;
     for buffer in document.buffers() {
         let item = format!("buffer {}", buffer.index());
+        if meshopt::is_fallback(&json["buffers"][buffer.index()]) {
+            // Its bytes are only in the compressed views that name it.
+            buffers.push(Vec::new());
+            continue;
+        }
         let data = match buffer.source() {
             gltf::buffer::Source::Bin => blob.take().ok_or_else(|| Error::BadItem {
                 path: path.to_path_buf(),
@@ -178,10 +164,12 @@ pub(crate) fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions
         }
         buffers.push(data);
     }
+    let decoded_views = meshopt::decode_views(&json, &buffers).map_err(invalid)?;
     Ok(Gltf {
         path: path.to_path_buf(),
         document,
         buffers,
+        decoded_views,
         json,
         options: options.clone(),
     })
@@ -311,6 +299,9 @@ impl Gltf {
 
     /// The bytes of a buffer view, checked against its buffer.
     pub(crate) fn view_bytes(&self, view: &gltf::buffer::View, item: &str) -> Result<&[u8]> {
+        if let Some(Some(decoded)) = self.decoded_views.get(view.index()) {
+            return Ok(decoded);
+        }
         let data = &self.buffers[view.buffer().index()];
         let end = view.offset().checked_add(view.length());
         match end {
@@ -401,23 +392,39 @@ impl Gltf {
             ));
         }
         let dt = accessor.data_type();
-        if dt != DataType::F32 && !accessor.normalized() {
+        // KHR_mesh_quantization: positions, texture coordinates and instance transforms may be
+        // integers, normalized or not; the node's transform scales them back.
+        let integers = extensions::declares(&self.json, "KHR_mesh_quantization")
+            && matches!(
+                dt,
+                DataType::I8 | DataType::U8 | DataType::I16 | DataType::U16
+            );
+        if dt != DataType::F32 && !accessor.normalized() && !integers {
             return Err(self.bad(
                 item,
-                format!("expected float or normalized components, found {dt:?}"),
+                format!(
+                    "expected float or normalized components, found {dt:?} (integer attributes \
+                     need KHR_mesh_quantization)"
+                ),
             ));
         }
-        let (bytes, _) = self.accessor_bytes(accessor)?;
+        let (bytes, elem) = self.accessor_bytes(accessor)?;
         let size = dt.size();
-        // Components are not padded within an element for any of the types read here (VEC2/3/4).
+        let n = dims.multiplicity();
+        let scale = |max: f64| if accessor.normalized() { max } else { 1.0 };
+        // `accessor_bytes` packs the elements tightly (a view's stride pads an 8- or 16-bit
+        // VEC3 to 4 bytes; the element itself is not padded).
         Ok(bytes
-            .chunks_exact(size)
+            .chunks_exact(elem)
+            .flat_map(|e| e[..n * size].chunks_exact(size))
             .map(|c| match dt {
                 DataType::F32 => f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
-                DataType::U8 => c[0] as f64 / 255.0,
-                DataType::I8 => (c[0] as i8 as f64 / 127.0).max(-1.0),
-                DataType::U16 => u16::from_le_bytes([c[0], c[1]]) as f64 / 65535.0,
-                DataType::I16 => (i16::from_le_bytes([c[0], c[1]]) as f64 / 32767.0).max(-1.0),
+                DataType::U8 => c[0] as f64 / scale(255.0),
+                DataType::I8 => (c[0] as i8 as f64 / scale(127.0)).max(-scale(1.0)),
+                DataType::U16 => u16::from_le_bytes([c[0], c[1]]) as f64 / scale(65535.0),
+                DataType::I16 => {
+                    (i16::from_le_bytes([c[0], c[1]]) as f64 / scale(32767.0)).max(-scale(1.0))
+                }
                 DataType::U32 => u32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64,
             })
             .collect())
@@ -496,6 +503,7 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
         radiance: DVec3::ZERO,
     });
     scene.warnings.append(&mut textures.warnings);
+    scene.warnings.extend(extensions::warnings(&gltf.json));
 
     let gscene = match doc.default_scene().or_else(|| doc.scenes().next()) {
         Some(s) => s,
@@ -548,47 +556,58 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
                     name_suffix(mesh.name())
                 ));
             } else {
-                for prim in mesh.primitives() {
-                    instances += 1;
-                    triangles = triangles.saturating_add(triangles_at_most(&prim));
-                    let item = || {
-                        format!(
-                            "node {} (mesh {}{} primitive {})",
-                            node.index(),
-                            mesh.index(),
-                            name_suffix(mesh.name()),
-                            prim.index()
-                        )
+                // One placement, or one per GPU instance (`instancing`).
+                let placements: Vec<(Option<u32>, DMat4)> =
+                    match instancing::instances(gltf, node.index())? {
+                        Some(locals) => (0u32..)
+                            .zip(locals)
+                            .map(|(k, local)| (Some(k), world * local))
+                            .collect(),
+                        None => vec![(None, world)],
                     };
-                    if instances > limits.instances {
-                        return Err(gltf.bad(
-                            item(),
+                for (gpu_instance, world) in &placements {
+                    for prim in mesh.primitives() {
+                        instances += 1;
+                        triangles = triangles.saturating_add(triangles_at_most(&prim));
+                        let item = || {
                             format!(
-                                "the scene places more than {} mesh instances (primitives \
-                                 placed by nodes; --max-instances raises the limit)",
-                                limits.instances
-                            ),
-                        ));
+                                "node {} (mesh {}{} primitive {})",
+                                node.index(),
+                                mesh.index(),
+                                name_suffix(mesh.name()),
+                                prim.index()
+                            )
+                        };
+                        if instances > limits.instances {
+                            return Err(gltf.bad(
+                                item(),
+                                format!(
+                                    "the scene places more than {} mesh instances (primitives \
+                                     placed by nodes; --max-instances raises the limit)",
+                                    limits.instances
+                                ),
+                            ));
+                        }
+                        if triangles > limits.triangles {
+                            return Err(gltf.bad(
+                                item(),
+                                format!(
+                                    "the scene's instances hold more than {} triangles \
+                                     (--max-triangles raises the limit)",
+                                    limits.triangles
+                                ),
+                            ));
+                        }
+                        add_primitive(
+                            gltf,
+                            &mut scene,
+                            (node.index(), *gpu_instance),
+                            &mesh,
+                            &prim,
+                            world,
+                            default_material,
+                        )?;
                     }
-                    if triangles > limits.triangles {
-                        return Err(gltf.bad(
-                            item(),
-                            format!(
-                                "the scene's instances hold more than {} triangles \
-                                 (--max-triangles raises the limit)",
-                                limits.triangles
-                            ),
-                        ));
-                    }
-                    add_primitive(
-                        gltf,
-                        &mut scene,
-                        &node,
-                        &mesh,
-                        &prim,
-                        &world,
-                        default_material,
-                    )?;
                 }
             }
         }
@@ -743,7 +762,7 @@ fn name_suffix(name: Option<&str>) -> String {
 fn add_primitive(
     gltf: &Gltf,
     scene: &mut Scene,
-    node: &gltf::Node,
+    (node, gpu_instance): (usize, Option<u32>),
     mesh: &gltf::Mesh,
     prim: &gltf::Primitive,
     world: &DMat4,
@@ -829,7 +848,8 @@ fn add_primitive(
     }
     let material = prim.material().index().unwrap_or(default_material);
     let front = Instance {
-        node: node.index(),
+        node,
+        gpu_instance,
         mesh: mesh.index(),
         primitive: prim.index(),
         gltf_material: prim.material().index(),

@@ -189,6 +189,8 @@ pub enum Side {
 pub struct Instance {
     /// glTF node index.
     pub node: usize,
+    /// Which of the node's `EXT_mesh_gpu_instancing` instances this is, if the node has them.
+    pub gpu_instance: Option<u32>,
     /// glTF mesh index.
     pub mesh: usize,
     /// Primitive index within the mesh.
@@ -226,6 +228,7 @@ impl Instance {
     pub fn new(positions_world: Vec<DVec3>, indices: Vec<u32>) -> Instance {
         Instance {
             node: 0,
+            gpu_instance: None,
             mesh: 0,
             primitive: 0,
             gltf_material: None,

@@ -29,6 +29,7 @@
 //! file. [`binding`] reads the lightmap binding back from a written file.
 
 pub(crate) mod binding;
+mod expand;
 
 use crate::atlas::{Atlas, AtlasMesh};
 use crate::error::{Error, Result};
@@ -146,17 +147,10 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     }
     let mut bin = Bin { data: Vec::new() };
 
-    // 1. Merge every buffer into the binary chunk and repoint the buffer views.
-    let mut base = Vec::new();
-    for data in &gltf.buffers {
-        base.push(bin.push(data));
-    }
-    for view in array_mut(&mut root, "bufferViews").iter_mut() {
-        let b = view["buffer"].as_u64().unwrap_or(0) as usize;
-        let off = view["byteOffset"].as_u64().unwrap_or(0) as usize;
-        view["buffer"] = json!(0);
-        view["byteOffset"] = json!(off + base.get(b).copied().unwrap_or(0));
-    }
+    // 1. Merge every buffer into the binary chunk (compressed views decoded) and repoint the
+    //    buffer views; GPU instances become nodes.
+    expand::merge_buffers(gltf, &mut root, &mut bin);
+    let instance_node = expand::split_gpu_instances(gltf, &mut root, scene)?;
     // 2. Embed images that live in files or data URIs.
     let n_images = array_mut(&mut root, "images").len();
     for i in 0..n_images {
@@ -227,10 +221,17 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     // 4. Which nodes use each mesh, and which of those placements are lightmapped.
     let mut lit_nodes: BTreeMap<usize, BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
     for (i, inst) in scene.instances.iter().enumerate() {
+        let node = match inst.gpu_instance {
+            Some(k) => instance_node
+                .get(&(inst.node, k))
+                .copied()
+                .unwrap_or(inst.node),
+            None => inst.node,
+        };
         lit_nodes
             .entry(inst.mesh)
             .or_default()
-            .entry(inst.node)
+            .entry(node)
             .or_default()
             .push(i);
     }
