@@ -36,6 +36,10 @@ import { fileURLToPath } from 'node:url';
 import { PNG } from 'pngjs';
 import * as validator from 'gltf-validator';
 import { addCamera, breakages, editGlb, hasCamera, readGlb } from './glb.mjs';
+import {
+  GLTFPACK_KEEP, OPTIMIZE_KEEP_LIGHTMAP, gltfTransformOptimize, gltfpack, gltfpackVersion, kib, lightmapKept,
+  lightmapOf, linkExampleModules,
+} from './toolchain.mjs';
 
 const HERE = path.dirname(fileURLToPath(import.meta.url));
 const ROOT = path.resolve(HERE, '../..');
@@ -91,6 +95,11 @@ function check(name, ok, detail) {
   counts[ok ? 'passed' : 'failed']++;
   results.push({ name, result: ok ? 'passed' : 'failed', detail });
   console.log(`${ok ? 'ok  ' : 'FAIL'} ${name}: ${detail}`);
+}
+/** A measurement, not a check: printed and kept in summary.json, never counted. */
+function info(name, detail) {
+  results.push({ name, result: 'info', detail });
+  console.log(`info ${name}: ${detail}`);
 }
 function skip(name, why) {
   counts.skipped++;
@@ -334,6 +343,107 @@ async function compare(browser, glb, tag, { lightmapColorSpace = 'file' } = {}, 
 
 const fmt = (x) => x.toFixed(4);
 
+/**
+ * 5. The JS toolchain on a baked file (issue 37; docs/engines.md). The baked cornell-box (with its
+ * camera) goes through `gltf-transform optimize` with examples/gltf-transform's MOZ_lightmap module
+ * and the options that keep the lightmap (OPTIMIZE_KEEP_LIGHTMAP): MOZ_lightmap must stay on every
+ * lit material, on TEXCOORD_1, with the texture's extras; the validator must report 0 errors and
+ * 0 warnings; three.js must draw it as `penumbra render` draws the file before optimising.
+ * Self-test: the same command without the module must lose the lightmap and fail both.
+ * Measured (info lines, not checks): what each optimize default left out of
+ * OPTIMIZE_KEEP_LIGHTMAP does. gltfpack: it drops MOZ_lightmap whatever its options (checked, so
+ * a gltfpack that keeps it shows up here); running it before the bake (`-noq`) works.
+ */
+async function toolchainChecks(browser) {
+  linkExampleModules();
+  const glb = (name) => path.join(OUT, 'glb', `${name}.glb`);
+  const view = glb('cornell-box-view');
+  const threeBefore = readPng(path.join(OUT, 'cornell-box-threejs.png'));
+  const vsThree = (tag) => meanAbsDiff(readPng(path.join(OUT, `${tag}-threejs.png`)), threeBefore);
+
+  // One processed file: its lightmap kept?, the validator, three.js against penumbra render of `view`.
+  const examine = async (tag, file) => {
+    const kept = lightmapKept(view, file);
+    const v = await validate(file);
+    const r = await compare(browser, file, tag, {}, view);
+    return { kept, v, r, three: vsThree(tag) };
+  };
+  const numbers = ({ r, three }) => `mean |diff| ${fmt(r.mad)} against penumbra render of the baked file, ` +
+    `${fmt(three)} against three.js of it, lit - without lightmap ${fmt(r.applied)}`;
+
+  // glTF-Transform with the module and the working options.
+  const opt = glb('gt-optimize');
+  const t = gltfTransformOptimize(view, opt, OPTIMIZE_KEEP_LIGHTMAP);
+  const e = await examine('gt-optimize', opt);
+  const command = `gltf-transform optimize ${OPTIMIZE_KEEP_LIGHTMAP.join(' ')} --config examples/gltf-transform/gltf-transform.config.mjs`;
+  check('gltf-transform optimize with the MOZ_lightmap module keeps the lightmap', e.kept.ok,
+    `${e.kept.detail}; ${kib(view)} -> ${kib(opt)} in ${t.seconds.toFixed(1)} s (${command})`);
+  check('validator gltf-transform optimize', e.v.errors === 0 && e.v.warnings === 0,
+    `${e.v.errors} errors, ${e.v.warnings} warnings, ${e.v.infos} infos` + (e.v.first.length ? `\n       ${e.v.first.join('\n       ')}` : ''));
+  check('three.js gltf-transform optimize matches penumbra render of the baked file', e.r.mad < MAD_TOLERANCE && e.r.applied >= APPLIED_MIN_MAD,
+    `${numbers(e)} (tolerance ${MAD_TOLERANCE}, at least ${APPLIED_MIN_MAD})` +
+    (e.r.info.messages.length ? `\n       ${e.r.info.messages.slice(0, 5).join('\n       ')}` : ''));
+
+  // Self-test: without the module glTF-Transform drops MOZ_lightmap, and the checks must say so.
+  const plain = glb('gt-optimize-no-module');
+  gltfTransformOptimize(view, plain, OPTIMIZE_KEEP_LIGHTMAP, { config: false });
+  const p = await examine('gt-optimize-no-module', plain);
+  check('self-test: the checks catch gltf-transform optimize without the module', !p.kept.ok && p.r.mad >= MAD_TOLERANCE,
+    `lightmap check: ${p.kept.problems.join('; ') || 'passed'}; ${numbers(p)}`);
+
+  // What each optimize default does to the lightmap: the working options with one default back.
+  const variants = [
+    ['--simplify true (default)', ['--simplify', 'true']],
+    ['--texture-compress auto (default)', ['--texture-compress', 'auto']],
+    ['--texture-compress webp', ['--texture-compress', 'webp']],
+    ['--texture-compress avif', ['--texture-compress', 'avif']],
+    ['--prune-attributes true (default)', ['--prune-attributes', 'true']],
+    ['--compress false (no meshopt, no quantization)', ['--compress', 'false']],
+    ['--palette false', ['--palette', 'false']],
+  ];
+  for (const [name, change] of variants) {
+    const options = [...OPTIMIZE_KEEP_LIGHTMAP];
+    for (let i = 0; i < change.length; i += 2) {
+      const at = options.indexOf(change[i]);
+      if (at >= 0) options.splice(at, 2, change[i], change[i + 1]);
+      else options.push(change[i], change[i + 1]);
+    }
+    const tag = `gt-optimize-${change.join('-').replace(/[^a-z0-9]+/gi, '-').replace(/^-+|-+$/g, '')}`;
+    const out = glb(tag);
+    const s = gltfTransformOptimize(view, out, options);
+    const m = await examine(tag, out);
+    info(`gltf-transform optimize with ${name}`,
+      `lightmap ${m.kept.ok ? 'kept' : `changed: ${m.kept.problems.join('; ')}`}; ${numbers(m)}; ` +
+      `validator ${m.v.errors} errors, ${m.v.warnings} warnings; ${kib(out)} in ${s.seconds.toFixed(1)} s`);
+  }
+
+  // gltfpack after the bake: MOZ_lightmap is lost whatever it keeps.
+  const packed = glb('gltfpack-after-bake');
+  gltfpack(view, packed, GLTFPACK_KEEP);
+  const k = await examine('gltfpack-after-bake', packed);
+  check(`${gltfpackVersion()} ${GLTFPACK_KEEP.join(' ')} after the bake drops MOZ_lightmap (as documented)`,
+    !k.kept.ok && k.kept.problems.includes('no material has MOZ_lightmap') && lightmapKept(view, packed).detail.includes('TEXCOORD_1 on'),
+    `${k.kept.detail}; ${numbers(k)}`);
+
+  // gltfpack before the bake: a plain (-noq) file that penumbra reads, bakes and three.js shows.
+  const first = glb('gltfpack-before-bake-input');
+  const after = glb('gltfpack-before-bake');
+  try {
+    gltfpack(path.join(ROOT, 'fixtures', 'cornell-box.glb'), first, ['-noq', '-kn', '-km', '-ke']);
+    penumbra(['bake', first, after, '--quiet']);
+  } catch (err) {
+    check('gltfpack -noq, then penumbra bake', false, err.message);
+    return;
+  }
+  const a = lightmapOf(after);
+  const v = await validate(after);
+  const r = await compare(browser, after, 'gltfpack-before-bake');
+  check('gltfpack -noq -kn -km -ke, then penumbra bake: validator and three.js',
+    a.materials > 0 && a.uvsPresent && v.errors === 0 && v.warnings === 0 && r.mad < MAD_TOLERANCE && r.applied >= APPLIED_MIN_MAD,
+    `${a.materials} materials with MOZ_lightmap, ${v.errors} errors, ${v.warnings} warnings; mean |diff| ${fmt(r.mad)} ` +
+    `against penumbra render, lit - without lightmap ${fmt(r.applied)}`);
+}
+
 async function main() {
   const args = process.argv.slice(2);
   const only = args.includes('--only') ? args[args.indexOf('--only') + 1].split(',') : null;
@@ -485,6 +595,8 @@ async function main() {
       const r = await compare(browser, broken, t.tag, t.client, view);
       check(`self-test: three.js checks catch ${t.name}`, t.caught(r), t.what(r));
     }
+
+    if (baked['cornell-box']) await toolchainChecks(browser);
   } catch (e) {
     check('three.js', false, e.stack ?? String(e));
   } finally {
