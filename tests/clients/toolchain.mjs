@@ -14,12 +14,12 @@ export const GT_CONFIG = path.join(ROOT, 'examples', 'gltf-transform', 'gltf-tra
 
 /**
  * The `gltf-transform optimize` options that keep the lightmap as baked (docs/engines.md): no
- * simplification (it moves vertices, so the lightmap UVs and the lit geometry), no texture
- * re-encoding (lossy WebP/KTX2 on the lightmap; `auto` is lossless PNG and only costs time), and
- * the UV sets kept (else TEXCOORD_1 is renumbered to TEXCOORD_0 where nothing else uses
- * TEXCOORD_0). Everything else stays at its default, meshopt compression included.
+ * simplification (it moves vertices, and with them the lightmap UVs), the UV sets kept (else
+ * TEXCOORD_1 becomes TEXCOORD_0 wherever no other texture uses TEXCOORD_0) and no palette (it
+ * merges the materials and moves their albedo into an 8-bit texture). The rest stays at its
+ * default: meshopt compression, and `--texture-compress auto`, which re-encodes PNG losslessly.
  */
-export const OPTIMIZE_KEEP_LIGHTMAP = ['--simplify', 'false', '--texture-compress', 'false', '--prune-attributes', 'false'];
+export const OPTIMIZE_KEEP_LIGHTMAP = ['--simplify', 'false', '--prune-attributes', 'false', '--palette', 'false'];
 
 /** The gltfpack options that keep the most of a baked file (it still drops MOZ_lightmap). */
 export const GLTFPACK_KEEP = ['-kn', '-km', '-ke', '-kv', '-vtf'];
@@ -119,4 +119,67 @@ export function linkExampleModules() {
     fs.unlinkSync(link); // a dangling link
   } catch { /* none */ }
   fs.symlinkSync(path.relative(path.dirname(link), path.join(HERE, 'node_modules')), link, 'dir');
+}
+
+/** Triangles in a file's meshes (each mesh counted once, however many nodes place it). */
+export function triangles(file) {
+  const { json } = readGlb(file);
+  let n = 0;
+  for (const m of json.meshes ?? []) {
+    for (const p of m.primitives) {
+      if ((p.mode ?? 4) !== 4) continue;
+      n += (p.indices !== undefined ? json.accessors[p.indices].count : json.accessors[p.attributes.POSITION].count) / 3;
+    }
+  }
+  return n;
+}
+
+const SRGB = Float64Array.from({ length: 256 }, (_, i) => {
+  const c = i / 255;
+  return c <= 0.04045 ? c / 12.92 : ((c + 0.055) / 1.055) ** 2.4;
+});
+
+/** The lightmap pages of a file: page number -> { pixels (RGB bytes), width, height, encoding }. */
+async function lightmapPages(file) {
+  const { default: sharp } = await import('sharp');
+  const { json, bin } = readGlb(file);
+  const pages = new Map();
+  for (const m of json.materials ?? []) {
+    const lm = m.extensions?.MOZ_lightmap;
+    const tex = lm && json.textures?.[lm.index];
+    if (!tex) continue;
+    const page = tex.extras?.penumbra?.page ?? 0;
+    if (pages.has(page)) continue;
+    let source = tex.source;
+    for (const ext of ['EXT_texture_webp', 'EXT_texture_avif']) source ??= tex.extensions?.[ext]?.source;
+    const view = json.bufferViews[json.images[source].bufferView];
+    const bytes = bin.subarray(view.byteOffset ?? 0, (view.byteOffset ?? 0) + view.byteLength);
+    const { data, info } = await sharp(bytes).removeAlpha().raw().toBuffer({ resolveWithObject: true });
+    pages.set(page, { pixels: data, width: info.width, height: info.height, encoding: tex.extras?.penumbra?.encoding ?? 'linear' });
+  }
+  return pages;
+}
+
+/**
+ * The lightmap texels of `after` against those of `before`, page by page: the mean absolute
+ * difference of the decoded (linear) values as a fraction of their mean, and the largest
+ * difference in 8-bit codes. null when `after` has no lightmap (or a page changed size).
+ */
+export async function texelDiff(before, after) {
+  const [a, b] = [await lightmapPages(before), await lightmapPages(after)];
+  if (b.size === 0) return null;
+  let sum = 0;
+  let ref = 0;
+  let maxCode = 0;
+  for (const [page, pa] of a) {
+    const pb = b.get(page);
+    if (!pb || pb.width !== pa.width || pb.height !== pa.height) return null;
+    const lin = (v) => (pa.encoding === 'srgb' ? SRGB[v] : v / 255);
+    for (let i = 0; i < pa.pixels.length; i++) {
+      sum += Math.abs(lin(pa.pixels[i]) - lin(pb.pixels[i]));
+      ref += lin(pa.pixels[i]);
+      maxCode = Math.max(maxCode, Math.abs(pa.pixels[i] - pb.pixels[i]));
+    }
+  }
+  return { relative: ref > 0 ? sum / ref : 0, maxCode };
 }
