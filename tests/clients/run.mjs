@@ -36,6 +36,10 @@ import { fileURLToPath } from 'node:url';
 import { PNG } from 'pngjs';
 import * as validator from 'gltf-validator';
 import { addCamera, breakages, editGlb, hasCamera, readGlb } from './glb.mjs';
+import {
+  GLTFPACK_KEEP, OPTIMIZE_KEEP_LIGHTMAP, gltfTransformOptimize, gltfpack, gltfpackVersion, kib, lightmapKept,
+  lightmapOf, linkExampleModules, texelDiff, triangles,
+} from './toolchain.mjs';
 
 const HERE = path.dirname(fileURLToPath(import.meta.url));
 const ROOT = path.resolve(HERE, '../..');
@@ -75,6 +79,8 @@ const VIEWS = {
   'spot-light': { eye: [1.6, 1.2, 2.0], target: [0.1, 0, 0], yfov: 0.9 },
   'square-occluder': { eye: [3.0, 1.5, 4.0], target: [0, 0.5, 0], yfov: 0.9 },
 };
+/** Pixel block size of the comparison (see VIEWS): the towns made for the toolchain checks too. */
+const blockOf = (tag) => (VIEWS[tag] ?? {}).block ?? (tag.includes('town-6k') ? 4 : 1);
 const DEFAULT_VIEW = { eye: [2.4, 1.6, 3.2], target: [0, 0.3, 0], yfov: 0.9 };
 
 const CHROMIUM_ARGS = [
@@ -91,6 +97,11 @@ function check(name, ok, detail) {
   counts[ok ? 'passed' : 'failed']++;
   results.push({ name, result: ok ? 'passed' : 'failed', detail });
   console.log(`${ok ? 'ok  ' : 'FAIL'} ${name}: ${detail}`);
+}
+/** A measurement, not a check: printed and kept in summary.json, never counted. */
+function info(name, detail) {
+  results.push({ name, result: 'info', detail });
+  console.log(`info ${name}: ${detail}`);
 }
 function skip(name, why) {
   counts.skipped++;
@@ -310,8 +321,8 @@ async function validate(file) {
  * removed. Returns the numbers; `tag` names the output files.
  */
 async function compare(browser, glb, tag, { lightmapColorSpace = 'file' } = {}, truth = glb) {
-  const { json } = readGlb(glb);
-  const exposure = exposureOf(json);
+  // The exposure of the unbroken file: a tool may change the materials (glTF-Transform's palette).
+  const exposure = exposureOf(readGlb(truth).json);
   const ref = path.join(OUT, `${tag}-penumbra.png`);
   penumbra(['render', truth, '--out', ref, '--width', String(SIZE), '--height', String(SIZE), '--camera', 'gltf', '--exposure', String(exposure)]);
   const shot = path.join(OUT, `${tag}-threejs.png`);
@@ -325,7 +336,7 @@ async function compare(browser, glb, tag, { lightmapColorSpace = 'file' } = {}, 
   return {
     exposure,
     info,
-    mad: blockMeanAbsDiff(a, b, (VIEWS[tag] ?? {}).block ?? 1),
+    mad: blockMeanAbsDiff(a, b, blockOf(tag)),
     applied: meanAbsDiff(a, c),
     meanThree: meanLinear(a),
     meanPenumbra: meanLinear(b),
@@ -333,6 +344,132 @@ async function compare(browser, glb, tag, { lightmapColorSpace = 'file' } = {}, 
 }
 
 const fmt = (x) => x.toFixed(4);
+
+/**
+ * 5. The JS toolchain on a baked file (issue 37; docs/engines.md). The baked cornell-box (with its
+ * camera) goes through `gltf-transform optimize` with examples/gltf-transform's MOZ_lightmap module
+ * and the options that keep the lightmap (OPTIMIZE_KEEP_LIGHTMAP): MOZ_lightmap must stay on every
+ * lit material, on TEXCOORD_1, with the texture's extras; the validator must report 0 errors and
+ * 0 warnings; three.js must draw it as `penumbra render` draws the file before optimising.
+ * Self-test: the same command without the module must lose the lightmap and fail both.
+ * Measured (info lines, not checks): what each optimize default left out of
+ * OPTIMIZE_KEEP_LIGHTMAP does. gltfpack: it drops MOZ_lightmap whatever its options (checked, so
+ * a gltfpack that keeps it shows up here); running it before the bake (`-noq`) works.
+ */
+async function toolchainChecks(browser) {
+  linkExampleModules();
+  const glb = (name) => path.join(OUT, 'glb', `${name}.glb`);
+  const view = glb('cornell-box-view');
+  const threeBefore = readPng(path.join(OUT, 'cornell-box-threejs.png'));
+
+  // One processed file: its lightmap kept?, the validator, three.js against penumbra render of `view`.
+  const examine = async (tag, file, base = view, before = threeBefore) => {
+    const kept = lightmapKept(base, file);
+    const v = await validate(file);
+    const r = await compare(browser, file, tag, {}, base);
+    const three = blockMeanAbsDiff(readPng(path.join(OUT, `${tag}-threejs.png`)), before, blockOf(tag));
+    return { kept, v, r, three };
+  };
+  const numbers = ({ r, three }) => `mean |diff| ${fmt(r.mad)} against penumbra render of the baked file, ` +
+    `${fmt(three)} against three.js of it, lit - without lightmap ${fmt(r.applied)}`;
+
+  // glTF-Transform with the module and the working options.
+  const opt = glb('gt-optimize');
+  const t = gltfTransformOptimize(view, opt, OPTIMIZE_KEEP_LIGHTMAP);
+  const e = await examine('gt-optimize', opt);
+  const command = `gltf-transform optimize ${OPTIMIZE_KEEP_LIGHTMAP.join(' ')} --config examples/gltf-transform/gltf-transform.config.mjs`;
+  const d = await texelDiff(view, opt);
+  check('gltf-transform optimize with the MOZ_lightmap module keeps the lightmap', e.kept.ok && d?.maxCode === 0,
+    `${e.kept.detail}; lightmap texels ${d ? `off by at most ${d.maxCode} codes` : 'not comparable'}; ` +
+    `${kib(view)} -> ${kib(opt)} in ${t.seconds.toFixed(1)} s (${command})`);
+  check('validator gltf-transform optimize', e.v.errors === 0 && e.v.warnings === 0,
+    `${e.v.errors} errors, ${e.v.warnings} warnings, ${e.v.infos} infos` + (e.v.first.length ? `\n       ${e.v.first.join('\n       ')}` : ''));
+  check('three.js gltf-transform optimize matches penumbra render of the baked file', e.r.mad < MAD_TOLERANCE && e.r.applied >= APPLIED_MIN_MAD,
+    `${numbers(e)} (tolerance ${MAD_TOLERANCE}, at least ${APPLIED_MIN_MAD})` +
+    (e.r.info.messages.length ? `\n       ${e.r.info.messages.slice(0, 5).join('\n       ')}` : ''));
+
+  // Self-test: without the module glTF-Transform drops MOZ_lightmap, and the checks must say so.
+  const plain = glb('gt-optimize-no-module');
+  gltfTransformOptimize(view, plain, OPTIMIZE_KEEP_LIGHTMAP, { config: false });
+  const p = await examine('gt-optimize-no-module', plain);
+  check('self-test: the checks catch gltf-transform optimize without the module', !p.kept.ok && p.r.mad >= MAD_TOLERANCE,
+    `lightmap check: ${p.kept.problems.join('; ') || 'passed'}; ${numbers(p)}`);
+
+  // What each optimize default does to the lightmap: the working options with one default back.
+  const variants = [
+    ['--simplify true (default)', ['--simplify', 'true']],
+    ['--texture-compress webp', ['--texture-compress', 'webp']],
+    ['--texture-compress avif', ['--texture-compress', 'avif']],
+    ['--prune-attributes true (default)', ['--prune-attributes', 'true']],
+    ['--compress false (no meshopt, no quantization)', ['--compress', 'false']],
+    ['--palette true (default)', ['--palette', 'true']],
+  ];
+  const measure = async (scene, base, before) => { for (const [name, change] of variants) {
+    const options = [...OPTIMIZE_KEEP_LIGHTMAP];
+    for (let i = 0; i < change.length; i += 2) {
+      const at = options.indexOf(change[i]);
+      if (at >= 0) options.splice(at, 2, change[i], change[i + 1]);
+      else options.push(change[i], change[i + 1]);
+    }
+    const tag = `gt-${scene}-${change.join('-').replace(/[^a-z0-9]+/gi, '-').replace(/^-+|-+$/g, '')}`;
+    const out = glb(tag);
+    const s = gltfTransformOptimize(base, out, options);
+    const m = await examine(tag, out, base, before);
+    const d = await texelDiff(base, out);
+    const texels = d ? `texels off by ${(100 * d.relative).toFixed(2)}% of the mean, at most ${d.maxCode} codes` : 'texels not comparable';
+    info(`gltf-transform optimize ${scene} with ${name}`,
+      `lightmap ${m.kept.ok ? 'kept' : `changed: ${m.kept.problems.join('; ')}`}; ${texels}; ${numbers(m)}; ` +
+      `${triangles(base)} -> ${triangles(out)} triangles; ` +
+      `validator ${m.v.errors} errors, ${m.v.warnings} warnings; ${kib(base)} -> ${kib(out)} in ${s.seconds.toFixed(1)} s`);
+  } };
+  await measure('cornell-box', view, threeBefore);
+
+  // Simplification needs geometry to simplify: the scale ladder's town at about 6 000 triangles.
+  const townIn = glb('town-6k-input');
+  const town = glb('town-6k');
+  const made = spawnSync(MAKE_FIXTURES, ['--town', '6000', townIn], { encoding: 'utf8' });
+  if (made.status !== 0) {
+    check('generate the town-6k scene', false, `${MAKE_FIXTURES}: ${made.error?.message ?? made.stderr}`);
+  } else {
+    penumbra(['bake', townIn, town, '--quiet']);
+    const base = await compare(browser, town, 'town-6k');
+    const townThree = readPng(path.join(OUT, 'town-6k-threejs.png'));
+    const tt = glb('gt-town-6k');
+    gltfTransformOptimize(town, tt, OPTIMIZE_KEEP_LIGHTMAP);
+    const w = await examine('gt-town-6k', tt, town, townThree);
+    check('gltf-transform optimize town-6k keeps the lightmap, validator and three.js',
+      w.kept.ok && w.v.errors === 0 && w.v.warnings === 0 && w.r.mad < MAD_TOLERANCE && w.r.applied >= APPLIED_MIN_MAD,
+      `${w.kept.ok ? 'lightmap kept' : w.kept.problems.join('; ')}; ${w.v.errors} errors, ${w.v.warnings} warnings; ${numbers(w)} ` +
+      `(three.js of the baked file against penumbra render: ${fmt(base.mad)}; ${kib(town)} -> ${kib(tt)})`);
+    await measure('town-6k', town, townThree);
+  }
+
+  // gltfpack after the bake: MOZ_lightmap is lost whatever it keeps.
+  const packed = glb('gltfpack-after-bake');
+  gltfpack(view, packed, GLTFPACK_KEEP);
+  const k = await examine('gltfpack-after-bake', packed);
+  check(`${gltfpackVersion()} ${GLTFPACK_KEEP.join(' ')} after the bake drops MOZ_lightmap (as documented)`,
+    !k.kept.ok && k.kept.problems.includes('no material has MOZ_lightmap') && lightmapKept(view, packed).detail.includes('TEXCOORD_1 on'),
+    `${k.kept.detail}; ${numbers(k)}`);
+
+  // gltfpack before the bake: a plain (-noq) file that penumbra reads, bakes and three.js shows.
+  const first = glb('gltfpack-before-bake-input');
+  const after = glb('gltfpack-before-bake');
+  try {
+    gltfpack(path.join(ROOT, 'fixtures', 'cornell-box.glb'), first, ['-noq', '-kn', '-km', '-ke']);
+    penumbra(['bake', first, after, '--quiet']);
+  } catch (err) {
+    check('gltfpack -noq, then penumbra bake', false, err.message);
+    return;
+  }
+  const a = lightmapOf(after);
+  const v = await validate(after);
+  const r = await compare(browser, after, 'gltfpack-before-bake');
+  check('gltfpack -noq -kn -km -ke, then penumbra bake: validator and three.js',
+    a.materials > 0 && a.uvsPresent && v.errors === 0 && v.warnings === 0 && r.mad < MAD_TOLERANCE && r.applied >= APPLIED_MIN_MAD,
+    `${a.materials} materials with MOZ_lightmap, ${v.errors} errors, ${v.warnings} warnings; mean |diff| ${fmt(r.mad)} ` +
+    `against penumbra render, lit - without lightmap ${fmt(r.applied)}`);
+}
 
 async function main() {
   const args = process.argv.slice(2);
@@ -485,6 +622,8 @@ async function main() {
       const r = await compare(browser, broken, t.tag, t.client, view);
       check(`self-test: three.js checks catch ${t.name}`, t.caught(r), t.what(r));
     }
+
+    if (baked['cornell-box']) await toolchainChecks(browser);
   } catch (e) {
     check('three.js', false, e.stack ?? String(e));
   } finally {

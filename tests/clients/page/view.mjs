@@ -10,6 +10,8 @@
 
 import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
+// For files that glTF-Transform or gltfpack compressed (EXT_meshopt_compression).
+import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
 import { MozLightmapExtension } from './moz-lightmap.mjs';
 
 let renderer = null;
@@ -76,6 +78,7 @@ window.renderGlb = async function renderGlb({ url, width, height, exposure, ligh
   const r = rendererOfSize(width, height);
   const loader = new GLTFLoader();
   loader.register((parser) => new MozLightmapExtension(parser));
+  loader.setMeshoptDecoder(MeshoptDecoder);
   const gltf = await loader.loadAsync(url);
   const scene = gltf.scene;
 
