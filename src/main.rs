@@ -292,6 +292,10 @@ struct RenderArgs {
     /// pages beside it as the bake names them).
     #[arg(long, value_name = "EXR")]
     irradiance: Option<PathBuf>,
+    /// Show the lightmap alone: irradiance / pi on white surfaces, without albedo, textures
+    /// or emission
+    #[arg(long, conflicts_with = "irradiance")]
+    lightmap_alone: bool,
     #[command(flatten)]
     input_args: InputArgs,
 }
@@ -700,20 +704,17 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
         "--width must be between 1 and 16384"
     );
     let height = args.height.unwrap_or(args.width).clamp(1, 16384);
-    let img = match &args.irradiance {
-        Some(exr) => {
-            let map = penumbra::render::read_irradiance(exr)?;
-            penumbra::render::render_irradiance(
-                &gltf,
-                camera,
-                args.width,
-                height,
-                args.exposure,
-                &map,
-            )?
-        }
-        None => penumbra::render::render(&gltf, camera, args.width, height, args.exposure)?,
+    let map = match &args.irradiance {
+        Some(exr) => Some(penumbra::render::read_irradiance(exr)?),
+        None => None,
     };
+    let shading = match &map {
+        Some(map) => penumbra::render::Shading::Irradiance(map),
+        None if args.lightmap_alone => penumbra::render::Shading::LightmapAlone,
+        None => penumbra::render::Shading::Lightmap,
+    };
+    let img =
+        penumbra::render::render_shaded(&gltf, camera, args.width, height, args.exposure, shading)?;
     let mut png = std::io::Cursor::new(Vec::new());
     img.write_to(&mut png, image::ImageFormat::Png)?;
     let out = check_outputs(&gltf, &[("--out", &args.out)])?;

@@ -133,6 +133,9 @@ impl Camera {
 pub enum Shading<'a> {
     /// `albedo/pi x H` with H from the file's own lightmap texture (as a client shows it).
     Lightmap,
+    /// `H/pi` from the file's own lightmap texture: the lightmap alone, on white surfaces, no
+    /// emission (what a lightmap holds, whatever the textures and colours).
+    LightmapAlone,
     /// `albedo/pi x H` with H from this float map over the same texel grid (e.g. a reference
     /// or another bake of the same layout), sampled bilinearly like the texture.
     Irradiance(&'a Lightmap),
@@ -150,22 +153,21 @@ pub fn render(
     height: u32,
     exposure: Option<f64>,
 ) -> Result<image::RgbImage> {
-    let radiance = render_radiance(gltf, camera, width, height, Shading::Lightmap)?;
-    let scale = exposure.unwrap_or_else(|| auto_exposure(&radiance));
-    Ok(tone_map(&radiance, width, height, scale))
+    render_shaded(gltf, camera, width, height, exposure, Shading::Lightmap)
 }
 
-/// [`render`] with the surfaces lit by `map` (irradiance, W/m², in the file's lightmap layout)
-/// instead of the file's own lightmap: a float lightmap or a reference, shown as a client would.
-pub fn render_irradiance(
+/// [`render`] with the surfaces shaded as `shading` says: for example lit by a float lightmap
+/// or a reference instead of the file's own lightmap ([`Shading::Irradiance`]), or the
+/// lightmap alone ([`Shading::LightmapAlone`]).
+pub fn render_shaded(
     gltf: &Gltf,
     camera: Option<Camera>,
     width: u32,
     height: u32,
     exposure: Option<f64>,
-    map: &Lightmap,
+    shading: Shading,
 ) -> Result<image::RgbImage> {
-    let radiance = render_radiance(gltf, camera, width, height, Shading::Irradiance(map))?;
+    let radiance = render_radiance(gltf, camera, width, height, shading)?;
     let scale = exposure.unwrap_or_else(|| auto_exposure(&radiance));
     Ok(tone_map(&radiance, width, height, scale))
 }
@@ -268,7 +270,8 @@ pub fn render_radiance(
                     sample_page(map, page, uv)
                 });
             }
-            let mut l = if tri.normal.dot(dir) < 0.0 {
+            let alone = matches!(shading, Shading::LightmapAlone);
+            let mut l = if tri.normal.dot(dir) < 0.0 && !alone {
                 mat.radiance
             } else {
                 DVec3::ZERO
@@ -278,7 +281,8 @@ pub fn render_radiance(
                     Shading::Irradiance(map) => sample_page(map, page, uv),
                     _ => sample_map(&textures[&b.texture], uv) * b.intensity,
                 };
-                l += mat.rho / std::f64::consts::PI * h;
+                let albedo = if alone { DVec3::ONE } else { mat.rho };
+                l += albedo / std::f64::consts::PI * h;
             }
             l
         })

@@ -5,7 +5,7 @@ import { spawnSync } from 'node:child_process';
 import fs from 'node:fs';
 import path from 'node:path';
 import { fileURLToPath } from 'node:url';
-import { readGlb } from './glb.mjs';
+import { readGlb, writeGlb } from './glb.mjs';
 
 const HERE = path.dirname(fileURLToPath(import.meta.url));
 const ROOT = path.resolve(HERE, '../..');
@@ -182,4 +182,53 @@ export async function texelDiff(before, after) {
     }
   }
   return { relative: ref > 0 ? sum / ref : 0, maxCode };
+}
+
+/**
+ * A copy of `from` whose primitives with TEXCOORD_0 get a base colour texture: a 64x64 PNG
+ * checker of two colours (the input for the optimised-input checks, where `gltf-transform webp`
+ * needs a texture to re-encode). Their materials are copied first, so other primitives keep
+ * their own colour.
+ */
+export async function withCheckerTexture(from, to) {
+  const { PNG } = await import('pngjs');
+  const png = new PNG({ width: 64, height: 64 });
+  for (let y = 0; y < 64; y++) {
+    for (let x = 0; x < 64; x++) {
+      const light = ((x >> 3) + (y >> 3)) % 2 === 0;
+      png.data.set(light ? [230, 200, 150, 255] : [60, 90, 140, 255], 4 * (64 * y + x));
+    }
+  }
+  const bytes = PNG.sync.write(png);
+  const glb = readGlb(from);
+  const { json } = glb;
+  const pad = (b) => Buffer.concat([b, Buffer.alloc((4 - (b.length % 4)) % 4)]);
+  const base = pad(glb.bin ?? Buffer.alloc(0));
+  glb.bin = Buffer.concat([base, bytes]);
+  json.buffers[0].byteLength = glb.bin.length;
+  json.bufferViews.push({ buffer: 0, byteOffset: base.length, byteLength: bytes.length });
+  (json.images ??= []).push({ bufferView: json.bufferViews.length - 1, mimeType: 'image/png' });
+  (json.samplers ??= []).push({ wrapS: 10497, wrapT: 10497 });
+  (json.textures ??= []).push({ source: json.images.length - 1, sampler: json.samplers.length - 1 });
+  const texture = json.textures.length - 1;
+  for (const mesh of json.meshes) {
+    for (const p of mesh.primitives) {
+      if (!('TEXCOORD_0' in p.attributes)) continue;
+      const m = structuredClone(json.materials?.[p.material] ?? {});
+      (m.pbrMetallicRoughness ??= {}).baseColorTexture = { index: texture };
+      json.materials.push(m);
+      p.material = json.materials.length - 1;
+    }
+  }
+  writeGlb(to, glb);
+}
+
+/** `gltf-transform CMD IN OUT args` (any command; no MOZ_lightmap config). */
+export function gltfTransform(cmd, input, output, args = []) {
+  return tool('gltf-transform', [cmd, input, output, ...args]);
+}
+
+/** The extensions a file requires. */
+export function required(file) {
+  return readGlb(file).json.extensionsRequired ?? [];
 }
