@@ -20,6 +20,7 @@ mod reference;
 mod seams;
 mod sky;
 mod stability;
+mod toolchain;
 mod untrusted;
 
 use penumbra::load::{self, Gltf};
