@@ -56,7 +56,8 @@ pub struct BakeOptions {
 
 /// What the output does with the back side of a double-sided primitive (`--double-sided`).
 /// The solve has both sides either way: both receive and reflect light.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(any(feature = "cli", feature = "measure"), derive(clap::ValueEnum))]
 pub enum DoubleSided {
     /// Each side its own lightmap: the back becomes an extra primitive with reversed winding
     /// (and negated normals), and both sides' materials become single-sided copies.
@@ -78,7 +79,8 @@ impl DoubleSided {
 }
 
 /// What the lightmap stage does at the seams between charts (`--seams`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+#[cfg_attr(any(feature = "cli", feature = "measure"), derive(clap::ValueEnum))]
 pub enum Seams {
     /// Least-squares stitching, so bilinear lookups on the two sides of a seam agree.
     #[default]

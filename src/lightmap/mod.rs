@@ -92,17 +92,8 @@ impl Lightmap {
 
 /// How the 8-bit lightmap maps codes to values: the transfer curve between the stored code
 /// (0..255, / 255) and the linear value `v = H / scale` (0..1).
-#[derive(
-    Clone,
-    Copy,
-    Debug,
-    PartialEq,
-    Eq,
-    Default,
-    clap::ValueEnum,
-    serde::Serialize,
-    serde::Deserialize,
-)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[cfg_attr(any(feature = "cli", feature = "measure"), derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Encoding {
     /// The sRGB transfer curve (IEC 61966-2-1): about 4x finer steps than linear at 1% of the

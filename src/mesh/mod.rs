@@ -27,7 +27,8 @@ use glam::DVec2;
 use rayon::prelude::*;
 
 /// Which mesher builds the receiver meshes.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[cfg_attr(any(feature = "cli", feature = "measure"), derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Mesher {
     /// Quality Delaunay refinement of each polygon's outline to an area cap from the budget.

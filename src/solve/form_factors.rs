@@ -25,7 +25,8 @@ use std::f64::consts::PI;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 /// How the patch solvers compute form factors (`--form-factors`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[cfg_attr(any(feature = "cli", feature = "measure"), derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum FormFactors {
     /// Exact unoccluded point-to-patch factor (contour formula), ray-cast visibility per piece.

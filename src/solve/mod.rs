@@ -69,7 +69,8 @@ use std::sync::atomic::Ordering;
 use std::time::Instant;
 
 /// How the direct light of area emitters is computed (`--direct`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[cfg_attr(any(feature = "cli", feature = "measure"), derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum DirectMethod {
     /// The exact form factor of the visible part of each emitter, by backprojection: occluders
@@ -82,7 +83,8 @@ pub enum DirectMethod {
 }
 
 /// Which solver computes the indirect light (`--solver`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, clap::ValueEnum, serde::Serialize)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[cfg_attr(any(feature = "cli", feature = "measure"), derive(clap::ValueEnum))]
 #[serde(rename_all = "lowercase")]
 pub enum Solver {
     /// Progressive refinement over coarse patches, then a final gather at every vertex

@@ -482,16 +482,16 @@ async function toolchainChecks(browser) {
   const first = glb('gltfpack-before-bake-input');
   const after = glb('gltfpack-before-bake');
   try {
-    gltfpack(path.join(ROOT, 'fixtures', 'cornell-box.glb'), first, ['-noq', '-kn', '-km', '-ke']);
+    gltfpack(path.join(ROOT, 'fixtures', 'cornell-box.glb'), first, ['-cc', '-kn', '-km', '-ke']);
     penumbra(['bake', first, after, '--quiet']);
   } catch (err) {
-    check('gltfpack -noq, then penumbra bake', false, err.message);
+    check('gltfpack -cc, then penumbra bake', false, err.message);
     return;
   }
   const a = lightmapOf(after);
   const v = await validate(after);
   const r = await compare(browser, after, 'gltfpack-before-bake');
-  check('gltfpack -noq -kn -km -ke, then penumbra bake: validator and three.js',
+  check('gltfpack -cc -kn -km -ke, then penumbra bake: validator and three.js',
     a.materials > 0 && a.uvsPresent && v.errors === 0 && v.warnings === 0 && r.mad < MAD_TOLERANCE && r.applied >= APPLIED_MIN_MAD,
     `${a.materials} materials with MOZ_lightmap, ${v.errors} errors, ${v.warnings} warnings; mean |diff| ${fmt(r.mad)} ` +
     `against penumbra render, lit - without lightmap ${fmt(r.applied)}`);
@@ -552,6 +552,22 @@ async function optimisedInputChecks() {
     } catch (err) {
       check(`${name}, then penumbra bake`, false, err.message);
     }
+  }
+
+  // Draco is refused, naming the extension and the command that re-encodes it with meshopt.
+  const draco = glb('gt-draco');
+  const recoded = glb('gt-draco-meshopt');
+  try {
+    gltfTransform('draco', source, draco);
+    const r = spawnSync(PENUMBRA, ['bake', draco, glb('gt-draco-baked')], { encoding: 'utf8' });
+    const way = r.stderr.match(/`npx @gltf-transform\/cli (\w+) IN\.glb OUT\.glb`/);
+    if (way) gltfTransform(way[1], draco, recoded);
+    const baked = way ? spawnSync(PENUMBRA, ['bake', recoded, glb('gt-draco-meshopt-baked'), '--quiet']) : null;
+    check('a Draco file is refused with the command that makes it readable, and that command works',
+      r.status !== 0 && r.stderr.includes('KHR_draco_mesh_compression') && baked?.status === 0,
+      `${r.stderr.trim().split('\n')[0]}; ${way ? `gltf-transform ${way[1]}, then bake: exit ${baked.status}` : 'no command given'}`);
+  } catch (err) {
+    check('a Draco file is refused with the way out', false, err.message);
   }
 }
 
