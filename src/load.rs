@@ -3,6 +3,10 @@
 //! Every accessor is bounds-checked here before it is read, so a truncated or inconsistent file
 //! gives an [`Error`] that names the file and the item, never a panic.
 //!
+//! Which extensions a file may require is decided in [`extensions`], not by the `gltf` crate:
+//! quantized attributes, meshopt-compressed views ([`meshopt`]), GPU instances ([`instancing`],
+//! each instance a placement of its own) and WebP images are read.
+//!
 //! A primitive whose material is `doubleSided` becomes two instances: its front, and right
 //! after it its back ([`crate::scene::Side::Back`]: the same world positions, every triangle's winding
 //! reversed). Both sides then receive, reflect and (if the material emits) emit light as two

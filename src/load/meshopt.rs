@@ -280,7 +280,8 @@ mod tests {
             ),
         ];
         for (ext, want) in cases {
-            let e = decode_views(&view(ext.clone()), std::slice::from_ref(&vbytes)).expect_err(want);
+            let e =
+                decode_views(&view(ext.clone()), std::slice::from_ref(&vbytes)).expect_err(want);
             assert_eq!(e.item, "bufferViews[0].extensions.EXT_meshopt_compression");
             assert!(e.reason.contains(want), "{ext}: {}", e.reason);
         }

@@ -16,7 +16,15 @@ use std::collections::BTreeMap;
 pub(super) fn merge_buffers(gltf: &Gltf, root: &mut Value, bin: &mut Bin) {
     let decoded = |i: usize| gltf.decoded_views.get(i).and_then(Option::as_ref);
     let views = array_mut(root, "bufferViews");
-    let mut live = vec![false; gltf.buffers.len()];
+    // Left out: a buffer that compressed views read from and no plain view does.
+    let mut live = vec![true; gltf.buffers.len()];
+    for view in views.iter() {
+        if let Some(b) = meshopt::extension(view).and_then(|e| e["buffer"].as_u64())
+            && let Some(l) = live.get_mut(b as usize)
+        {
+            *l = false;
+        }
+    }
     for (i, view) in views.iter().enumerate() {
         if decoded(i).is_none()
             && let Some(b) = view["buffer"]
