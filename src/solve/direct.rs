@@ -687,10 +687,13 @@ pub fn punctual_irradiance(
     };
     let lit = match light.kind {
         LightKind::Directional => {
-            vis.unoccluded_towards(at.ray_origin, -light.direction, at.polygon)
+            let dir = -light.direction;
+            vis.unoccluded_towards(at.ray_origin_towards(dir), dir, at.polygon)
         }
         LightKind::Point | LightKind::Spot { .. } => {
-            !vis.occluded_skipping(at.ray_origin, light.position, [at.polygon, NO_POLYGON])
+            let dir = (light.position - at.p).normalize_or_zero();
+            let origin = at.ray_origin_towards(dir);
+            !vis.occluded_skipping(origin, light.position, [at.polygon, NO_POLYGON])
         }
     };
     (if lit { e } else { DVec3::ZERO }, 1)

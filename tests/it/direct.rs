@@ -632,3 +632,45 @@ fn light_cuts_leave_a_single_emitter_exact() {
     let d = &b.stats.solve.direct;
     assert_eq!((d.light_tree_nodes, d.bounded), (1, 0), "{d:?}");
 }
+
+/// A point half a ray lift beside a sun's hard shadow edge gets its own side's light: the
+/// shadow ray starts on the line through the point, not lifted along the normal (which moves
+/// the edge by the lift times the tangent of the sun's angle, here 45 degrees: one lift).
+#[test]
+fn points_beside_a_hard_shadow_edge_get_their_own_sides_light() {
+    let gltf = parse(&fixtures::directional_light(), "sun.glb");
+    let scene = penumbra::load::scene(&gltf).unwrap();
+    let vis = Visibility::new(&scene);
+    let light = &scene.lights[0];
+    let to_sun = -light.direction;
+    let floor = (0..scene.polygons.len())
+        .max_by(|&a, &b| scene.polygons[a].area.total_cmp(&scene.polygons[b].area))
+        .unwrap();
+    // The box's top edge at x = 0.5, y = 0.3 shades the floor to x = 0.8: find the edge along
+    // z = 0 with rays from the floor itself (its own polygon never blocks them).
+    let lit_from_surface = |x: f64| vis.unoccluded_towards(DVec3::new(x, 0.0, 0.0), to_sun, floor);
+    let (mut shadow, mut lit) = (0.6, 1.0);
+    assert!(!lit_from_surface(shadow) && lit_from_surface(lit));
+    for _ in 0..60 {
+        let mid = 0.5 * (shadow + lit);
+        if lit_from_surface(mid) {
+            lit = mid;
+        } else {
+            shadow = mid;
+        }
+    }
+    assert!((lit - 0.8).abs() < 1e-3, "the shadow edge at x = {lit}");
+    let lift = 2.0 * vis.epsilon();
+    let n = DVec3::Y;
+    let at = |x: f64| SurfacePoint {
+        p: DVec3::new(x, 0.0, 0.0),
+        n,
+        ray_origin: DVec3::new(x, lift, 0.0),
+        polygon: floor,
+    };
+    let h = |x: f64| solve::punctual_irradiance(light, &vis, &at(x)).0.x;
+    let full = h(1.5);
+    assert!(full > 0.0);
+    assert_eq!(h(lit + 0.5 * lift), full, "lit side");
+    assert_eq!(h(shadow - 0.5 * lift), 0.0, "shadow side");
+}
