@@ -851,6 +851,7 @@ fn add_primitive(
         return Ok(());
     }
     let material = prim.material().index().unwrap_or(default_material);
+    let colours = vertex_colours(gltf, prim, &item)?;
     let front = Instance {
         node,
         gpu_instance,
@@ -863,6 +864,8 @@ fn add_primitive(
         side: Side::Front,
         first_triangle: 0,
         derived: Vec::new(),
+        colours,
+        material,
     };
     // A double-sided material: the back is a second instance right after the front, its
     // winding reversed, so both sides receive, reflect (and emit) light. Not for a closed
@@ -874,6 +877,34 @@ fn add_primitive(
         scene.add_instance(back, material);
     }
     Ok(())
+}
+
+/// A primitive's `COLOR_0` as linear RGB per vertex (glTF stores vertex colours linear; alpha
+/// is left out), or `None` without one.
+fn vertex_colours(gltf: &Gltf, prim: &gltf::Primitive, item: &str) -> Result<Option<Vec<DVec3>>> {
+    let Some(acc) = prim.get(&gltf::Semantic::Colors(0)) else {
+        return Ok(None);
+    };
+    let dims = acc.dimensions();
+    let n = match dims {
+        Dimensions::Vec3 => 3,
+        Dimensions::Vec4 => 4,
+        _ => return Err(gltf.bad(item, format!("COLOR_0 is {dims:?}, not VEC3 or VEC4"))),
+    };
+    let values = gltf
+        .read_floats(&acc, dims)
+        .map_err(|e| e.within(&format!("{item}: COLOR_0")))?;
+    let colours: Vec<DVec3> = values
+        .chunks_exact(n)
+        .map(|c| DVec3::new(c[0], c[1], c[2]))
+        .collect();
+    if let Some(bad) = colours
+        .iter()
+        .find(|c| !c.is_finite() || c.min_element() < 0.0)
+    {
+        return Err(gltf.bad(item, format!("COLOR_0 holds {bad}, not a colour")));
+    }
+    Ok(Some(colours))
 }
 
 /// The most triangles a primitive can hold, from its accessors' counts (before reading them).

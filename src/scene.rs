@@ -212,6 +212,11 @@ pub struct Instance {
     /// Vertices added by [`cut::cut_long_edges`], in order: vertex `positions_world.len() -
     /// derived.len() + i` is `derived[i]`. Empty when nothing was cut.
     pub derived: Vec<Derived>,
+    /// Linear RGB per glTF vertex from `COLOR_0`, which multiplies the material's base colour;
+    /// each polygon of the instance reflects its area-weighted mean ([`Scene::add_instance`]).
+    pub(crate) colours: Option<Vec<DVec3>>,
+    /// The material [`Scene::add_instance`] was given (before any `colours` tint).
+    pub(crate) material: usize,
 }
 
 /// A vertex that is not in the glTF primitive: a weighted mean of up to three of its vertices
@@ -238,6 +243,8 @@ impl Instance {
             side: Side::Front,
             first_triangle: 0,
             derived: Vec::new(),
+            colours: None,
+            material: 0,
         }
     }
 
@@ -389,6 +396,7 @@ impl Scene {
     pub(crate) fn add_instance(&mut self, mut instance: Instance, material: usize) {
         let id = self.instances.len();
         instance.first_triangle = self.triangles.len();
+        instance.material = material;
         let first = self.triangles.len();
         for (k, tri) in instance.indices.chunks_exact(3).enumerate() {
             let p = [
@@ -414,7 +422,67 @@ impl Scene {
         }
         self.instances.push(instance);
         let last = self.triangles.len();
+        let polygons = self.polygons.len();
         self.merge_polygons(first..last, material, id);
+        self.tint_polygons(polygons, id);
+    }
+
+    /// Gives each polygon from `first` on (all of instance `id`'s) the material it was made
+    /// with times the area-weighted mean of the instance's vertex colours over it: the mean of
+    /// the linear interpolation over each triangle is its corners' mean. Polygons of one colour
+    /// share one material.
+    fn tint_polygons(&mut self, first: usize, id: usize) {
+        let Some(colours) = self.instances[id].colours.as_ref() else {
+            return;
+        };
+        let inst = &self.instances[id];
+        let source = inst.source_vertices();
+        let colour = |v: u32| -> DVec3 {
+            match (v as usize).checked_sub(source) {
+                None => colours[v as usize],
+                Some(d) => inst.derived[d]
+                    .weights
+                    .iter()
+                    .map(|&(w, k)| colours[w as usize] * k)
+                    .sum(),
+            }
+        };
+        let means: Vec<DVec3> = self.polygons[first..]
+            .iter()
+            .map(|poly| {
+                let (mut sum, mut area) = (DVec3::ZERO, 0.0);
+                for &t in &poly.triangles {
+                    let tri = &self.triangles[t];
+                    let k = tri.local_index;
+                    let c = (0..3)
+                        .map(|e| colour(inst.indices[3 * k + e]))
+                        .sum::<DVec3>()
+                        / 3.0;
+                    sum += c * tri.area();
+                    area += tri.area();
+                }
+                if area > 0.0 { sum / area } else { DVec3::ONE }
+            })
+            .collect();
+        for (i, mean) in means.into_iter().enumerate() {
+            let base = &self.materials[self.polygons[first + i].material];
+            let tinted = Material {
+                name: format!("{} x COLOR_0", base.name),
+                rho: (base.rho * mean).clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO)),
+                radiance: base.radiance,
+            };
+            let m = match self.materials.iter().position(|m| *m == tinted) {
+                Some(m) => m,
+                None => {
+                    self.materials.push(tinted);
+                    self.materials.len() - 1
+                }
+            };
+            self.polygons[first + i].material = m;
+            for t in self.polygons[first + i].triangles.clone() {
+                self.triangles[t].material = m;
+            }
+        }
     }
 
     /// Groups the triangles in `range` into planar polygons: flood fill over shared edges

@@ -54,10 +54,7 @@ pub(crate) fn cut_long_edges(scene: &mut Scene, max_edge: f64) -> Cut {
         return cut;
     }
     let mut instances = std::mem::take(&mut scene.instances);
-    let materials: Vec<usize> = instances
-        .iter()
-        .map(|inst| scene.triangles[inst.first_triangle].material)
-        .collect();
+    let materials: Vec<usize> = instances.iter().map(|inst| inst.material).collect();
     scene.triangles.clear();
     scene.polygons.clear();
     // Input triangles split, per instance.

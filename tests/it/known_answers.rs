@@ -237,3 +237,58 @@ fn png_values_times_intensity_give_the_irradiance() {
         }
     }
 }
+
+/// The furnace with `COLOR_0` on every vertex (normalized RGBA bytes, as exporters write it):
+/// the colour multiplies the base colour, not the emission, so per channel B = M / (1 - rho c).
+#[test]
+fn furnace_with_vertex_colours_is_m_over_one_minus_rho_times_the_colour() {
+    let (rho, m) = (0.8, 1.0);
+    let rgba = [128u8, 255, 64, 200];
+    let c = glam::DVec3::new(128.0 / 255.0, 1.0, 64.0 / 255.0);
+    let (mut json, mut bin) = crate::output::split_glb(&fixtures::furnace_box_with(rho, m));
+    let meshes = json["meshes"].as_array().unwrap().len();
+    for mi in 0..meshes {
+        let prims = json["meshes"][mi]["primitives"].as_array().unwrap().len();
+        for pi in 0..prims {
+            let pos = json["meshes"][mi]["primitives"][pi]["attributes"]["POSITION"]
+                .as_u64()
+                .unwrap() as usize;
+            let count = json["accessors"][pos]["count"].as_u64().unwrap() as usize;
+            while !bin.len().is_multiple_of(4) {
+                bin.push(0);
+            }
+            let at = bin.len();
+            for _ in 0..count {
+                bin.extend_from_slice(&rgba);
+            }
+            let views = json["bufferViews"].as_array_mut().unwrap();
+            views.push(serde_json::json!({"buffer": 0, "byteOffset": at, "byteLength": 4 * count}));
+            let view = views.len() - 1;
+            let accessors = json["accessors"].as_array_mut().unwrap();
+            accessors.push(
+                serde_json::json!({"bufferView": view, "componentType": 5121,
+                "normalized": true, "count": count, "type": "VEC4"}),
+            );
+            let acc = accessors.len() - 1;
+            json["meshes"][mi]["primitives"][pi]["attributes"]["COLOR_0"] = serde_json::json!(acc);
+        }
+    }
+    json["buffers"][0]["byteLength"] = serde_json::json!(bin.len());
+    let b = bake(&penumbra::write::to_glb(&json, bin).unwrap(), &quick());
+    let expected = glam::DVec3::splat(m) / (glam::DVec3::ONE - rho * c);
+    let mut worst: f64 = 0.0;
+    for values in &b.solution.irradiance {
+        for h in values {
+            let radiosity = glam::DVec3::splat(m) + rho * c * *h;
+            worst = worst.max(
+                (radiosity / expected - glam::DVec3::ONE)
+                    .abs()
+                    .max_element(),
+            );
+        }
+    }
+    // The bounces stop on the luminance's residual, which the green channel (rho c = 0.8, the
+    // slowest to converge) dominates but does not settle alone: 0.14% on green, measured. A
+    // polygon left untinted would be off by a factor of three in red.
+    assert!(worst < 2e-3, "worst relative error of B {worst}");
+}

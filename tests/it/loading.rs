@@ -283,3 +283,67 @@ fn triangle_strips_are_expanded_with_alternating_winding() {
     );
     assert!((b.scene.polygons[0].area - 4.0).abs() < 1e-9);
 }
+
+#[test]
+fn vertex_colours_tint_each_polygon_by_their_mean_over_it() {
+    // The floor (two triangles) with a colour per vertex, as floats.
+    let colours: [[f32; 3]; 4] = [
+        [1.0, 0.0, 0.0],
+        [1.0, 1.0, 1.0],
+        [0.5, 0.5, 0.5],
+        [0.0, 0.0, 1.0],
+    ];
+    let input = edit(&fixtures::plane_uniform(), |json, bin| {
+        let bytes: Vec<u8> = colours
+            .iter()
+            .flatten()
+            .flat_map(|c| c.to_le_bytes())
+            .collect();
+        let view = add_view(json, bin, &bytes);
+        let accessors = json["accessors"].as_array_mut().unwrap();
+        accessors
+            .push(json!({"bufferView": view, "componentType": 5126, "count": 4, "type": "VEC3"}));
+        let acc = accessors.len() - 1;
+        json["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"] = json!(acc);
+    });
+    let scene = penumbra::load::scene(&parse(&input, "coloured.glb")).unwrap();
+    let inst = &scene.instances[0];
+    assert_eq!(inst.positions_world.len(), 4, "the floor has four vertices");
+    let c = |v: u32| DVec3::from(colours[v as usize].map(|x| x as f64));
+    let (mut sum, mut area) = (DVec3::ZERO, 0.0);
+    for t in inst.indices.chunks_exact(3) {
+        let p: Vec<DVec3> = t
+            .iter()
+            .map(|&v| inst.positions_world[v as usize])
+            .collect();
+        let a = 0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length();
+        sum += (c(t[0]) + c(t[1]) + c(t[2])) / 3.0 * a;
+        area += a;
+    }
+    let expected = 0.5 * sum / area;
+    let rho = scene.materials[scene.polygons[0].material].rho;
+    assert!(
+        (rho - expected).abs().max_element() < 1e-12,
+        "{rho} vs {expected}"
+    );
+    // A colour that is not one is refused, naming the primitive.
+    let bad = edit(&input, |json, bin| {
+        let bytes: Vec<u8> = [f32::NAN; 12]
+            .iter()
+            .flat_map(|c| c.to_le_bytes())
+            .collect();
+        let view = add_view(json, bin, &bytes);
+        let acc = json["meshes"][0]["primitives"][0]["attributes"]["COLOR_0"]
+            .as_u64()
+            .unwrap() as usize;
+        json["accessors"][acc]["bufferView"] = json!(view);
+    });
+    let e = penumbra::load::scene(&parse(&bad, "bad.glb"))
+        .err()
+        .unwrap()
+        .to_string();
+    assert!(
+        e.contains("bad.glb") && e.contains("COLOR_0") && e.contains("mesh 0"),
+        "{e}"
+    );
+}
