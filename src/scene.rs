@@ -317,6 +317,8 @@ pub struct Scene {
     pub bounds_max: DVec3,
     /// What the loader skipped or repaired.
     pub warnings: Vec<Warning>,
+    /// The material of each (material, vertex-colour tint) made so far ([`Scene::add_instance`]).
+    tints: BTreeMap<(usize, [u64; 3]), usize>,
 }
 
 impl Default for Scene {
@@ -330,6 +332,7 @@ impl Default for Scene {
             bounds_min: DVec3::INFINITY,
             bounds_max: DVec3::NEG_INFINITY,
             warnings: Vec::new(),
+            tints: BTreeMap::new(),
         }
     }
 }
@@ -465,16 +468,20 @@ impl Scene {
             })
             .collect();
         for (i, mean) in means.into_iter().enumerate() {
-            let base = &self.materials[self.polygons[first + i].material];
-            let tinted = Material {
-                name: format!("{} x COLOR_0", base.name),
-                rho: (base.rho * mean).clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO)),
-                radiance: base.radiance,
-            };
-            let m = match self.materials.iter().position(|m| *m == tinted) {
-                Some(m) => m,
+            let base = self.polygons[first + i].material;
+            let key = (base, mean.to_array().map(f64::to_bits));
+            let m = match self.tints.get(&key) {
+                Some(&m) => m,
                 None => {
+                    let b = &self.materials[base];
+                    let tinted = Material {
+                        name: format!("{} x COLOR_0", b.name),
+                        rho: (b.rho * mean)
+                            .clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO)),
+                        radiance: b.radiance,
+                    };
                     self.materials.push(tinted);
+                    self.tints.insert(key, self.materials.len() - 1);
                     self.materials.len() - 1
                 }
             };
