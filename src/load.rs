@@ -168,7 +168,8 @@ pub(crate) fn from_bytes_with(bytes: Vec<u8>, path: &Path, options: &LoadOptions
         }
         buffers.push(data);
     }
-    let decoded_views = meshopt::decode_views(&json, &buffers).map_err(invalid)?;
+    let decoded_views =
+        meshopt::decode_views(&json, &buffers, options.limits.input_bytes).map_err(invalid)?;
     Ok(Gltf {
         path: path.to_path_buf(),
         document,

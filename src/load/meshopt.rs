@@ -32,15 +32,35 @@ pub(crate) fn is_fallback(buffer: &Value) -> bool {
 }
 
 /// Decodes every compressed view: entry `i` holds view `i`'s decoded bytes (cut to the view's
-/// `byteLength`), `None` for a view stored plainly. `buffers` are the buffers' bytes.
+/// `byteLength`), `None` for a view stored plainly. `buffers` are the buffers' bytes; the views
+/// may decode to `limit` bytes together (checked before anything is decoded, so a small file
+/// cannot ask for unbounded memory).
 pub(super) fn decode_views(
     json: &Value,
     buffers: &[Vec<u8>],
+    limit: u64,
 ) -> Result<Vec<Option<Vec<u8>>>, Invalid> {
     let views = json["bufferViews"]
         .as_array()
         .map(Vec::as_slice)
         .unwrap_or(&[]);
+    let mut total: u64 = 0;
+    for (i, view) in views.iter().enumerate() {
+        if let Some(ext) = extension(view) {
+            let size = |k: &str| ext[k].as_u64().unwrap_or(0);
+            total = total.saturating_add(size("count").saturating_mul(size("byteStride")));
+            if total > limit {
+                return Err(Invalid {
+                    item: format!("bufferViews[{i}].extensions.{}", ext_name(view)),
+                    reason: format!(
+                        "the compressed views decode to more than {} MiB together \
+                         (--max-input-mib raises the limit)",
+                        limit >> 20
+                    ),
+                });
+            }
+        }
+    }
     views
         .iter()
         .enumerate()
@@ -214,7 +234,7 @@ mod tests {
                  "count": 144, "mode": "TRIANGLES"}}},
             {"buffer": 0, "byteLength": 4},
         ]});
-        let views = decode_views(&json, &[buffer, Vec::new()]).expect("decodes");
+        let views = decode_views(&json, &[buffer, Vec::new()], 1 << 20).expect("decodes");
         let v = views[0].as_ref().unwrap();
         for (i, p) in verts.iter().enumerate() {
             for c in 0..3 {
@@ -279,9 +299,14 @@ mod tests {
                 "fewer than",
             ),
         ];
+        // Together past the limit: refused before anything is decoded.
+        let ext = json!({"buffer": 0, "byteLength": vbytes.len(), "byteStride": 16, "count": 10,
+            "mode": "ATTRIBUTES"});
+        let e = decode_views(&view(ext), std::slice::from_ref(&vbytes), 100).expect_err("limit");
+        assert!(e.reason.contains("--max-input-mib"), "{}", e.reason);
         for (ext, want) in cases {
-            let e =
-                decode_views(&view(ext.clone()), std::slice::from_ref(&vbytes)).expect_err(want);
+            let e = decode_views(&view(ext.clone()), std::slice::from_ref(&vbytes), u64::MAX)
+                .expect_err(want);
             assert_eq!(e.item, "bufferViews[0].extensions.EXT_meshopt_compression");
             assert!(e.reason.contains(want), "{ext}: {}", e.reason);
         }
