@@ -563,7 +563,7 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
             } else {
                 // One placement, or one per GPU instance (`instancing`).
                 let placements: Vec<(Option<u32>, DMat4)> =
-                    match instancing::instances(gltf, node.index())? {
+                    match instancing::instances(gltf, node.index(), limits.instances)? {
                         Some(locals) => (0u32..)
                             .zip(locals)
                             .map(|(k, local)| (Some(k), world * local))

@@ -12,8 +12,9 @@ use gltf::accessor::Dimensions;
 pub(crate) const NAME: &str = "EXT_mesh_gpu_instancing";
 
 /// The local transform of each of node `node`'s GPU instances (applied before the node's own
-/// transform), or `None` when the node has none.
-pub(crate) fn instances(gltf: &Gltf, node: usize) -> Result<Option<Vec<DMat4>>> {
+/// transform), or `None` when the node has none; refused past `most` instances (checked before
+/// they are read).
+pub(crate) fn instances(gltf: &Gltf, node: usize, most: usize) -> Result<Option<Vec<DMat4>>> {
     let ext = &gltf.json["nodes"][node]["extensions"][NAME];
     if ext.is_null() {
         return Ok(None);
@@ -31,6 +32,15 @@ pub(crate) fn instances(gltf: &Gltf, node: usize) -> Result<Option<Vec<DMat4>>> 
             .as_u64()
             .and_then(|i| gltf.document.accessors().nth(i as usize))
             .ok_or_else(|| gltf.bad(&item, format!("{name}: {index} is not an accessor")))?;
+        if accessor.count() > most {
+            return Err(gltf.bad(
+                &item,
+                format!(
+                    "{name} has {} instances, more than {most} (--max-instances raises the limit)",
+                    accessor.count()
+                ),
+            ));
+        }
         if *count.get_or_insert(accessor.count()) != accessor.count() {
             return Err(gltf.bad(
                 &item,

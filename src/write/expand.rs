@@ -83,7 +83,7 @@ pub(super) fn split_gpu_instances(
         .collect();
     let mut child = BTreeMap::new();
     for &node in &parents {
-        let locals = instancing::instances(gltf, node)?.unwrap_or_default();
+        let locals = instancing::instances(gltf, node, usize::MAX)?.unwrap_or_default();
         let mesh = root["nodes"][node]["mesh"].clone();
         let name = root["nodes"][node]["name"].as_str().map(str::to_string);
         let mut children = Vec::with_capacity(locals.len());

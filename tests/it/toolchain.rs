@@ -374,3 +374,24 @@ fn a_webp_texture_colours_the_bake_as_the_same_png_does() {
     assert_eq!(a.materials[0].rho, b.materials[0].rho);
     assert!(a.materials[0].rho.x < 0.3 && b.warnings.iter().all(|w| !w.contains("decode")));
 }
+
+#[test]
+fn gpu_instances_count_against_the_instance_limit_before_they_are_read() {
+    let dir = crate::scratch("gpu-instance-limit");
+    let path = dir.join("inst.glb");
+    std::fs::write(&path, gpu_instanced(&fixtures::instanced())).unwrap();
+    let mut options = penumbra::load::LoadOptions::default();
+    options.limits.instances = 1;
+    let gltf = penumbra::load::read_with(&path, &options).unwrap();
+    let e = penumbra::load::scene(&gltf)
+        .err()
+        .expect("refused")
+        .to_string();
+    assert!(
+        e.contains("inst.glb")
+            && e.contains("node 3 EXT_mesh_gpu_instancing")
+            && e.contains("--max-instances"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
