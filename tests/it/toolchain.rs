@@ -384,8 +384,7 @@ fn gpu_instances_count_against_the_instance_limit_before_they_are_read() {
     options.limits.instances = 1;
     let gltf = penumbra::load::read_with(&path, &options).unwrap();
     let e = penumbra::load::scene(&gltf)
-        .err()
-        .expect("refused")
+        .expect_err("refused")
         .to_string();
     assert!(
         e.contains("inst.glb")
