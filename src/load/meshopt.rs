@@ -17,11 +17,14 @@ pub(crate) const NAMES: [&str; 2] = ["EXT_meshopt_compression", "KHR_meshopt_com
 /// The most bytes one view may decode to (1 GiB), as for any accessor without a view.
 const MAX_DECODED: usize = 1 << 30;
 
-/// A view's compression extension, if it has one.
-pub(crate) fn extension(view: &Value) -> Option<&Value> {
-    NAMES
-        .iter()
-        .find_map(|n| view["extensions"].get(*n).filter(|e| e.is_object()))
+/// A view's compression extension, if it has one: its name and its object.
+pub(crate) fn extension(view: &Value) -> Option<(&'static str, &Value)> {
+    NAMES.iter().find_map(|&n| {
+        view["extensions"]
+            .get(n)
+            .filter(|e| e.is_object())
+            .map(|e| (n, e))
+    })
 }
 
 /// Whether buffer `b` is a fallback buffer: one whose bytes are only in compressed views.
@@ -46,12 +49,12 @@ pub(super) fn decode_views(
         .unwrap_or(&[]);
     let mut total: u64 = 0;
     for (i, view) in views.iter().enumerate() {
-        if let Some(ext) = extension(view) {
+        if let Some((name, ext)) = extension(view) {
             let size = |k: &str| ext[k].as_u64().unwrap_or(0);
             total = total.saturating_add(size("count").saturating_mul(size("byteStride")));
             if total > limit {
                 return Err(Invalid {
-                    item: format!("bufferViews[{i}].extensions.{}", ext_name(view)),
+                    item: format!("bufferViews[{i}].extensions.{name}"),
                     reason: format!(
                         "the compressed views decode to more than {} MiB together \
                          (--max-input-mib raises the limit)",
@@ -66,8 +69,8 @@ pub(super) fn decode_views(
         .enumerate()
         .map(|(i, view)| match extension(view) {
             None => Ok(None),
-            Some(ext) => {
-                let item = format!("bufferViews[{i}].extensions.{}", ext_name(view));
+            Some((name, ext)) => {
+                let item = format!("bufferViews[{i}].extensions.{name}");
                 decode(ext, buffers)
                     .and_then(|bytes| {
                         let length = view["byteLength"].as_u64().unwrap_or(0) as usize;
@@ -83,14 +86,6 @@ pub(super) fn decode_views(
             }
         })
         .collect()
-}
-
-fn ext_name(view: &Value) -> &'static str {
-    NAMES
-        .iter()
-        .find(|n| view["extensions"].get(**n).is_some())
-        .copied()
-        .unwrap_or(NAMES[0])
 }
 
 /// One view's decoded bytes.

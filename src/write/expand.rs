@@ -19,7 +19,7 @@ pub(super) fn merge_buffers(gltf: &Gltf, root: &mut Value, bin: &mut Bin) {
     // Left out: a buffer that compressed views read from and no plain view does.
     let mut live = vec![true; gltf.buffers.len()];
     for view in views.iter() {
-        if let Some(b) = meshopt::extension(view).and_then(|e| e["buffer"].as_u64())
+        if let Some(b) = meshopt::extension(view).and_then(|(_, e)| e["buffer"].as_u64())
             && let Some(l) = live.get_mut(b as usize)
         {
             *l = false;
@@ -44,15 +44,8 @@ pub(super) fn merge_buffers(gltf: &Gltf, root: &mut Value, bin: &mut Bin) {
         if let Some(bytes) = decoded(i) {
             view["byteOffset"] = json!(bin.push(bytes));
             view["byteLength"] = json!(bytes.len());
-            if let Some(ext) = view.get_mut("extensions").and_then(Value::as_object_mut) {
-                for name in meshopt::NAMES {
-                    ext.remove(name);
-                }
-                if ext.is_empty()
-                    && let Some(v) = view.as_object_mut()
-                {
-                    v.remove("extensions");
-                }
+            for name in meshopt::NAMES {
+                remove_extension(view, name);
             }
         } else {
             let b = view["buffer"].as_u64().unwrap_or(0) as usize;
@@ -105,14 +98,7 @@ pub(super) fn split_gpu_instances(
                 kids.extend(children);
             }
         }
-        if let Some(ext) = parent.get_mut("extensions").and_then(Value::as_object_mut) {
-            ext.remove(instancing::NAME);
-            if ext.is_empty()
-                && let Some(p) = parent.as_object_mut()
-            {
-                p.remove("extensions");
-            }
-        }
+        remove_extension(parent, instancing::NAME);
     }
     let still_used = root["nodes"]
         .as_array()
@@ -123,6 +109,20 @@ pub(super) fn split_gpu_instances(
         undeclare(root, instancing::NAME);
     }
     Ok(child)
+}
+
+/// Removes extension `name` from an object's `extensions`, and `extensions` when it becomes
+/// empty.
+fn remove_extension(object: &mut Value, name: &str) {
+    let Some(o) = object.as_object_mut() else {
+        return;
+    };
+    if let Some(ext) = o.get_mut("extensions").and_then(Value::as_object_mut) {
+        ext.remove(name);
+        if ext.is_empty() {
+            o.remove("extensions");
+        }
+    }
 }
 
 /// Removes extension `name` from `extensionsUsed` and `extensionsRequired`, and either list
