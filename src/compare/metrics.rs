@@ -153,18 +153,28 @@ pub(crate) fn mean_lit_irradiance(reference: &ReferenceMap, regions: &[Option<Re
         .unwrap_or(0.0)
 }
 
-/// Barycentric weights of the seven points per element where [`mesh_samples`] compares a
-/// mesh's direct light with the exact one: the centroid, the three points at (2/3, 1/6, 1/6)
-/// and the three edge midpoints.
-const MESH_POINTS: [[f64; 3]; 7] = [
-    [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0],
-    [2.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0],
-    [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0],
-    [1.0 / 6.0, 1.0 / 6.0, 2.0 / 3.0],
-    [0.5, 0.5, 0.0],
-    [0.0, 0.5, 0.5],
-    [0.5, 0.0, 0.5],
-];
+/// The seven points per element where [`mesh_samples`] compares a mesh's direct light with the
+/// exact one, as (barycentric coordinates, weight): Dunavant's degree-5 rule ("High degree
+/// efficient symmetrical Gaussian quadrature rules for the triangle", 1985). Every point is
+/// inside the element: on an edge, which may lie on a hard shadow line, the exact light is
+/// either side's by rounding.
+const MESH_POINTS: [([f64; 3], f64); 7] = {
+    const A1: f64 = 0.059_715_871_789_770;
+    const B1: f64 = 0.470_142_064_105_115;
+    const W1: f64 = 0.132_394_152_788_506;
+    const A2: f64 = 0.797_426_985_353_087;
+    const B2: f64 = 0.101_286_507_323_456;
+    const W2: f64 = 0.125_939_180_544_827;
+    [
+        ([1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0], 0.225),
+        ([A1, B1, B1], W1),
+        ([B1, A1, B1], W1),
+        ([B1, B1, A1], W1),
+        ([A2, B2, B2], W2),
+        ([B2, A2, B2], W2),
+        ([B2, B2, A2], W2),
+    ]
+};
 
 /// One point of a mesh where [`mesh_samples`] compared the light the lightmap shows with the
 /// exact direct light.
@@ -199,16 +209,13 @@ pub fn mesh_samples(bake: &Bake, vis: &Visibility, direct: &Direct<'_>) -> Vec<M
             let p = t.map(|i| m.vertices[i as usize]);
             let v = t.map(|i| mean(at_vertices[i as usize]));
             let a = m.triangle_area(t);
-            for w in MESH_POINTS {
+            for (w, weight) in MESH_POINTS {
                 let at = frame.world_from_plane(p[0] * w[0] + p[1] * w[1] + p[2] * w[2]);
                 if vis.buried(at, frame.n) {
                     continue;
                 }
                 points.push(SurfacePoint::new(at, frame.n, m.polygon, vis));
-                shown.push((
-                    a / MESH_POINTS.len() as f64,
-                    v[0] * w[0] + v[1] * w[1] + v[2] * w[2],
-                ));
+                shown.push((a * weight, v[0] * w[0] + v[1] * w[1] + v[2] * w[2]));
             }
         }
         let exact = direct.irradiance_points(&points);

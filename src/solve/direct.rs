@@ -191,7 +191,7 @@ impl<'a> Direct<'a> {
     /// Irradiance H (W/m²) at a receiving point.
     pub fn irradiance(&self, at: &SurfacePoint) -> DVec3 {
         match self.method {
-            DirectMethod::Sampled => self.irradiance_sampled(at),
+            DirectMethod::Sampled => self.irradiance_sampled(at, true),
             DirectMethod::Exact => self.irradiance_points(std::slice::from_ref(at))[0],
         }
     }
@@ -201,8 +201,27 @@ impl<'a> Direct<'a> {
     /// neighbouring points. The result of each point does not depend on the others, up to
     /// rounding in rare near-degenerate cases; it is deterministic for given `points`.
     pub fn irradiance_points(&self, points: &[SurfacePoint]) -> Vec<DVec3> {
+        self.evaluate(points, true)
+    }
+
+    /// Irradiance H (W/m²) at the vertices of `mesh`, evaluated at `points` (one per vertex,
+    /// [`evaluation_points`]): area emitters and the sky at the points, as
+    /// [`Direct::irradiance_points`]; punctual lights unoccluded at the points times their
+    /// visibility averaged over each vertex's fan ([`punctual_over_fans`]).
+    pub fn irradiance_vertices(&self, mesh: &ReceiverMesh, points: &[SurfacePoint]) -> Vec<DVec3> {
+        let mut h = self.evaluate(points, false);
+        let rays = punctual_over_fans(self.scene, self.vis, mesh, points, &mut h);
+        self.rays.fetch_add(rays, Ordering::Relaxed);
+        h
+    }
+
+    /// [`Direct::irradiance_points`], with the punctual lights at the points or left out.
+    fn evaluate(&self, points: &[SurfacePoint], punctual: bool) -> Vec<DVec3> {
         if self.method == DirectMethod::Sampled {
-            return points.iter().map(|p| self.irradiance_sampled(p)).collect();
+            return points
+                .iter()
+                .map(|p| self.irradiance_sampled(p, punctual))
+                .collect();
         }
         let mut h = vec![DVec3::ZERO; points.len()];
         let mut tally = Tally::default();
@@ -284,7 +303,7 @@ impl<'a> Direct<'a> {
             c.nanos
                 .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
         }
-        for (pt, h) in points.iter().zip(&mut h) {
+        for (pt, h) in points.iter().zip(&mut h).filter(|_| punctual) {
             for light in &self.scene.lights {
                 let (value, r) = punctual_irradiance(light, self.vis, pt);
                 *h += value;
@@ -463,7 +482,7 @@ impl<'a> Direct<'a> {
     /// Sampled direct light at one point: exact unoccluded form factor x visibility fraction
     /// from shadow rays, spent in proportion to each emitter's contribution (at least one per
     /// visible emitter), so scenes with many small emitters stay cheap.
-    fn irradiance_sampled(&self, at: &SurfacePoint) -> DVec3 {
+    fn irradiance_sampled(&self, at: &SurfacePoint, punctual: bool) -> DVec3 {
         let mut h = DVec3::ZERO;
         let mut rays = 0u64;
         let (p, n) = (at.p, at.n);
@@ -488,7 +507,7 @@ impl<'a> Direct<'a> {
             rays += r;
             h += e.radiance * (PI * f * visible);
         }
-        for light in &self.scene.lights {
+        for light in self.scene.lights.iter().filter(|_| punctual) {
             let (value, r) = punctual_irradiance(light, self.vis, at);
             h += value;
             rays += r;
@@ -685,7 +704,20 @@ pub fn punctual_irradiance(
     let Some(e) = punctual_unoccluded(light, at.p, at.n) else {
         return (DVec3::ZERO, 0);
     };
-    let lit = match light.kind {
+    (
+        if punctual_visible(light, vis, at) {
+            e
+        } else {
+            DVec3::ZERO
+        },
+        1,
+    )
+}
+
+/// Whether one shadow ray from `at` reaches a punctual light (it starts on the line through the
+/// point, [`SurfacePoint::ray_origin_towards`]).
+fn punctual_visible(light: &PunctualLight, vis: &Visibility, at: &SurfacePoint) -> bool {
+    match light.kind {
         LightKind::Directional => {
             let dir = -light.direction;
             vis.unoccluded_towards(at.ray_origin_towards(dir), dir, at.polygon)
@@ -695,8 +727,85 @@ pub fn punctual_irradiance(
             let origin = at.ray_origin_towards(dir);
             !vis.occluded_skipping(origin, light.position, [at.polygon, NO_POLYGON])
         }
-    };
-    (if lit { e } else { DVec3::ZERO }, 1)
+    }
+}
+
+/// Barycentric coordinates of the points where [`punctual_over_fans`] tests a triangle: the
+/// centroids of its four midpoint sub-triangles, a quadrature of equal weights.
+const FAN_SAMPLES: [[f64; 3]; 4] = [
+    [2.0 / 3.0, 1.0 / 6.0, 1.0 / 6.0],
+    [1.0 / 6.0, 2.0 / 3.0, 1.0 / 6.0],
+    [1.0 / 6.0, 1.0 / 6.0, 2.0 / 3.0],
+    [1.0 / 3.0, 1.0 / 3.0, 1.0 / 3.0],
+];
+
+/// Adds every punctual light's irradiance at the vertices of `mesh` to `h` and returns the rays
+/// cast. A vertex gets the light's unoccluded irradiance at its point (`points`, one per vertex)
+/// times the light's visibility averaged over its fan, weighted by the vertex's hat function:
+/// V_v = ∫ φ_v V dA / ∫ φ_v dA, by [`FAN_SAMPLES`] in each triangle (shared by its three
+/// vertices). This is the lumped L2 projection of the visibility onto the mesh's linear
+/// elements (Heckbert, Winget, "Finite element methods for global illumination", 1991). Where the mesh holds a light's shadow lines (split per side), every fan
+/// lies on one side and V_v is 0 or 1, as at the point; where a line is missing (a strip of
+/// shadow thinner than the elements), the vertex gets its fan's share of shadow instead of
+/// whatever its one point happens to see, so a 6 cm strip along a wall's corner no longer
+/// darkens half the wall. Samples buried under other geometry ([`Visibility::buried`]) do not
+/// count; a vertex without any other sample keeps the test at its point.
+fn punctual_over_fans(
+    scene: &Scene,
+    vis: &Visibility,
+    mesh: &ReceiverMesh,
+    points: &[SurfacePoint],
+    h: &mut [DVec3],
+) -> u64 {
+    let frame = &scene.polygons[mesh.polygon].frame;
+    let mut rays = 0;
+    let mut weights = vec![[0.0f64; 2]; points.len()];
+    for light in &scene.lights {
+        let unoccluded: Vec<Option<DVec3>> = points
+            .iter()
+            .map(|q| punctual_unoccluded(light, q.p, q.n))
+            .collect();
+        if unoccluded.iter().all(Option::is_none) {
+            continue;
+        }
+        weights.fill([0.0; 2]);
+        for t in &mesh.triangles {
+            if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
+                continue;
+            }
+            let area = mesh.triangle_area(t);
+            let corners = t.map(|i| mesh.vertices[i as usize]);
+            for b in FAN_SAMPLES {
+                let p = corners[0] * b[0] + corners[1] * b[1] + corners[2] * b[2];
+                let at = SurfacePoint::new(frame.world_from_plane(p), frame.n, mesh.polygon, vis);
+                let lit = punctual_visible(light, vis, &at);
+                rays += 1;
+                // A point buried under other geometry is never seen (its texels are left out
+                // of the lightmap): its darkness must not reach the vertices beside it.
+                if !lit && vis.buried(at.p, at.n) {
+                    continue;
+                }
+                let lit = if lit { 1.0 } else { 0.0 };
+                for (k, &i) in t.iter().enumerate() {
+                    let w = area * b[k];
+                    weights[i as usize][0] += w * lit;
+                    weights[i as usize][1] += w;
+                }
+            }
+        }
+        for (i, e) in unoccluded.iter().enumerate() {
+            let Some(e) = e else { continue };
+            let [lit, all] = weights[i];
+            if all > 0.0 {
+                h[i] += *e * (lit / all);
+            } else {
+                let (value, r) = punctual_irradiance(light, vis, &points[i]);
+                h[i] += value;
+                rays += r;
+            }
+        }
+    }
+    rays
 }
 
 /// Direct irradiance H (W/m², linear RGB) at every vertex of `meshes`, one mesh per task: the
@@ -714,7 +823,7 @@ pub fn direct_light(
         .par_iter()
         .map(|m| {
             let pts = evaluation_points(scene, vis, m);
-            let out = direct.irradiance_points(&pts);
+            let out = direct.irradiance_vertices(m, &pts);
             let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
             progress("direct light", d + m.vertices.len() as u64, total_vertices);
             out
