@@ -769,21 +769,49 @@ fn punctual_over_fans(
             continue;
         }
         weights.fill([0.0; 2]);
-        for t in &mesh.triangles {
+        // The samples' visibility first, and which vertices see the light anywhere in their
+        // fan; a triangle skipped (the light below every corner's horizon) is dark.
+        let mut seen = vec![false; points.len()];
+        let lit: Vec<[bool; FAN_SAMPLES.len()]> = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
+                    return [false; FAN_SAMPLES.len()];
+                }
+                let corners = t.map(|i| mesh.vertices[i as usize]);
+                let lit = FAN_SAMPLES.map(|b| {
+                    let p = corners[0] * b[0] + corners[1] * b[1] + corners[2] * b[2];
+                    let at =
+                        SurfacePoint::new(frame.world_from_plane(p), frame.n, mesh.polygon, vis);
+                    rays += 1;
+                    punctual_visible(light, vis, &at)
+                });
+                if lit.contains(&true) {
+                    t.iter().for_each(|&i| seen[i as usize] = true);
+                }
+                lit
+            })
+            .collect();
+        for (t, lit) in mesh.triangles.iter().zip(&lit) {
             if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
                 continue;
             }
             let area = mesh.triangle_area(t);
             let corners = t.map(|i| mesh.vertices[i as usize]);
-            for b in FAN_SAMPLES {
-                let p = corners[0] * b[0] + corners[1] * b[1] + corners[2] * b[2];
-                let at = SurfacePoint::new(frame.world_from_plane(p), frame.n, mesh.polygon, vis);
-                let lit = punctual_visible(light, vis, &at);
-                rays += 1;
+            for (b, &lit) in FAN_SAMPLES.iter().zip(lit) {
                 // A point buried under other geometry is never seen (its texels are left out
-                // of the lightmap): its darkness must not reach the vertices beside it.
-                if !lit && vis.buried(at.p, at.n) {
-                    continue;
+                // of the lightmap): its darkness must not reach the vertices beside it. That
+                // matters beside a vertex that sees the light somewhere, and for a dark vertex
+                // only until one of its samples counts (then it is 0, whatever else counts).
+                let matters = t
+                    .iter()
+                    .any(|&i| seen[i as usize] || weights[i as usize][1] == 0.0);
+                if !lit && matters {
+                    let p = corners[0] * b[0] + corners[1] * b[1] + corners[2] * b[2];
+                    if vis.buried(frame.world_from_plane(p), frame.n) {
+                        continue;
+                    }
                 }
                 let lit = if lit { 1.0 } else { 0.0 };
                 for (k, &i) in t.iter().enumerate() {
