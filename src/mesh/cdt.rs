@@ -17,6 +17,20 @@ use spade::{
 /// Minimum angle for quality refinement, degrees.
 pub(crate) const ANGLE_LIMIT_DEG: f64 = 25.0;
 
+/// A polygon larger than this many area caps whose refinement runs out of vertices is
+/// triangulated again with a lattice in its open areas ([`open_lattice`]).
+const LATTICE_FROM: f64 = 4.0;
+
+/// The lattice's triangles, as a fraction of the area cap: under 1, so rounding leaves none
+/// over the cap for refinement to split.
+const LATTICE_FILL: f64 = 0.8;
+
+/// The lattice keeps this many of its steps from the outline and the lines.
+const LATTICE_CLEAR: f64 = 0.25;
+
+/// The most point-in-triangle tests [`open_lattice`] spends on one polygon.
+const LATTICE_TESTS: f64 = 5e7;
+
 /// Triangulates one polygon without extra constraints; see [`triangulate_with`].
 pub(crate) fn triangulate(
     id: usize,
@@ -145,50 +159,69 @@ fn triangulate_in_frame(
         }
     }
     let arr = arrangement::build(&input, tol);
-    let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
-    let handles: Vec<Option<FixedVertexHandle>> = arr
-        .points
-        .iter()
-        .map(|p| cdt.insert(Point2::new(p.x, p.y)).ok())
-        .collect();
-    let mut refused = 0;
-    for &(a, b, _) in &arr.edges {
-        if let (Some(va), Some(vb)) = (handles[a as usize], handles[b as usize])
-            && va != vb
-            && cdt.try_add_constraint(va, vb).is_empty()
-            && !cdt.exists_constraint(va, vb)
-        {
-            refused += 1;
-        }
-    }
-    for p in points {
-        if polygon.contains(*p) {
-            let _ = cdt.insert(Point2::new(p.x, p.y));
-        }
-    }
     // A polygon no larger than one element, with nothing inside, stays its outline's
     // triangulation: refining its slivers for their angles (a tessellated sphere's poles) would
     // spend the budget where the light is smooth at the element's scale anyway.
     let refine =
         polygon.area > max_area || !arr.edges.iter().all(|e| e.2.is_none()) || !points.is_empty();
-    if refine && cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
-        // Two passes: the area cap first, then the angles with at most half as many vertices
-        // again. In one pass, constraints that meet at small angles or run close together (a
-        // thin slab's contact and penumbra lines) can take every vertex the cap allows in
-        // fans around them and leave the rest of the polygon coarse.
-        let params = |angle: AngleLimit, vertices: usize| {
-            RefinementParameters::<f64>::new()
-                .with_angle_limit(angle)
-                .with_max_allowed_area(max_area.max(polygon.area * 1e-9))
-                .with_min_required_area(max_area * 1e-3)
-                .with_max_additional_vertices(vertices)
-                .exclude_outer_faces(segments.is_empty())
-        };
-        let before = cdt.num_vertices();
-        cdt.refine(params(AngleLimit::from_deg(0.0), vertex_cap));
-        let added = cdt.num_vertices() - before;
-        let angle_cap = (added / 2).max(vertex_cap / 4);
-        cdt.refine(params(AngleLimit::from_deg(ANGLE_LIMIT_DEG), angle_cap));
+    // The triangulation, refined; with `lattice`, seeded first with a lattice in the open
+    // areas. Also whether the area pass ran out of vertices.
+    let build = |lattice: bool, vertex_cap: usize| {
+        let mut cdt = ConstrainedDelaunayTriangulation::<Point2<f64>>::new();
+        let handles: Vec<Option<FixedVertexHandle>> = arr
+            .points
+            .iter()
+            .map(|p| cdt.insert(Point2::new(p.x, p.y)).ok())
+            .collect();
+        let mut refused = 0;
+        for &(a, b, _) in &arr.edges {
+            if let (Some(va), Some(vb)) = (handles[a as usize], handles[b as usize])
+                && va != vb
+                && cdt.try_add_constraint(va, vb).is_empty()
+                && !cdt.exists_constraint(va, vb)
+            {
+                refused += 1;
+            }
+        }
+        for p in points {
+            if polygon.contains(*p) {
+                let _ = cdt.insert(Point2::new(p.x, p.y));
+            }
+        }
+        if lattice {
+            for q in open_lattice(polygon, lo, hi, max_area, &obstacles) {
+                let _ = cdt.insert(Point2::new(q.x, q.y));
+            }
+        }
+        let mut starved = false;
+        if refine && cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
+            // Two passes: the area cap first, then the angles with at most half as many
+            // vertices again. In one pass, constraints that meet at small angles or run close
+            // together (a thin slab's contact and penumbra lines) can take every vertex the cap
+            // allows in fans around them and leave the rest of the polygon coarse.
+            let params = |angle: AngleLimit, vertices: usize| {
+                RefinementParameters::<f64>::new()
+                    .with_angle_limit(angle)
+                    .with_max_allowed_area(max_area.max(polygon.area * 1e-9))
+                    .with_min_required_area(max_area * 1e-3)
+                    .with_max_additional_vertices(vertices)
+                    .exclude_outer_faces(segments.is_empty())
+            };
+            let before = cdt.num_vertices();
+            cdt.refine(params(AngleLimit::from_deg(0.0), vertex_cap));
+            let added = cdt.num_vertices() - before;
+            starved = added >= vertex_cap;
+            let angle_cap = (added / 2).max(vertex_cap / 4);
+            cdt.refine(params(AngleLimit::from_deg(ANGLE_LIMIT_DEG), angle_cap));
+        }
+        (cdt, handles, refused, starved)
+    };
+    // When the area pass runs out of vertices, it has spent them around the lines (on a city's
+    // ground, thousands of footprints and shadow lines) and left open ground in elements up to
+    // forty times the cap: the polygon is triangulated again with its open areas seeded first.
+    let (mut cdt, mut handles, mut refused, starved) = build(false, vertex_cap);
+    if starved && polygon.area > LATTICE_FROM * max_area {
+        (cdt, handles, refused, _) = build(true, vertex_cap);
     }
     let (mut mesh, remap) = inside_faces(id, polygon, &cdt);
     let mut constraint_edges: Vec<(u32, u32)> = cdt
@@ -263,6 +296,43 @@ fn triangulate_in_frame(
         split_along(&mut mesh, &cuts);
     }
     (mesh, Inserted { refused, crowded })
+}
+
+/// Points of a lattice of equilateral triangles of [`LATTICE_FILL`] times `max_area` (scene
+/// units²) over the box `lo..hi`, inside `polygon` and at least half a lattice step from every
+/// segment of `obstacles` (the outline and the lines): refinement grades the band beside them.
+fn open_lattice(
+    polygon: &Polygon,
+    lo: DVec2,
+    hi: DVec2,
+    max_area: f64,
+    obstacles: &Obstacles,
+) -> Vec<DVec2> {
+    let step = (4.0 * LATTICE_FILL * max_area / 3f64.sqrt()).sqrt();
+    let row = step * 3f64.sqrt() / 2.0;
+    let sites = (hi - lo).x / step * (hi - lo).y / row;
+    // Every site is tested against the polygon's triangles: left out where that would cost more
+    // than the refinement it saves (a long diagonal strip, a finely tessellated polygon).
+    if step.is_nan() || step <= 0.0 || sites > 16.0 * polygon.area / (step * row) + 1024.0 {
+        return Vec::new();
+    }
+    if sites * polygon.triangles_plane.len() as f64 > LATTICE_TESTS {
+        return Vec::new();
+    }
+    let rows = ((hi.y - lo.y) / row).ceil() as usize;
+    let columns = ((hi.x - lo.x) / step).ceil() as usize + 1;
+    let mut out = Vec::new();
+    for j in 1..rows {
+        let y = lo.y + j as f64 * row;
+        let shift = if j % 2 == 1 { 0.5 * step } else { 0.0 };
+        for i in 0..columns {
+            let q = DVec2::new(lo.x + shift + i as f64 * step, y);
+            if q.x < hi.x && polygon.contains(q) && !obstacles.near(q, LATTICE_CLEAR * step) {
+                out.push(q);
+            }
+        }
+    }
+    out
 }
 
 /// Duplicates the vertices on the `cuts` edges so that the triangles on either side of a cut

@@ -218,6 +218,20 @@ impl Obstacles {
         }
     }
 
+    /// True when a placed segment passes within `d` of `p` (scene units).
+    pub(super) fn near(&self, p: DVec2, d: f64) -> bool {
+        let (x0, y0) = self.cell_of(p - DVec2::splat(d));
+        let (x1, y1) = self.cell_of(p + DVec2::splat(d));
+        (y0..=y1).any(|y| {
+            (x0..=x1).any(|x| {
+                self.buckets[y * self.dims + x].iter().any(|&k| {
+                    let [a, b] = self.segments[k as usize];
+                    dist_to_segment(p, a, b) < d
+                })
+            })
+        })
+    }
+
     /// The pieces of the wedge segment `a b` (of `feature`, see [`Segment::feature`]) that do
     /// not run close along the other boundary of its own penumbra: the parts within the
     /// clearance of a placed segment of the same feature, at an angle under
