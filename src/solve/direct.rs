@@ -208,7 +208,11 @@ impl<'a> Direct<'a> {
     /// [`evaluation_points`]): area emitters and the sky at the points, as
     /// [`Direct::irradiance_points`]; punctual lights unoccluded at the points times their
     /// visibility averaged over each vertex's fan ([`punctual_over_fans`]).
-    pub fn irradiance_vertices(&self, mesh: &ReceiverMesh, points: &[SurfacePoint]) -> Vec<DVec3> {
+    pub(crate) fn irradiance_vertices(
+        &self,
+        mesh: &ReceiverMesh,
+        points: &[SurfacePoint],
+    ) -> Vec<DVec3> {
         let mut h = self.evaluate(points, false);
         let rays = punctual_over_fans(self.scene, self.vis, mesh, points, &mut h);
         self.rays.fetch_add(rays, Ordering::Relaxed);
