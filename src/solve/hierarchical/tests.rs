@@ -270,3 +270,88 @@ fn vertex_values_keep_the_elements_mean_irradiance_under_a_peak() {
         "fitted {fitted}, averaged {averaged}"
     );
 }
+
+/// A surface node's sample points stand for its area: the mean of the exact point form
+/// factors from its samples to a source is the area-weighted mean over its elements' centroids,
+/// on a discontinuity mesh whose elements are smallest along its lines (the Cornell box's,
+/// graded towards the boxes' contacts and shadows). Samples taken at quantiles of the element
+/// count instead sit mostly along those lines, where a node's light is least like its mean:
+/// there the error is measured too, and must be larger.
+#[test]
+fn a_nodes_samples_give_its_area_mean_form_factor() {
+    let h = cornell();
+    let ff = |p: DVec3, n: DVec3, s: &Node| {
+        h.elements[s.lo as usize..s.hi as usize]
+            .iter()
+            .map(|e| point_polygon_form_factor(p, n, &e.p))
+            .sum::<f64>()
+    };
+    let centroid = |e: &Element| (e.p[0] + e.p[1] + e.p[2]) / 3.0;
+    let nodes = &h.nodes;
+    let surfaces = |least: u32| {
+        (0..nodes.len())
+            .filter(move |&i| {
+                let n = &nodes[i];
+                n.polygon != NO_POLYGON && n.hi - n.lo >= least
+            })
+            .collect::<Vec<_>>()
+    };
+    let sources: Vec<usize> = surfaces(64).into_iter().step_by(3).collect();
+    let (mut by_area, mut by_count, mut pairs) = (0.0, 0.0, 0);
+    let (mut signed_area, mut signed_count) = (0.0, 0.0);
+    for r in surfaces(16) {
+        let nr = &h.nodes[r];
+        let els = &h.elements[nr.lo as usize..nr.hi as usize];
+        for &s in &sources {
+            let ns = &h.nodes[s];
+            if ns.polygon == nr.polygon {
+                continue;
+            }
+            let exact = els
+                .iter()
+                .map(|e| e.area * ff(centroid(e), e.normal, ns))
+                .sum::<f64>()
+                / nr.area;
+            if exact < 1e-3 {
+                continue;
+            }
+            let samples = &h.samples[r];
+            let area_mean =
+                samples.iter().map(|q| ff(q.p, q.n, ns)).sum::<f64>() / samples.len() as f64;
+            let count = els.len();
+            let count_mean = (0..4)
+                .map(|k| {
+                    let e = &els[(2 * k + 1) * count / 8];
+                    ff(centroid(e), e.normal, ns)
+                })
+                .sum::<f64>()
+                / 4.0;
+            by_area += (area_mean / exact - 1.0).abs();
+            by_count += (count_mean / exact - 1.0).abs();
+            signed_area += area_mean / exact - 1.0;
+            signed_count += count_mean / exact - 1.0;
+            pairs += 1;
+        }
+    }
+    let (by_area, by_count) = (by_area / pairs as f64, by_count / pairs as f64);
+    let (signed_area, signed_count) = (signed_area / pairs as f64, signed_count / pairs as f64);
+    eprintln!(
+        "{pairs} links: mean error {by_area:.4} by area, {by_count:.4} by count; \
+         bias {signed_area:.4} by area, {signed_count:.4} by count"
+    );
+    assert!(pairs > 100, "{pairs} pairs");
+    // Four points are a coarse quadrature (6.5% per link here): the errors must not add up to
+    // a bias, and must be well under the count quantiles' (12.6%).
+    assert!(
+        by_area < 0.08,
+        "mean error of the samples' form factor {by_area}"
+    );
+    assert!(
+        signed_area.abs() < 0.01,
+        "bias of the samples' form factor {signed_area}"
+    );
+    assert!(
+        by_area < 0.6 * by_count,
+        "{by_area} by area, {by_count} by count"
+    );
+}

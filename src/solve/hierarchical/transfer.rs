@@ -305,6 +305,8 @@ impl Hierarchy {
     pub(super) fn disk_transfer(&self, vis: &Visibility, r: u32, s: u32) -> Transfer {
         let ns = &self.nodes[s as usize];
         let (sr, ss) = (&self.samples[r as usize], &self.samples[s as usize]);
+        // Each source sample stands for its share of the source's area.
+        let share = ns.area / ss.len().max(1) as f64;
         let disk = |a: &Sample, b: &Sample| {
             let dir = b.p - a.p;
             let d2 = dir.length_squared();
@@ -316,7 +318,7 @@ impl Hierarchy {
             if ci <= 0.0 || cj <= 0.0 {
                 return 0.0;
             }
-            ns.area * ci * cj / (PI * d2 + ns.area)
+            ns.area * ci * cj / (PI * d2 + share)
         };
         let PairVisibility {
             seen: k,

@@ -429,10 +429,15 @@ impl Hierarchy {
             leaf: Vec::new(),
         };
         b.cluster(&mut groups);
+        let mut area_before = Vec::with_capacity(b.elements.len() + 1);
+        area_before.push(0.0);
+        for e in &b.elements {
+            area_before.push(area_before.last().copied().unwrap_or(0.0) + e.area);
+        }
         let samples = b
             .nodes
             .par_iter()
-            .map(|n| node_samples(n, &b.elements, vis))
+            .map(|n| node_samples(n, &b.elements, &area_before, vis))
             .collect();
         let outline = outlines(&b.nodes, &b.elements);
         Some(Hierarchy {
@@ -489,8 +494,14 @@ fn enclosed(scene: &Scene, vis: &Visibility, p: &[DVec3; 3], n: DVec3, polygon: 
         })
 }
 
-/// Up to four sample points of a node (see the `hierarchical` module doc).
-fn node_samples(n: &Node, elements: &[Element], vis: &Visibility) -> Vec<Sample> {
+/// Up to four sample points of a node (see the `hierarchical` module doc); `area_before[e]` is
+/// the area of the elements before element `e` (one more entry than elements).
+fn node_samples(
+    n: &Node,
+    elements: &[Element],
+    area_before: &[f64],
+    vis: &Visibility,
+) -> Vec<Sample> {
     let at = |p: DVec3, e: &Element| {
         let sp = SurfacePoint::new(p, e.normal, e.polygon, vis);
         Sample {
@@ -508,10 +519,24 @@ fn node_samples(n: &Node, elements: &[Element], vis: &Visibility) -> Vec<Sample>
         out.extend(e.p.iter().map(|q| at((c + *q) * 0.5, e)));
         return out;
     }
+    // The elements at the 1/8, 3/8, 5/8, 7/8 points of the node's area, not of its element
+    // count: a discontinuity mesh's elements are smallest along its lines (a wall's foot, a
+    // shadow's edge), where the light is least like the node's mean.
     let m = count.min(4);
+    let range = &area_before[n.lo as usize..=n.hi as usize];
+    let (first, total) = (range[0], range[count] - range[0]);
+    // Each sample on an element of its own: a large element holding two of the points (a
+    // node of one large and one small element) would hide the node's spread from the
+    // variation test.
+    let mut next = 0;
     (0..m)
         .map(|k| {
-            let e = &elements[n.lo as usize + (2 * k + 1) * count / (2 * m)];
+            let at_area = first + total * (2 * k + 1) as f64 / (2 * m) as f64;
+            let i = range[1..]
+                .partition_point(|&a| a <= at_area)
+                .clamp(next, count - (m - k));
+            next = i + 1;
+            let e = &elements[n.lo as usize + i];
             at((e.p[0] + e.p[1] + e.p[2]) / 3.0, e)
         })
         .collect()
