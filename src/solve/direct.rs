@@ -762,6 +762,11 @@ fn punctual_over_fans(
     h: &mut [DVec3],
 ) -> u64 {
     let frame = &scene.polygons[mesh.polygon].frame;
+    // The world point at barycentric `b` of triangle `t`.
+    let sample = |t: &[u32; 3], b: &[f64; 3]| {
+        let c = t.map(|i| mesh.vertices[i as usize]);
+        frame.world_from_plane(c[0] * b[0] + c[1] * b[1] + c[2] * b[2])
+    };
     let mut rays = 0;
     let mut weights = vec![[0.0f64; 2]; points.len()];
     for light in &scene.lights {
@@ -783,11 +788,8 @@ fn punctual_over_fans(
                 if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
                     return [false; FAN_SAMPLES.len()];
                 }
-                let corners = t.map(|i| mesh.vertices[i as usize]);
                 let lit = FAN_SAMPLES.map(|b| {
-                    let p = corners[0] * b[0] + corners[1] * b[1] + corners[2] * b[2];
-                    let at =
-                        SurfacePoint::new(frame.world_from_plane(p), frame.n, mesh.polygon, vis);
+                    let at = SurfacePoint::new(sample(t, &b), frame.n, mesh.polygon, vis);
                     rays += 1;
                     punctual_visible(light, vis, &at)
                 });
@@ -802,7 +804,6 @@ fn punctual_over_fans(
                 continue;
             }
             let area = mesh.triangle_area(t);
-            let corners = t.map(|i| mesh.vertices[i as usize]);
             for (b, &lit) in FAN_SAMPLES.iter().zip(lit) {
                 // A point buried under other geometry is never seen (its texels are left out
                 // of the lightmap): its darkness must not reach the vertices beside it. That
@@ -811,11 +812,8 @@ fn punctual_over_fans(
                 let matters = t
                     .iter()
                     .any(|&i| seen[i as usize] || weights[i as usize][1] == 0.0);
-                if !lit && matters {
-                    let p = corners[0] * b[0] + corners[1] * b[1] + corners[2] * b[2];
-                    if vis.buried(frame.world_from_plane(p), frame.n) {
-                        continue;
-                    }
+                if !lit && matters && vis.buried(sample(t, b), frame.n) {
+                    continue;
                 }
                 let lit = if lit { 1.0 } else { 0.0 };
                 for (k, &i) in t.iter().enumerate() {

@@ -4,7 +4,8 @@ use crate::{parse, quick};
 use glam::DVec3;
 use penumbra::discontinuity::{Kind, Segment};
 use penumbra::fixtures::{self, GlbBuilder, Material};
-use penumbra::mesh::Mesher;
+use penumbra::mesh::{Mesher, ReceiverMesh};
+use penumbra::scene::Frame;
 use penumbra::{Bake, BakeOptions};
 
 pub fn dm() -> BakeOptions {
@@ -667,6 +668,24 @@ fn floor_with_a_strip_of_shadow() -> Vec<u8> {
     g.to_glb()
 }
 
+/// [`floor_with_a_strip_of_shadow`] baked with `o`, direct light only, at 40 elements.
+fn strip_floor_bake(mut o: BakeOptions) -> Bake {
+    o.solve.bounces = Some(0);
+    o.budget = Some(40);
+    crate::bake(&floor_with_a_strip_of_shadow(), &o)
+}
+
+/// The floor's mesh, frame and vertex irradiance in a bake of [`floor_with_a_strip_of_shadow`].
+fn strip_floor(b: &Bake) -> (&ReceiverMesh, &Frame, &[DVec3]) {
+    let f = floor(b);
+    let m = b.meshes.iter().position(|m| m.polygon == f).unwrap();
+    (
+        &b.meshes[m],
+        &b.scene.polygons[f].frame,
+        &b.solution.irradiance[m],
+    )
+}
+
 /// A punctual light's shadow line closer to the outline than an element is wide stays in the
 /// mesh, from outline to outline, with its vertices valued per side: left out (or pulled away
 /// from the outline), it let the outline's shadowed vertices darken the lit floor over whole
@@ -674,14 +693,8 @@ fn floor_with_a_strip_of_shadow() -> Vec<u8> {
 /// At a budget of 40 elements the floor's elements are about 1 m wide, twenty times the strip.
 #[test]
 fn a_shadow_strip_along_the_outline_does_not_darken_the_lit_side() {
-    let mut o = dm();
-    o.solve.bounces = Some(0);
-    o.budget = Some(40);
-    let b = crate::bake(&floor_with_a_strip_of_shadow(), &o);
-    let f = floor(&b);
-    let m = b.meshes.iter().position(|m| m.polygon == f).unwrap();
-    let (mesh, frame) = (&b.meshes[m], &b.scene.polygons[f].frame);
-    let h = &b.solution.irradiance[m];
+    let b = strip_floor_bake(dm());
+    let (mesh, frame, h) = strip_floor(&b);
     let world = |v: u32| frame.world_from_plane(mesh.vertices[v as usize]);
     let lit = h
         .iter()
@@ -725,13 +738,8 @@ fn a_shadow_strip_along_the_outline_does_not_darken_the_lit_side() {
 fn a_vertex_beside_an_unmeshed_shadow_takes_its_fans_share_of_the_light() {
     let mut o = quick();
     o.mesher = Mesher::Uniform;
-    o.solve.bounces = Some(0);
-    o.budget = Some(40);
-    let b = crate::bake(&floor_with_a_strip_of_shadow(), &o);
-    let f = floor(&b);
-    let m = b.meshes.iter().position(|m| m.polygon == f).unwrap();
-    let (mesh, frame) = (&b.meshes[m], &b.scene.polygons[f].frame);
-    let h = &b.solution.irradiance[m];
+    let b = strip_floor_bake(o);
+    let (mesh, frame, h) = strip_floor(&b);
     let world = |p: glam::DVec2| frame.world_from_plane(p);
     // The unoccluded light is the same everywhere on the floor: the brightest vertex's.
     let e = h.iter().map(|h| h.x).fold(0.0, f64::max);
