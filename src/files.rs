@@ -32,35 +32,62 @@ fn pending() -> std::sync::MutexGuard<'static, BTreeSet<PathBuf>> {
     PENDING.lock().unwrap_or_else(|e| e.into_inner())
 }
 
+/// Removes every pending temporary file.
+fn remove_pending() {
+    let mut files = pending();
+    for f in files.iter() {
+        let _ = std::fs::remove_file(f);
+    }
+    files.clear();
+}
+
+/// The error of a signal handler that could not be installed.
+fn handler_error(source: std::io::Error) -> Error {
+    Error::Write {
+        path: PathBuf::from("(signal handlers)"),
+        source,
+    }
+}
+
 /// Installs handlers for SIGINT, SIGTERM and SIGHUP that remove every pending temporary file,
 /// then end the process as the signal's default action would (so the exit status still says
 /// which signal it was). Call once, early in `main`.
+#[cfg(unix)]
 pub fn clean_up_on_signals() -> Result<()> {
     use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
     let mut signals =
-        signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]).map_err(|source| {
-            Error::Write {
-                path: PathBuf::from("(signal handlers)"),
-                source,
-            }
-        })?;
+        signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]).map_err(handler_error)?;
     std::thread::Builder::new()
         .name("signals".into())
         .spawn(move || {
             if let Some(signal) = signals.forever().next() {
-                let mut files = pending();
-                for f in files.iter() {
-                    let _ = std::fs::remove_file(f);
-                }
-                files.clear();
+                remove_pending();
                 let _ = signal_hook::low_level::emulate_default_handler(signal);
                 std::process::exit(128 + signal);
             }
         })
-        .map_err(|source| Error::Write {
-            path: PathBuf::from("(signal handlers)"),
-            source,
-        })?;
+        .map_err(handler_error)?;
+    Ok(())
+}
+
+/// Installs a console handler for Ctrl+C, Ctrl+Break and the console's close, logoff and
+/// shutdown events (the `ctrlc` crate) that removes every pending temporary file, then ends
+/// the process with `STATUS_CONTROL_C_EXIT`, as Windows ends a process on Ctrl+C. Call once,
+/// early in `main`.
+#[cfg(windows)]
+pub fn clean_up_on_signals() -> Result<()> {
+    /// `STATUS_CONTROL_C_EXIT`, 0xC000013A, as an exit code.
+    const CONTROL_C_EXIT: i32 = 0xC000_013A_u32 as i32;
+    ctrlc::set_handler(|| {
+        remove_pending();
+        std::process::exit(CONTROL_C_EXIT);
+    })
+    .map_err(|e| handler_error(std::io::Error::other(e)))
+}
+
+/// Where the platform has neither Unix signals nor Windows console events, nothing to install.
+#[cfg(not(any(unix, windows)))]
+pub fn clean_up_on_signals() -> Result<()> {
     Ok(())
 }
 
@@ -68,6 +95,7 @@ pub fn clean_up_on_signals() -> Result<()> {
 /// its directory plus its name.
 #[derive(Clone, Debug, PartialEq, Eq)]
 enum Identity {
+    #[cfg(unix)]
     Inode(u64, u64),
     Path(PathBuf),
 }
@@ -279,6 +307,7 @@ mod tests {
         dir
     }
 
+    #[cfg(unix)]
     #[test]
     fn the_input_is_refused_by_any_path() {
         let dir = scratch("input");
@@ -309,6 +338,7 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    #[cfg(unix)]
     #[test]
     fn a_link_output_is_written_through() {
         let dir = scratch("link");

@@ -45,6 +45,7 @@ fn refused(dir: &Path, input: &Path, output: &Path, extra: &[&OsStr], needle: &s
     );
 }
 
+#[cfg(unix)]
 #[test]
 fn the_input_is_never_an_output() {
     let dir = scratch("in-is-out");
@@ -116,6 +117,7 @@ fn a_gltf_s_own_buffers_are_inputs_too() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+#[cfg(unix)]
 #[test]
 fn an_output_link_is_written_through() {
     let dir = scratch("out-link");
@@ -409,6 +411,7 @@ fn a_scene_that_receives_no_light_warns() {
 
 /// A SIGTERM after the first output is written but before any is renamed leaves neither the
 /// outputs nor temporary files.
+#[cfg(unix)]
 #[test]
 fn a_signal_between_writing_and_renaming_leaves_nothing() {
     let dir = scratch("sigterm");
@@ -461,6 +464,7 @@ fn a_signal_between_writing_and_renaming_leaves_nothing() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+#[cfg(unix)]
 unsafe extern "C" {
     fn kill(pid: i32, sig: i32) -> i32;
 }

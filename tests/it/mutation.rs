@@ -452,6 +452,7 @@ fn plant_outside(dir: &Path) -> (PathBuf, String) {
 }
 
 /// Creates the [`PLANTED`] files in a mutant's folder.
+#[cfg(unix)]
 fn plant(dir: &Path, outside: &Path) {
     let fifo = std::ffi::CString::new(dir.join("fifo").to_str().unwrap()).unwrap();
     // SAFETY: a valid NUL-terminated path.
@@ -459,6 +460,17 @@ fn plant(dir: &Path, outside: &Path) {
     std::os::unix::fs::symlink(outside.join("secret.txt"), dir.join("link-out")).unwrap();
     std::os::unix::fs::symlink(outside, dir.join("linkdir")).unwrap();
     std::os::unix::fs::symlink("/dev/urandom", dir.join("urandom")).unwrap();
+    std::fs::create_dir(dir.join("subdir")).unwrap();
+    std::fs::write(
+        dir.join("bomb.png"),
+        crate::untrusted::png_bomb(23170, 23170),
+    )
+    .unwrap();
+}
+
+/// Creates the portable [`PLANTED`] files (no FIFO or links) in a mutant's folder.
+#[cfg(not(unix))]
+fn plant(dir: &Path, _outside: &Path) {
     std::fs::create_dir(dir.join("subdir")).unwrap();
     std::fs::write(
         dir.join("bomb.png"),

@@ -187,6 +187,7 @@ fn an_absolute_uri_is_refused_unless_allowed() {
     let _ = std::fs::remove_dir_all(&l.root);
 }
 
+#[cfg(unix)]
 #[test]
 fn a_symbolic_link_out_of_the_folder_is_refused() {
     let l = layout("uri-symlink");
@@ -211,6 +212,7 @@ fn a_symbolic_link_out_of_the_folder_is_refused() {
     let _ = std::fs::remove_dir_all(&l.root);
 }
 
+#[cfg(unix)]
 #[test]
 fn a_fifo_uri_is_refused_without_blocking() {
     let l = layout("uri-fifo");
@@ -226,6 +228,7 @@ fn a_fifo_uri_is_refused_without_blocking() {
     let _ = std::fs::remove_dir_all(&l.root);
 }
 
+#[cfg(unix)]
 #[test]
 fn devices_are_refused_even_when_allowed() {
     let l = layout("uri-device");
@@ -475,6 +478,7 @@ fn the_node_count_is_limited() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+#[cfg(unix)]
 #[test]
 fn outputs_that_are_not_regular_files_are_refused() {
     let dir = scratch("out-special");
