@@ -70,10 +70,11 @@ pub fn clean_up_on_signals() -> Result<()> {
     Ok(())
 }
 
-/// Installs a console handler for Ctrl+C, Ctrl+Break and the console's close, logoff and
-/// shutdown events (the `ctrlc` crate) that removes every pending temporary file, then ends
-/// the process with `STATUS_CONTROL_C_EXIT`, as Windows ends a process on Ctrl+C. Call once,
-/// early in `main`.
+/// Installs a console handler (the `ctrlc` crate) for Ctrl+C, Ctrl+Break and the console's
+/// close, logoff and shutdown events that removes every pending temporary file, then ends the
+/// process with `STATUS_CONTROL_C_EXIT`, as Windows ends a process on Ctrl+C. On a close,
+/// logoff or shutdown Windows ends the process soon after the event, so the removal there is
+/// a race it may lose. Call once, early in `main`.
 #[cfg(windows)]
 pub fn clean_up_on_signals() -> Result<()> {
     /// `STATUS_CONTROL_C_EXIT`, 0xC000013A, as an exit code.
