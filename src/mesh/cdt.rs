@@ -299,8 +299,9 @@ fn triangulate_in_frame(
 }
 
 /// Points of a lattice of equilateral triangles of [`LATTICE_FILL`] times `max_area` (scene
-/// units²) over the box `lo..hi`, inside `polygon` and at least half a lattice step from every
-/// segment of `obstacles` (the outline and the lines): refinement grades the band beside them.
+/// units²) over the box `lo..hi`, inside `polygon` and at least [`LATTICE_CLEAR`] lattice steps
+/// from every segment of `obstacles` (the outline and the lines): refinement grades the band
+/// beside them.
 fn open_lattice(
     polygon: &Polygon,
     lo: DVec2,

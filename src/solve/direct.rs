@@ -762,11 +762,15 @@ fn punctual_over_fans(
     h: &mut [DVec3],
 ) -> u64 {
     let frame = &scene.polygons[mesh.polygon].frame;
-    // The world point at barycentric `b` of triangle `t`.
-    let sample = |t: &[u32; 3], b: &[f64; 3]| {
-        let c = t.map(|i| mesh.vertices[i as usize]);
-        frame.world_from_plane(c[0] * b[0] + c[1] * b[1] + c[2] * b[2])
-    };
+    // Every triangle's samples in world space, once for all the lights.
+    let samples: Vec<[DVec3; FAN_SAMPLES.len()]> = mesh
+        .triangles
+        .iter()
+        .map(|t| {
+            let c = t.map(|i| mesh.vertices[i as usize]);
+            FAN_SAMPLES.map(|b| frame.world_from_plane(c[0] * b[0] + c[1] * b[1] + c[2] * b[2]))
+        })
+        .collect();
     let mut rays = 0;
     let mut weights = vec![[0.0f64; 2]; points.len()];
     for light in &scene.lights {
@@ -781,30 +785,32 @@ fn punctual_over_fans(
         // The samples' visibility first, and which vertices see the light anywhere in their
         // fan; a triangle skipped (the light below every corner's horizon) is dark.
         let mut seen = vec![false; points.len()];
-        let lit: Vec<[bool; FAN_SAMPLES.len()]> = mesh
+        let lit: Vec<Option<[bool; FAN_SAMPLES.len()]>> = mesh
             .triangles
             .iter()
-            .map(|t| {
+            .zip(&samples)
+            .map(|(t, at)| {
                 if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
-                    return [false; FAN_SAMPLES.len()];
+                    return None;
                 }
-                let lit = FAN_SAMPLES.map(|b| {
-                    let at = SurfacePoint::new(sample(t, &b), frame.n, mesh.polygon, vis);
+                let lit = at.map(|p| {
                     rays += 1;
-                    punctual_visible(light, vis, &at)
+                    punctual_visible(
+                        light,
+                        vis,
+                        &SurfacePoint::new(p, frame.n, mesh.polygon, vis),
+                    )
                 });
                 if lit.contains(&true) {
                     t.iter().for_each(|&i| seen[i as usize] = true);
                 }
-                lit
+                Some(lit)
             })
             .collect();
-        for (t, lit) in mesh.triangles.iter().zip(&lit) {
-            if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
-                continue;
-            }
+        for ((t, lit), at) in mesh.triangles.iter().zip(&lit).zip(&samples) {
+            let Some(lit) = lit else { continue };
             let area = mesh.triangle_area(t);
-            for (b, &lit) in FAN_SAMPLES.iter().zip(lit) {
+            for ((b, &lit), &p) in FAN_SAMPLES.iter().zip(lit).zip(at) {
                 // A point buried under other geometry is never seen (its texels are left out
                 // of the lightmap): its darkness must not reach the vertices beside it. That
                 // matters beside a vertex that sees the light somewhere, and for a dark vertex
@@ -812,7 +818,7 @@ fn punctual_over_fans(
                 let matters = t
                     .iter()
                     .any(|&i| seen[i as usize] || weights[i as usize][1] == 0.0);
-                if !lit && matters && vis.buried(sample(t, b), frame.n) {
+                if !lit && matters && vis.buried(p, frame.n) {
                     continue;
                 }
                 let lit = if lit { 1.0 } else { 0.0 };
