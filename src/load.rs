@@ -523,6 +523,9 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     stack.reverse();
     let mut lights_seen = 0;
     let (mut instances, mut triangles) = (0usize, 0usize);
+    // Placements so far, by vertex data, material and world matrix; and the repeats skipped.
+    let mut placed = std::collections::HashSet::new();
+    let mut duplicates = 0usize;
     let mut visited = vec![false; doc.nodes().len()];
     while let Some((node, parent, depth)) = stack.pop() {
         // glTF node graphs are strict trees: a node reached twice is a cycle or a shared child,
@@ -603,6 +606,20 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
                                 ),
                             ));
                         }
+                        // The same vertex data and material placed again at the same place
+                        // (a copied node or primitive): it would only z-fight with the first,
+                        // and each copy would cost a chart and an occluder.
+                        let key = (
+                            prim.get(&gltf::Semantic::Positions).map(|a| a.index()),
+                            prim.indices().map(|a| a.index()),
+                            prim.mode() as u32,
+                            prim.material().index(),
+                            world.to_cols_array().map(f64::to_bits),
+                        );
+                        if !placed.insert(key) {
+                            duplicates += 1;
+                            continue;
+                        }
                         add_primitive(
                             gltf,
                             &mut scene,
@@ -619,6 +636,12 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
         let mut children: Vec<_> = node.children().map(|c| (c, world, depth + 1)).collect();
         children.reverse();
         stack.extend(children);
+    }
+    if duplicates > 0 {
+        scene.warnings.push(format!(
+            "{duplicates} primitive placement(s) repeat an earlier one (the same vertex data and \
+             material at the same place) and are skipped: they get no lightmap"
+        ));
     }
     if scene.triangles.is_empty() {
         return Err(Error::EmptyScene {

@@ -60,7 +60,7 @@ pub const DEFAULT_IMAGE_MIB: u64 = 3072;
 /// Default of [`Limits::nodes`].
 pub const DEFAULT_NODES: usize = 1_000_000;
 /// Default of [`Limits::instances`].
-pub const DEFAULT_INSTANCES: usize = 5_000;
+pub const DEFAULT_INSTANCES: usize = 10_000;
 /// Default of [`Limits::primitives`].
 pub const DEFAULT_PRIMITIVES: usize = 20_000;
 /// Default of [`Limits::triangles`].

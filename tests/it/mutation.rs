@@ -238,7 +238,7 @@ const SCALES: [f64; 8] = [1e-30, 1e-12, 1e-9, 1e-6, 1e6, 1e9, 1e30, 1e-300];
 
 /// Instance and primitive counts of the explosions: a few hundred bake (or fail in the atlas)
 /// within the time limit; the rest are past the default limits, and must be refused at once.
-const EXPLOSIONS: [usize; 5] = [300, 5_001, 10_000, 25_000, 100_000];
+const EXPLOSIONS: [usize; 5] = [300, 10_001, 15_000, 25_000, 100_000];
 
 /// Applies one untrusted-input mutation; returns what it did. `outside` is the absolute folder
 /// of the marker file.
