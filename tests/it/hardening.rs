@@ -376,14 +376,31 @@ fn duplicated_geometry_that_makes_the_solve_diverge_is_an_error() {
     // Every primitive of a closed box twice: each point sees every wall twice (form factors
     // summing to 2), so with albedo 0.8 the bounces grow without end. Found by the mutation test
     // on a real scene (a duplicated primitive): it ran to the shot limit and wrote a NaN
-    // lightmap with exit 0.
-    let twice = edit(&fixtures::furnace_box_with(0.8, 1.0), |j, _| {
-        for mesh in j["meshes"].as_array_mut().unwrap() {
-            let prims = mesh["primitives"].as_array_mut().unwrap();
-            let copy = prims.clone();
-            prims.extend(copy);
-        }
-    });
+    // lightmap with exit 0. An exact copy (the same accessors and material) is placed once
+    // (`untrusted::copies_of_a_primitive_at_one_place_are_baked_once_with_a_warning`), so the
+    // copies here use a copy of their material.
+    let furnace = fixtures::furnace_box_with(0.8, 1.0);
+    let copied = |new_material: bool| {
+        edit(&furnace, |j, _| {
+            let materials = j["materials"].as_array().map_or(0, Vec::len);
+            if new_material {
+                let copies = j["materials"].as_array().unwrap().clone();
+                j["materials"].as_array_mut().unwrap().extend(copies);
+            }
+            for mesh in j["meshes"].as_array_mut().unwrap() {
+                let prims = mesh["primitives"].as_array_mut().unwrap();
+                let mut copy = prims.clone();
+                for p in copy.iter_mut().filter(|_| new_material) {
+                    let m = p["material"].as_u64().unwrap() as usize;
+                    p["material"] = json!(m + materials);
+                }
+                prims.extend(copy);
+            }
+        })
+    };
+    let (code, stderr, _) = bake_with_stats("copied", &copied(false), &[]);
+    assert_eq!(code, Some(0), "{stderr}");
+    let twice = copied(true);
     for args in [
         &["--solver", "progressive", "--patches", "64"][..],
         &["--solver", "hierarchical"],

@@ -466,6 +466,7 @@ fn copies_of_a_primitive_at_one_place_are_baked_once_with_a_warning() {
     std::fs::write(&input, primitives(1)).unwrap();
     assert_eq!(copied.triangles.len(), scene(&input).triangles.len());
     std::fs::write(&input, primitives(5_000)).unwrap();
+    std::fs::remove_file(&output).unwrap();
     refused(
         &input,
         &["--max-instances", "4000"],
