@@ -236,30 +236,6 @@ impl<'a> Locator<'a> {
         self.interpolate(self.mesh.triangles[k as usize], l.map(|x| x.max(0.0)))
     }
 
-    /// The value at plane point `q` when `q` and the plane points `others` all lie in one
-    /// triangle (the one `hint` holds, or the one found for `q`; `hint` is left in it), else
-    /// `None`. The value is linear in that triangle, so over a region with these corners its
-    /// mean is its value at the region's centre.
-    pub(crate) fn value_if_in_one(
-        &self,
-        q: DVec2,
-        others: &[DVec2],
-        hint: &mut Option<u32>,
-    ) -> Option<DVec3> {
-        let inside = |k: u32, p: DVec2| self.barycentric(k, p).iter().all(|&v| v >= 0.0);
-        let k = match *hint {
-            Some(k) if (k as usize) < self.mesh.triangles.len() && inside(k, q) => k,
-            _ => {
-                self.value_near(q, hint);
-                (*hint).filter(|&k| inside(k, q))?
-            }
-        };
-        if !others.iter().all(|&p| inside(k, p)) {
-            return None;
-        }
-        Some(self.interpolate(self.mesh.triangles[k as usize], self.barycentric(k, q)))
-    }
-
     /// The values at triangle `t`'s corners weighted by `l` (non-negative), renormalised.
     fn interpolate(&self, t: [u32; 3], l: [f64; 3]) -> DVec3 {
         let s = l[0] + l[1] + l[2];
@@ -282,10 +258,6 @@ impl<'a> Locator<'a> {
 /// (about one test per texel); only a texel whose corners disagree (a
 /// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
 /// that touches none of its corners is missed (its sub-samples count as visible).
-///
-/// A texel wholly inside one atlas triangle and one mesh element, none of its corners buried,
-/// takes the value at its centre: the value is linear there, so that is its sub-samples' mean,
-/// found with one point location instead of `n²` (about half the demo scene's texels).
 pub(crate) fn rasterize(
     scene: &Scene,
     vis: &Visibility,
@@ -406,32 +378,9 @@ pub(crate) fn rasterize(
                         }
                     }
                 };
-                let plane = |q: DVec2| poly.frame.plane_from_world(world(q));
-                let inside = |q: DVec2| barycentric_2d(&t.uv, q).iter().all(|&l| l >= 0.0);
                 for y in ya..=yb {
                     for x in x0..=x1 {
                         let idx = (y - y_lo) * w + x;
-                        // A texel wholly inside this triangle and one mesh element, with no
-                        // corner buried: the sub-samples' mean of the linear value there is
-                        // its value at the texel's centre.
-                        let square = [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)];
-                        let at = |(cx, cy): (usize, usize)| DVec2::new(cx as f64, cy as f64);
-                        if claimed[idx] == 0 && square.iter().all(|&c| inside(at(c))) {
-                            let c = square.map(|(cx, cy)| corner_buried(cx, cy));
-                            let centre = DVec2::new(x as f64 + 0.5, y as f64 + 0.5);
-                            if !c.iter().any(|&b| b)
-                                && let Some(v) = locators[t.mesh].value_if_in_one(
-                                    plane(centre),
-                                    &square.map(|c| plane(at(c))),
-                                    &mut hint,
-                                )
-                            {
-                                sum[idx] = v * (n * n) as f64;
-                                count[idx] = (n * n) as u32;
-                                claimed[idx] = u64::MAX;
-                                continue;
-                            }
-                        }
                         let mut corners: Option<[bool; 4]> = None;
                         for s in 0..n * n {
                             let bit = 1u64 << (s % 64);
@@ -589,53 +538,6 @@ mod tests {
         // Just outside: clamped to the nearest triangle's edge value.
         let v = loc.value(DVec2::new(2.0 + 1e-9, 1.0)).x;
         assert!((v - f(DVec2::new(2.0, 1.0))).abs() < 1e-6);
-    }
-
-    #[test]
-    fn a_square_in_one_triangle_takes_its_centre_value_and_one_across_an_edge_none() {
-        // The triangle (0,0), (4,0), (0,4) and its neighbour across x + y = 4.
-        let m = ReceiverMesh {
-            vertices: vec![
-                DVec2::ZERO,
-                DVec2::new(4.0, 0.0),
-                DVec2::new(0.0, 4.0),
-                DVec2::new(4.0, 4.0),
-            ],
-            triangles: vec![[0, 1, 2], [1, 3, 2]],
-            ..Default::default()
-        };
-        let f = |p: DVec2| 1.0 + 2.0 * p.x - 0.5 * p.y;
-        let values: Vec<DVec3> = m.vertices.iter().map(|&p| DVec3::splat(f(p))).collect();
-        let loc = Locator::new(&m, &values);
-        let square = |x: f64, y: f64| {
-            [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0), (1.0, 1.0)]
-                .map(|(dx, dy)| DVec2::new(x + dx, y + dy))
-        };
-        let mut hint = None;
-        let centre = DVec2::new(1.5, 0.5);
-        let v = loc.value_if_in_one(centre, &square(1.0, 0.0), &mut hint);
-        assert!((v.expect("inside triangle 0").x - f(centre)).abs() < 1e-12);
-        assert_eq!(hint, Some(0));
-        // The mean of the 4 x 4 sub-samples a texel would take is the same value.
-        let mean = (0..16)
-            .map(|s| {
-                loc.value(DVec2::new(
-                    1.125 + 0.25 * (s % 4) as f64,
-                    0.125 + 0.25 * (s / 4) as f64,
-                ))
-                .x
-            })
-            .sum::<f64>()
-            / 16.0;
-        assert!((mean - f(centre)).abs() < 1e-12);
-        // Across the edge x + y = 4, and wholly in the neighbour (the hint moves there).
-        assert_eq!(
-            loc.value_if_in_one(DVec2::new(2.5, 1.5), &square(2.0, 1.0), &mut hint),
-            None
-        );
-        let v = loc.value_if_in_one(DVec2::new(3.5, 3.5), &square(3.0, 3.0), &mut hint);
-        assert!((v.expect("inside triangle 1").x - f(DVec2::splat(3.5))).abs() < 1e-12);
-        assert_eq!(hint, Some(1));
     }
 
     #[test]
