@@ -451,7 +451,8 @@ impl Hierarchy {
     /// [`Hierarchy::link`], at `tolerance`, or, when that is predicted past [`STAGE_ROOM`] of
     /// the cap, at the tolerance predicted to fit (with a warning that names it). Returns the
     /// links (with the refinements and rays of every stage) and the tolerance they were
-    /// refined at; an overflowing coarse stage is returned as it is, at its tolerance.
+    /// refined at; a coarse stage that overflows, or whose links already pass [`STAGE_ROOM`] of
+    /// the cap, is returned as it is, at its tolerance.
     ///
     /// The final refinement starts from the root because refining on from a coarse stage's
     /// links re-tests them by their stored factors only, a weaker test than the oracle's: on
@@ -472,6 +473,15 @@ impl Hierarchy {
         let coarse = (tolerance * FIRST_STAGE).min(1.0);
         let first = self.link(vis, b, limits(coarse));
         if first.overflow {
+            return (first, coarse);
+        }
+        if first.links.len() as f64 > room {
+            warnings.push(format!(
+                "hierarchical radiosity: {} links at --hr-tolerance {coarse:.2e}, more than \
+                 {STAGE_ROOM} of the {cap} allowed; refined at {coarse:.2e} instead of \
+                 {tolerance:.2e}",
+                first.links.len()
+            ));
             return (first, coarse);
         }
         let t = (coarse / STAGE).max(tolerance);
