@@ -290,8 +290,9 @@ const FAR_FIELD: f64 = 6.0;
 
 /// Most links a refinement may hold (the default of [`SolveOptions::hr_max_links`]: 1.4 GB
 /// at 48 bytes a link); past it the refinement stops and is redone with a 4× larger
-/// tolerance, up to 1 (a warning). A hierarchy that may reach it is refined in stages
-/// instead, which stop before it ([`Hierarchy::staged_link`]). The links of zero `K` a pass keeps for the next one count.
+/// tolerance, up to 1 (a warning). A hierarchy that may reach it first predicts its link
+/// count from coarse stages, and refines where it fits ([`Hierarchy::staged_link`]). The
+/// links of zero `K` a pass keeps for the next one count.
 pub const MAX_LINKS: usize = 30_000_000;
 
 /// Links per element past which a refinement is taken to risk the link cap (the Cornell box
