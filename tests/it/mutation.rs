@@ -451,26 +451,18 @@ fn plant_outside(dir: &Path) -> (PathBuf, String) {
     (std::fs::canonicalize(&outside).unwrap(), marker)
 }
 
-/// Creates the [`PLANTED`] files in a mutant's folder.
-#[cfg(unix)]
-fn plant(dir: &Path, outside: &Path) {
-    let fifo = std::ffi::CString::new(dir.join("fifo").to_str().unwrap()).unwrap();
-    // SAFETY: a valid NUL-terminated path.
-    assert_eq!(unsafe { libc::mkfifo(fifo.as_ptr(), 0o644) }, 0, "mkfifo");
-    std::os::unix::fs::symlink(outside.join("secret.txt"), dir.join("link-out")).unwrap();
-    std::os::unix::fs::symlink(outside, dir.join("linkdir")).unwrap();
-    std::os::unix::fs::symlink("/dev/urandom", dir.join("urandom")).unwrap();
-    std::fs::create_dir(dir.join("subdir")).unwrap();
-    std::fs::write(
-        dir.join("bomb.png"),
-        crate::untrusted::png_bomb(23170, 23170),
-    )
-    .unwrap();
-}
-
-/// Creates the portable [`PLANTED`] files (no FIFO or links) in a mutant's folder.
-#[cfg(not(unix))]
-fn plant(dir: &Path, _outside: &Path) {
+/// Creates the [`PLANTED`] files in a mutant's folder (off Unix, only the portable ones: no
+/// FIFO or links).
+fn plant(dir: &Path, #[cfg_attr(not(unix), allow(unused))] outside: &Path) {
+    #[cfg(unix)]
+    {
+        let fifo = std::ffi::CString::new(dir.join("fifo").to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(fifo.as_ptr(), 0o644) }, 0, "mkfifo");
+        std::os::unix::fs::symlink(outside.join("secret.txt"), dir.join("link-out")).unwrap();
+        std::os::unix::fs::symlink(outside, dir.join("linkdir")).unwrap();
+        std::os::unix::fs::symlink("/dev/urandom", dir.join("urandom")).unwrap();
+    }
     std::fs::create_dir(dir.join("subdir")).unwrap();
     std::fs::write(
         dir.join("bomb.png"),

@@ -393,31 +393,30 @@ pub fn indirect(
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
         let mut previous: Option<Vec<Link>> = None;
+        // The oracle's limits at a tolerance. At the loosest the links are what the hierarchy's
+        // shape asks for (a cluster's self-link is always split): no cap then.
+        let limits_at = |t: f64| Limits {
+            max_links: if t < 1.0 {
+                options.hr_max_links
+            } else {
+                usize::MAX
+            },
+            ..Limits::of_bake(t, initial, total_area, lit)
+        };
         for pass in 0..REFINE_PASSES {
             progress("indirect light", pass as u64, REFINE_PASSES as u64);
             let t = Instant::now();
             let last = pass + 1 == REFINE_PASSES;
             let sources = h.sources(&b_el);
             let links = loop {
-                let mut limits = Limits::of_bake(tolerance, initial, total_area, lit);
-                // At the loosest tolerance the links are what the hierarchy's shape asks for
-                // (a cluster's self-link is always split): no cap then.
-                limits.max_links = if tolerance < 1.0 {
-                    options.hr_max_links
-                } else {
-                    usize::MAX
-                };
+                let limits = limits_at(tolerance);
                 let r = match &previous {
                     Some(p) => h.relink(vis, p, &sources, limits, last),
                     None if h.elements.len().saturating_mul(LINKS_PER_ELEMENT)
                         > limits.max_links =>
                     {
-                        let of = |t: f64| Limits {
-                            max_links: limits.max_links,
-                            ..Limits::of_bake(t, initial, total_area, lit)
-                        };
                         let (r, t) =
-                            h.staged_link(vis, &sources, tolerance, of, &mut stats.warnings);
+                            h.staged_link(vis, &sources, tolerance, limits_at, &mut stats.warnings);
                         tolerance = t;
                         r
                     }
