@@ -438,6 +438,36 @@ pub(crate) fn triangle_bounds(t: &[DVec2; 3]) -> (DVec2, DVec2) {
     (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]))
 }
 
+/// Polygons with at least this many triangles get a grid of them ([`grid_of_triangles`]): a
+/// ground plane cut around thousands of buildings has tens of thousands, and every wedge that
+/// reaches it would otherwise clip against each.
+pub(crate) const GRID_TRIANGLES: usize = 32;
+
+/// A polygon's triangle grid holds at most this many cell entries per triangle (its memory and the
+/// cells a query visits stay linear in the triangles).
+const GRID_ENTRIES_PER_TRIANGLE: usize = 16;
+
+/// The grid of a polygon's triangles in its plane ([`BoxGrid`], cells about square, about one
+/// per triangle), or `None` when their boxes would fill more than
+/// [`GRID_ENTRIES_PER_TRIANGLE`] cells each on average (long slivers across the polygon):
+/// then every triangle is tested, as without a grid.
+pub(crate) fn grid_of_triangles(triangles: &[[DVec2; 3]]) -> Option<BoxGrid> {
+    let boxes: Vec<(DVec2, DVec2)> = triangles.iter().map(triangle_bounds).collect();
+    let min = boxes.iter().fold(DVec2::INFINITY, |m, b| m.min(b.0));
+    let max = boxes.iter().fold(DVec2::NEG_INFINITY, |m, b| m.max(b.1));
+    let size = (max - min).max(DVec2::splat(1e-300));
+    let cell = (size.x * size.y / triangles.len() as f64)
+        .sqrt()
+        .max(size.x.max(size.y) / 1024.0);
+    let dims = (
+        ((size.x / cell).ceil() as usize).clamp(1, 1024),
+        ((size.y / cell).ceil() as usize).clamp(1, 1024),
+    );
+    let cell = DVec2::splat(cell);
+    (BoxGrid::entries(min, cell, dims, &boxes) <= GRID_ENTRIES_PER_TRIANGLE * triangles.len())
+        .then(|| BoxGrid::new(min, cell, dims, &boxes))
+}
+
 /// A uniform grid of buckets over a 2D box (plane coordinates): cell `(x, y)` lists, in
 /// increasing order, the items whose bounding boxes meet it. Point location in a mesh and
 /// the triangles a segment passes near use it.

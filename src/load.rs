@@ -17,7 +17,7 @@
 use crate::error::{Error, Result};
 use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side};
 use base64::Engine;
-use glam::{DMat3, DMat4, DVec3};
+use glam::{DMat3, DMat4, DVec2, DVec3};
 use gltf::accessor::{DataType, Dimensions};
 use gltf::mesh::Mode;
 use std::path::{Path, PathBuf};
@@ -34,7 +34,7 @@ pub use limits::{
     DEFAULT_IMAGE_MIB, DEFAULT_IMAGE_SIDE, DEFAULT_INPUT_MIB, DEFAULT_INSTANCES, DEFAULT_NODES,
     DEFAULT_POLYGONS, DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, IMAGES_TOGETHER, Limits, MIB,
 };
-use materials::{TextureMeans, material};
+use materials::{Textures, material};
 
 /// What the loader is told: the resource limits, and the folders besides the input's own that
 /// its URIs may name files in.
@@ -495,7 +495,7 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
 pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     let doc = &gltf.document;
     let mut scene = Scene::default();
-    let mut textures = TextureMeans::default();
+    let mut textures = Textures::default();
     // One baker material per glTF material, plus the glTF default material at the end.
     for m in doc.materials() {
         scene.materials.push(material(gltf, &m, &mut textures)?);
@@ -506,8 +506,10 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
         name: "default material".into(),
         rho: DVec3::splat(MAX_ALBEDO),
         radiance: DVec3::ZERO,
+        base: None,
     });
     scene.warnings.append(&mut textures.warnings);
+    scene.images = std::sync::Arc::new(textures.kept);
     scene.warnings.extend(extensions::warnings(&gltf.json));
 
     let gscene = match doc.default_scene().or_else(|| doc.scenes().next()) {
@@ -876,6 +878,7 @@ fn add_primitive(
     }
     let material = prim.material().index().unwrap_or(default_material);
     let colours = vertex_colours(gltf, prim, &item)?;
+    let uvs = texture_coordinates(gltf, scene, prim, material, &item)?;
     let front = Instance {
         node,
         gpu_instance,
@@ -890,6 +893,7 @@ fn add_primitive(
         derived: Vec::new(),
         colours,
         material,
+        uvs,
     };
     // A double-sided material: the back is a second instance right after the front, its
     // winding reversed, so both sides receive, reflect (and emit) light. Not for a closed
@@ -901,6 +905,44 @@ fn add_primitive(
         scene.add_instance(back, material);
     }
     Ok(())
+}
+
+/// The `TEXCOORD_n` set that `material`'s base-colour texture reads, per vertex; `None` when it
+/// has no texture, or (with a warning: the texture's mean colour stands for it) when the
+/// primitive lacks the set.
+fn texture_coordinates(
+    gltf: &Gltf,
+    scene: &mut Scene,
+    prim: &gltf::Primitive,
+    material: usize,
+    item: &str,
+) -> Result<Option<Vec<DVec2>>> {
+    let Some(tex) = scene.materials[material]
+        .base
+        .as_ref()
+        .and_then(|b| b.texture.as_ref())
+    else {
+        return Ok(None);
+    };
+    let n = tex.tex_coord;
+    let Some(acc) = prim.get(&gltf::Semantic::TexCoords(n)) else {
+        scene.warnings.push(format!(
+            "{item}: its material's base-colour texture reads TEXCOORD_{n}, which it does not \
+             have; the texture's mean colour stands for it"
+        ));
+        return Ok(None);
+    };
+    let values = gltf
+        .read_floats(&acc, Dimensions::Vec2)
+        .map_err(|e| e.within(&format!("{item}: TEXCOORD_{n}")))?;
+    let uvs: Vec<DVec2> = values
+        .chunks_exact(2)
+        .map(|c| DVec2::new(c[0], c[1]))
+        .collect();
+    if let Some(bad) = uvs.iter().find(|c| !c.is_finite()) {
+        return Err(gltf.bad(item, format!("TEXCOORD_{n} holds {bad}, not a coordinate")));
+    }
+    Ok(Some(uvs))
 }
 
 /// A primitive's `COLOR_0` as linear RGB per vertex (glTF stores vertex colours linear; alpha

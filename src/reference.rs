@@ -563,14 +563,17 @@ impl<'a> Tracer<'a> {
                 let cos_x = at.n.dot(dir);
                 total += throughput * e.radiance * (cos_x / (p_l + cos_x / PI));
             }
-            let rho = self.scene.materials[tri.material].rho;
+            let p = at.ray_origin + dir * hit.t;
+            // The albedo at the hit, read from the texture at that point (the baker averages
+            // it over each element instead).
+            let bary = crate::geometry::barycentric_3d(&tri.p, p);
+            let rho = self.scene.albedo_at(hit.triangle, bary);
             if rho.max_element() <= 0.0 {
                 break;
             }
             throughput *= rho;
             depth += 1;
             let frame = self.scene.polygons[poly].frame;
-            let p = at.ray_origin + dir * hit.t;
             let p = p - frame.n * frame.n.dot(p - frame.origin);
             let next = SurfacePoint::new(p, frame.n, poly, self.vis);
             total += throughput

@@ -257,11 +257,11 @@ pub fn render_radiance(
             let tri = &scene.triangles[hit.triangle];
             let mat = &scene.materials[tri.material];
             let p = camera.eye + dir * hit.t;
+            let bary = crate::geometry::barycentric_3d(&tri.p, p);
             let uv = bindings[tri.instance].as_ref().map(|(b, page)| {
                 let inst = &scene.instances[tri.instance];
                 let k = tri.local_index;
                 let ids = &inst.indices[3 * k..3 * k + 3];
-                let bary = crate::geometry::barycentric_3d(&tri.p, p);
                 let uv: DVec2 = (0..3).map(|c| b.uv[ids[c] as usize] * bary[c]).sum();
                 (b, *page, uv)
             });
@@ -281,7 +281,11 @@ pub fn render_radiance(
                     Shading::Irradiance(map) => sample_page(map, page, uv),
                     _ => sample_map(&textures[&b.texture], uv) * b.intensity,
                 };
-                let albedo = if alone { DVec3::ONE } else { mat.rho };
+                let albedo = if alone {
+                    DVec3::ONE
+                } else {
+                    scene.albedo_at(hit.triangle, bary)
+                };
                 l += albedo / std::f64::consts::PI * h;
             }
             l

@@ -6,8 +6,13 @@
 
 use glam::{DVec2, DVec3};
 use std::collections::BTreeMap;
+use std::sync::Arc;
 
 pub mod cut;
+pub mod surface;
+pub mod texture;
+
+pub use surface::{AlbedoOver, Base};
 
 /// The geometric tolerances of every stage, as fractions of [`Scene::extent`] (times it: scene
 /// units), so a scene bakes alike at any size. Three levels, by the rounding each must absorb:
@@ -37,6 +42,9 @@ pub struct Material {
     pub rho: DVec3,
     /// Emitted radiance `L_e` in W/(m² sr) per channel (front face only); exitance is `pi L_e`.
     pub radiance: DVec3,
+    /// Where the colour varies over the surface (a base-colour texture, an alpha test): how.
+    /// `None`: `rho` everywhere.
+    pub base: Option<Base>,
 }
 
 impl Material {
@@ -217,6 +225,9 @@ pub struct Instance {
     pub(crate) colours: Option<Vec<DVec3>>,
     /// The material [`Scene::add_instance`] was given (before any `colours` tint).
     pub(crate) material: usize,
+    /// Per glTF vertex, the `TEXCOORD_n` set that the material's base-colour texture reads
+    /// (without its transform), when it has one.
+    pub(crate) uvs: Option<Vec<DVec2>>,
 }
 
 /// A vertex that is not in the glTF primitive: a weighted mean of up to three of its vertices
@@ -245,6 +256,7 @@ impl Instance {
             derived: Vec::new(),
             colours: None,
             material: 0,
+            uvs: None,
         }
     }
 
@@ -317,6 +329,9 @@ pub struct Scene {
     pub bounds_max: DVec3,
     /// What the loader skipped or repaired.
     pub warnings: Vec<Warning>,
+    /// The decoded base-colour images that materials' [`Base::texture`] index (shared with
+    /// the ray queries' alpha test).
+    pub images: Arc<Vec<texture::Image>>,
     /// The material of each (material, vertex-colour tint) made so far ([`Scene::add_instance`]).
     tints: BTreeMap<(usize, [u64; 3]), usize>,
 }
@@ -332,6 +347,7 @@ impl Default for Scene {
             bounds_min: DVec3::INFINITY,
             bounds_max: DVec3::NEG_INFINITY,
             warnings: Vec::new(),
+            images: Arc::default(),
             tints: BTreeMap::new(),
         }
     }
@@ -439,17 +455,7 @@ impl Scene {
             return;
         };
         let inst = &self.instances[id];
-        let source = inst.source_vertices();
-        let colour = |v: u32| -> DVec3 {
-            match (v as usize).checked_sub(source) {
-                None => colours[v as usize],
-                Some(d) => inst.derived[d]
-                    .weights
-                    .iter()
-                    .map(|&(w, k)| colours[w as usize] * k)
-                    .sum(),
-            }
-        };
+        let colour = |v: u32| -> DVec3 { inst.attribute(colours, v) };
         let means: Vec<DVec3> = self.polygons[first..]
             .iter()
             .map(|poly| {
@@ -479,6 +485,7 @@ impl Scene {
                         rho: (b.rho * mean)
                             .clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO)),
                         radiance: b.radiance,
+                        base: b.base.clone(),
                     };
                     self.materials.push(tinted);
                     self.tints.insert(key, self.materials.len() - 1);
@@ -699,6 +706,7 @@ mod tests {
             name: "grey".into(),
             rho: DVec3::splat(0.5),
             radiance: DVec3::ZERO,
+            base: None,
         }
     }
 

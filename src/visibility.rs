@@ -10,8 +10,11 @@
 //! ([`take_recorded_rays`]); it is off unless switched on, and never changes an answer.
 
 use crate::scene::Scene;
+use crate::scene::surface::Cutout;
+use crate::scene::texture::Image;
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::Bvh2, ray::Ray, ray::RayHit, triangle::Triangle};
+use std::sync::Arc;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
@@ -44,6 +47,11 @@ pub struct Visibility {
     ids: Vec<usize>,
     /// Polygon index of each BVH primitive.
     polygons: Vec<u32>,
+    /// Per BVH primitive, its index in `cutouts` (alpha-tested triangles), or `u32::MAX`.
+    cut: Vec<u32>,
+    cutouts: Vec<Cutout>,
+    /// The images the cut-outs read.
+    images: Arc<Vec<Image>>,
     center: DVec3,
     eps: f64,
 }
@@ -110,11 +118,25 @@ impl Visibility {
             .iter()
             .map(|&i| scene.triangles[i].polygon.map_or(u32::MAX, |p| p as u32))
             .collect();
+        let mut cutouts = Vec::new();
+        let cut = ids
+            .iter()
+            .map(|&i| match scene.cutout_of(i) {
+                Some(c) => {
+                    cutouts.push(c);
+                    (cutouts.len() - 1) as u32
+                }
+                None => u32::MAX,
+            })
+            .collect();
         Visibility {
             bvh,
             tris,
             ids,
             polygons,
+            cut,
+            cutouts,
+            images: scene.images.clone(),
             center,
             eps: crate::scene::tolerance::RAY * scene.extent(),
         }
@@ -164,10 +186,9 @@ impl Visibility {
         }
         let ray = self.ray(origin, dir, self.eps, tmax);
         let mut hit = RayHit::none();
-        let tris = &self.tris;
         let found = self
             .bvh
-            .ray_traverse(ray, &mut hit, |r, id| tris[id].intersect(r));
+            .ray_traverse(ray, &mut hit, |r, id| self.intersect(r, id));
         if RECORDING.load(Ordering::Relaxed) {
             record(&ray, Query::FirstHit, [u32::MAX; 2], found);
         }
@@ -187,7 +208,7 @@ impl Visibility {
             if self.shows_back(id, d) {
                 f32::INFINITY
             } else {
-                tris[id].intersect(r)
+                self.intersect(r, id)
             }
         });
         Some(if found {
@@ -195,6 +216,25 @@ impl Visibility {
         } else {
             (t, k)
         })
+    }
+
+    /// Where ray `r` meets BVH primitive `id` (infinity: it does not), the holes of an
+    /// alpha-tested triangle let through (the any-hit test of ray tracers).
+    fn intersect(&self, r: &Ray, id: usize) -> f32 {
+        let t = self.tris[id].intersect(r);
+        let c = self.cut[id];
+        if c == u32::MAX || !t.is_finite() {
+            return t;
+        }
+        let tri = &self.tris[id];
+        let p = (r.origin + r.direction * t).as_dvec3();
+        let corners = [tri.v0, tri.v1, tri.v2].map(|q| q.as_dvec3());
+        let bary = crate::geometry::barycentric_3d(&corners, p);
+        if self.cutouts[c as usize].hole(&self.images, bary) {
+            f32::INFINITY
+        } else {
+            t
+        }
     }
 
     /// True when BVH primitive `k`'s front normal points along `dir` (the ray meets its back).
@@ -294,12 +334,12 @@ impl Visibility {
         }
         let ray = self.ray(origin, dir, self.eps, tmax);
         let skip = skip.map(|s| s as u32);
-        let (tris, polys) = (&self.tris, &self.polygons);
+        let polys = &self.polygons;
         let blocked = !self.bvh.ray_traverse_miss(ray, |r, id| {
             if polys[id] == skip[0] || polys[id] == skip[1] {
                 f32::INFINITY
             } else {
-                tris[id].intersect(r)
+                self.intersect(r, id)
             }
         });
         if RECORDING.load(Ordering::Relaxed) {
@@ -589,6 +629,7 @@ mod tests {
             name: "m".into(),
             rho: DVec3::splat(0.5),
             radiance: DVec3::ZERO,
+            base: None,
         });
         for _ in 0..n {
             let c = rng.vec(-5.0, 5.0) + offset;
@@ -723,6 +764,7 @@ mod tests {
             name: "m".into(),
             rho: DVec3::splat(0.5),
             radiance: DVec3::ZERO,
+            base: None,
         });
         let front = Instance::new(
             vec![

@@ -910,6 +910,7 @@ mod tests {
             name: "m".into(),
             rho: DVec3::splat(0.5),
             radiance: DVec3::ZERO,
+            base: None,
         });
         let corners = vec![
             DVec3::new(0.0, 0.0, 0.0),

@@ -2,9 +2,9 @@
 //! polygon's triangles, and the clipping of a segment or a wedge to a receiver polygon.
 
 use super::wedges::{Light, Wedge, half_space};
-use crate::geometry::{BoxGrid, triangle_bounds};
+use crate::geometry::{BoxGrid, GRID_TRIANGLES, grid_of_triangles};
 use crate::scene::{LightKind, Scene};
-use glam::{DVec2, DVec3, Vec3A};
+use glam::{DVec3, Vec3A};
 use obvhs::aabb::Aabb;
 use rayon::prelude::*;
 
@@ -15,36 +15,6 @@ pub(super) struct PolygonIndex {
     center: DVec3,
     /// Per polygon of at least [`GRID_TRIANGLES`] triangles, a grid of them in its plane.
     grids: Vec<Option<BoxGrid>>,
-}
-
-/// Polygons with at least this many triangles get a grid of them ([`grid_of_triangles`]): a
-/// ground plane cut around thousands of buildings has tens of thousands, and every wedge that
-/// reaches it would otherwise clip against each.
-const GRID_TRIANGLES: usize = 32;
-
-/// A polygon's triangle grid holds at most this many cell entries per triangle (its memory and the
-/// cells a query visits stay linear in the triangles).
-const GRID_ENTRIES_PER_TRIANGLE: usize = 16;
-
-/// The grid of a polygon's triangles in its plane ([`BoxGrid`], cells about square, about one
-/// per triangle), or `None` when their boxes would fill more than
-/// [`GRID_ENTRIES_PER_TRIANGLE`] cells each on average (long slivers across the polygon):
-/// then every triangle is tested, as without a grid.
-fn grid_of_triangles(triangles: &[[DVec2; 3]]) -> Option<BoxGrid> {
-    let boxes: Vec<(DVec2, DVec2)> = triangles.iter().map(triangle_bounds).collect();
-    let min = boxes.iter().fold(DVec2::INFINITY, |m, b| m.min(b.0));
-    let max = boxes.iter().fold(DVec2::NEG_INFINITY, |m, b| m.max(b.1));
-    let size = (max - min).max(DVec2::splat(1e-300));
-    let cell = (size.x * size.y / triangles.len() as f64)
-        .sqrt()
-        .max(size.x.max(size.y) / 1024.0);
-    let dims = (
-        ((size.x / cell).ceil() as usize).clamp(1, 1024),
-        ((size.y / cell).ceil() as usize).clamp(1, 1024),
-    );
-    let cell = DVec2::splat(cell);
-    (BoxGrid::entries(min, cell, dims, &boxes) <= GRID_ENTRIES_PER_TRIANGLE * triangles.len())
-        .then(|| BoxGrid::new(min, cell, dims, &boxes))
 }
 
 impl PolygonIndex {
@@ -264,6 +234,8 @@ pub(super) fn clip_wedge_to_polygon(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::triangle_bounds;
+    use glam::DVec2;
 
     /// The grid's segment query finds every triangle the segment crosses or passes within
     /// the margin of (checked by brute force on random triangles and segments, including

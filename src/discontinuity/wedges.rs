@@ -75,7 +75,8 @@ pub(super) enum Generator {
     DirectionEdge { d: DVec3, a: DVec3, b: DVec3 },
 }
 
-/// Mesh connectivity of the whole scene with vertices welded by exact position.
+/// Mesh connectivity of the whole scene with vertices welded by exact position: the occluders'
+/// edges and vertices (alpha-tested triangles left out).
 pub(super) struct Topology {
     /// Welded vertex positions.
     points: Vec<DVec3>,
@@ -106,7 +107,11 @@ impl Topology {
         let mut neighbours = vec![Vec::new(); points.len()];
         let mut vertex_polygons = vec![Vec::new(); points.len()];
         for (i, (t, c)) in scene.triangles.iter().zip(&corner_ids).enumerate() {
-            let Some(poly) = t.polygon else { continue };
+            // An alpha-tested triangle's edges are not its shadow's outline: it casts no
+            // wedges, and its shadow is left to the shadow rays, which see its holes.
+            let Some(poly) = t.polygon.filter(|_| !scene.is_cut_out(i)) else {
+                continue;
+            };
             for e in 0..3 {
                 let (a, b) = (c[e], c[(e + 1) % 3]);
                 edges.entry((a.min(b), a.max(b))).or_default().push(i);

@@ -8,7 +8,8 @@
 //!
 //! - **Read**: the geometry and lights penumbra bakes (`KHR_mesh_quantization`'s integer
 //!   attributes, `EXT_meshopt_compression`'s encoded views, `EXT_mesh_gpu_instancing`'s
-//!   instances, `EXT_texture_webp` images, punctual lights, emissive strength).
+//!   instances, `EXT_texture_webp` images, `KHR_texture_transform` on base-colour textures,
+//!   punctual lights, emissive strength).
 //! - **Kept**: what a client shows but the diffuse light does not depend on (clearcoat, sheen,
 //!   specular, variants, ...), or what penumbra approximates with a warning (a KTX2 texture's
 //!   colour is its material's factor; transmission is baked as an opaque surface).
@@ -40,12 +41,7 @@ const KNOWN: &[(&str, Support)] = &[
     ("KHR_meshopt_compression", Support::Read),
     ("EXT_mesh_gpu_instancing", Support::Read),
     ("EXT_texture_webp", Support::Read),
-    (
-        "KHR_texture_transform",
-        Support::Approximated(
-            "a texture's colour is the mean of its whole image, so its transform does not change it",
-        ),
-    ),
+    ("KHR_texture_transform", Support::Read),
     (
         "KHR_texture_basisu",
         Support::Approximated(

@@ -1,23 +1,31 @@
-//! Materials: a glTF material's albedo and emitted radiance, texture colours averaged over
-//! their decoded images (within the image limits), out-of-range values refused or clamped.
+//! Materials: a glTF material's albedo and emitted radiance, out-of-range values refused or
+//! clamped. A base-colour texture is decoded (within the image limits) and kept for lookups
+//! ([`crate::scene::Base`]), with its `texCoord`, sampler and `KHR_texture_transform`; its mean
+//! colour is the material's `rho` where one colour stands for the surface. An emissive texture
+//! scales the emission by its mean.
 
 use super::{Gltf, MAX_ALBEDO, MIB, limits, name_suffix, short};
 use crate::color::srgb_to_linear;
 use crate::error::Result;
-use crate::scene::Material;
-use glam::DVec3;
+use crate::scene::texture::{Image, TextureRef, Wrap};
+use crate::scene::{Base, Material};
+use glam::{DVec2, DVec3};
 use std::collections::BTreeMap;
 
 pub(super) fn material(
     gltf: &Gltf,
     m: &gltf::Material,
-    textures: &mut TextureMeans,
+    textures: &mut Textures,
 ) -> Result<Material> {
     let pbr = m.pbr_metallic_roughness();
     let base = pbr.base_color_factor();
-    let mut rho = DVec3::new(base[0] as f64, base[1] as f64, base[2] as f64);
+    let factor = DVec3::new(base[0] as f64, base[1] as f64, base[2] as f64);
+    let mut rho = factor;
+    let mut texture = None;
     if let Some(info) = pbr.base_color_texture() {
-        rho *= textures.mean(gltf, &info.texture())?;
+        let (mean, image) = textures.load(gltf, &info.texture(), true)?;
+        rho *= mean;
+        texture = image.map(|image| texture_ref(&info, image));
     }
     let strength = m.emissive_strength().unwrap_or(1.0);
     if !(strength.is_finite() && strength >= 0.0) {
@@ -33,7 +41,7 @@ pub(super) fn material(
     if radiance.max_element() > 0.0
         && let Some(info) = m.emissive_texture()
     {
-        radiance *= textures.mean(gltf, &info.texture())?;
+        radiance *= textures.load(gltf, &info.texture(), false)?.0;
     }
     let name = m
         .name()
@@ -61,74 +69,187 @@ pub(super) fn material(
             short(clamped)
         ));
     }
+    let opacity = f64::from(base[3]);
+    let cutoff = match m.alpha_mode() {
+        gltf::material::AlphaMode::Mask => {
+            let cutoff = f64::from(m.alpha_cutoff().unwrap_or(0.5));
+            if texture.is_none() && opacity < cutoff {
+                textures.warnings.push(format!(
+                    "material {name}: alphaMode MASK with baseColorFactor alpha {opacity} under \
+                     alphaCutoff {cutoff} and no texture: the surface is a hole everywhere (it \
+                     neither casts shadows nor reflects light)"
+                ));
+            }
+            Some(cutoff)
+        }
+        gltf::material::AlphaMode::Blend => {
+            textures.warnings.push(format!(
+                "material {name}: alphaMode BLEND is baked as an opaque surface (it casts a full \
+                 shadow); alphaMode MASK cuts holes"
+            ));
+            None
+        }
+        gltf::material::AlphaMode::Opaque => None,
+    };
+    let base = (texture.is_some() || cutoff.is_some()).then(|| Base {
+        factor,
+        opacity,
+        texture,
+        cutoff,
+    });
     Ok(Material {
         name,
         rho: clamped,
         radiance,
+        base,
     })
 }
 
-/// Mean linear colour of each decoded texture image, cached by image index.
+/// How a material reads its base-colour texture: the image kept as scene image `image`, the
+/// `texCoord` set, the sampler's wrap modes and the `KHR_texture_transform` (whose own
+/// `texCoord` overrides the info's, as the extension says).
+fn texture_ref(info: &gltf::texture::Info, image: usize) -> TextureRef {
+    let sampler = info.texture().sampler();
+    let mut tex_coord = info.tex_coord();
+    let mut transform = TextureRef::IDENTITY;
+    if let Some(t) = info
+        .extensions()
+        .and_then(|e| e.get("KHR_texture_transform"))
+    {
+        let pair = |key: &str, default: f64| {
+            let v = |i: usize| {
+                t[key][i]
+                    .as_f64()
+                    .filter(|x| x.is_finite())
+                    .unwrap_or(default)
+            };
+            DVec2::new(v(0), v(1))
+        };
+        let rotation = t["rotation"]
+            .as_f64()
+            .filter(|x| x.is_finite())
+            .unwrap_or(0.0);
+        transform = TextureRef::transform_of(pair("offset", 0.0), rotation, pair("scale", 1.0));
+        if let Some(n) = t["texCoord"].as_u64() {
+            tex_coord = n.min(u64::from(u32::MAX)) as u32;
+        }
+    }
+    TextureRef {
+        image,
+        tex_coord,
+        wrap: [
+            Wrap::from_gl(sampler.wrap_s().as_gl_enum()),
+            Wrap::from_gl(sampler.wrap_t().as_gl_enum()),
+        ],
+        transform,
+    }
+}
+
+/// The decoded texture images: each one's mean linear colour, and the base-colour ones kept
+/// for lookups (they become [`crate::scene::Scene::images`]).
 #[derive(Default)]
-pub(super) struct TextureMeans {
-    cache: BTreeMap<usize, DVec3>,
+pub(super) struct Textures {
+    /// glTF image index to (mean colour, index into `kept` once kept).
+    cache: BTreeMap<usize, (DVec3, Option<usize>)>,
+    /// The images kept, in the order first needed.
+    pub(super) kept: Vec<Image>,
     pub(super) warnings: Vec<String>,
     /// Bytes of the images decoded so far, counted as [`Limits::image_bytes`](super::Limits::image_bytes) counts them.
     decoded: u64,
 }
 
-impl TextureMeans {
-    fn mean(&mut self, gltf: &Gltf, texture: &gltf::Texture) -> Result<DVec3> {
+impl Textures {
+    /// The mean linear colour of `texture`'s image and, when `keep`, its index among the kept
+    /// images (`None` when it cannot be decoded: a warning, and white).
+    fn load(
+        &mut self,
+        gltf: &Gltf,
+        texture: &gltf::Texture,
+        keep: bool,
+    ) -> Result<(DVec3, Option<usize>)> {
         let image = texture.source();
         let index = image.index();
-        if let Some(m) = self.cache.get(&index) {
-            return Ok(*m);
-        }
         let item = format!("image {index}{}", name_suffix(image.name()));
-        let bytes = match image.source() {
-            gltf::image::Source::View { view, .. } => gltf.view_bytes(&view, &item)?.to_vec(),
-            gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, &item)?,
-        };
-        let mean = match gltf.decode_image(&bytes, &item) {
-            Ok(Ok(img)) => {
-                self.decoded += limits::decoded_bytes(img.width(), img.height());
-                let most = gltf
-                    .options
-                    .limits
-                    .image_bytes
-                    .saturating_mul(limits::IMAGES_TOGETHER);
-                if self.decoded > most {
-                    return Err(gltf.bad(
-                        &item,
-                        format!(
-                            "the images decoded so far take more than {} MiB together, {} times \
-                             the limit of one image (--max-image-mib raises it)",
-                            most / MIB,
-                            limits::IMAGES_TOGETHER
-                        ),
-                    ));
+        let cached = self.cache.get(&index).copied();
+        let (mean, kept) = match cached {
+            Some((mean, kept)) if kept.is_some() || !keep => return Ok((mean, kept)),
+            _ => {
+                let bytes = match image.source() {
+                    gltf::image::Source::View { view, .. } => {
+                        gltf.view_bytes(&view, &item)?.to_vec()
+                    }
+                    gltf::image::Source::Uri { uri, .. } => gltf.uri_bytes(uri, &item)?,
+                };
+                match gltf.decode_image(&bytes, &item) {
+                    Ok(Ok(img)) => {
+                        if cached.is_none() {
+                            self.count(
+                                gltf,
+                                &item,
+                                limits::decoded_bytes(img.width(), img.height()),
+                            )?;
+                        }
+                        let rgba = img.to_rgba8();
+                        let (w, h) = (rgba.width() as usize, rgba.height() as usize);
+                        let texels: Vec<[u8; 4]> = rgba.pixels().map(|p| p.0).collect();
+                        let mut sum = DVec3::ZERO;
+                        for t in &texels {
+                            sum += DVec3::new(
+                                srgb_to_linear(f64::from(t[0]) / 255.0),
+                                srgb_to_linear(f64::from(t[1]) / 255.0),
+                                srgb_to_linear(f64::from(t[2]) / 255.0),
+                            );
+                        }
+                        let mean = sum / (texels.len() as f64).max(1.0);
+                        let kept = match Image::new(w, h, texels).filter(|_| keep) {
+                            Some(img) => {
+                                self.kept.push(img);
+                                Some(self.kept.len() - 1)
+                            }
+                            None => None,
+                        };
+                        if keep && kept.is_none() {
+                            self.warnings.push(format!(
+                                "{item}: has no pixels; its colour is taken as white"
+                            ));
+                            (DVec3::ONE, None)
+                        } else {
+                            (mean, kept)
+                        }
+                    }
+                    Ok(Err(e)) => {
+                        self.warnings.push(format!(
+                            "{item}: cannot decode ({e}); its colour is taken as white"
+                        ));
+                        (DVec3::ONE, None)
+                    }
+                    Err(e) => return Err(e),
                 }
-                let rgb = img.to_rgb32f();
-                let mut sum = DVec3::ZERO;
-                for p in rgb.pixels() {
-                    sum += DVec3::new(
-                        srgb_to_linear(p[0] as f64),
-                        srgb_to_linear(p[1] as f64),
-                        srgb_to_linear(p[2] as f64),
-                    );
-                }
-                let n = (rgb.width() as f64 * rgb.height() as f64).max(1.0);
-                sum / n
             }
-            Ok(Err(e)) => {
-                self.warnings.push(format!(
-                    "{item}: cannot decode ({e}); its mean colour is taken as white"
-                ));
-                DVec3::ONE
-            }
-            Err(e) => return Err(e),
         };
-        self.cache.insert(index, mean);
-        Ok(mean)
+        self.cache.insert(index, (mean, kept));
+        Ok((mean, kept))
+    }
+
+    /// Counts `bytes` more of decoded images against the limit on all of them together.
+    fn count(&mut self, gltf: &Gltf, item: &str, bytes: u64) -> Result<()> {
+        self.decoded += bytes;
+        let most = gltf
+            .options
+            .limits
+            .image_bytes
+            .saturating_mul(limits::IMAGES_TOGETHER);
+        if self.decoded > most {
+            return Err(gltf.bad(
+                item,
+                format!(
+                    "the images decoded so far take more than {} MiB together, {} times \
+                     the limit of one image (--max-image-mib raises it)",
+                    most / MIB,
+                    limits::IMAGES_TOGETHER
+                ),
+            ));
+        }
+        Ok(())
     }
 }

@@ -551,6 +551,7 @@ mod tests {
             name: "m".into(),
             rho: DVec3::splat(0.5),
             radiance: DVec3::ZERO,
+            base: None,
         });
         scene.add_instance(Instance::new(corners, indices), 0);
         scene

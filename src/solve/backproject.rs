@@ -48,6 +48,9 @@ pub struct OccluderPiece {
     pub polygon: usize,
     /// Corners in world space (the scene's own triangle corners), convex, planar.
     pub vertices: Vec<DVec3>,
+    /// True when the polygon is alpha-tested: its outline is not its shadow's, so a point it
+    /// may shadow takes shadow rays instead ([`crate::scene::Scene::cut_out_at`]).
+    pub cut_out: bool,
 }
 
 /// Every polygon of a scene cut into convex pieces, for backprojection.
@@ -65,6 +68,7 @@ impl Occluders {
         for (id, poly) in scene.polygons.iter().enumerate() {
             let first = pieces.len() as u32;
             let (convex, owner) = convex_pieces(&poly.triangles_plane);
+            let cut_out = poly.triangles.iter().any(|&t| scene.is_cut_out(t));
             for piece in convex {
                 let vertices = piece
                     .iter()
@@ -73,6 +77,7 @@ impl Occluders {
                 pieces.push(OccluderPiece {
                     polygon: id,
                     vertices,
+                    cut_out,
                 });
             }
             for (&t, &k) in poly.triangles.iter().zip(&owner) {

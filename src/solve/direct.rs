@@ -402,6 +402,14 @@ impl<'a> Direct<'a> {
         }
         tally.candidates += candidates.len() as u64;
         let pieces = &self.occluders.pieces;
+        let cut_out = candidates.iter().any(|&k| {
+            let piece = &pieces[k as usize];
+            piece.cut_out && piece.polygon != at.polygon
+        });
+        if cut_out {
+            // An alpha-tested occluder in the way: shadow rays, which see through its holes.
+            return PI * f_unoccluded * self.fallback_visibility(e, f_unoccluded, at, tally);
+        }
         let occluders = candidates
             .iter()
             .map(|&k| &pieces[k as usize])
@@ -422,14 +430,23 @@ impl<'a> Direct<'a> {
             // Nothing in the way: the same value as the sampled method's unoccluded one.
             Some(_) if r.occluders == 0 => PI * f_unoccluded,
             Some(f) => PI * f,
-            None => {
-                tally.fallbacks += 1;
-                let total = self.total_weight(at);
-                let (visible, rays) = self.sampled_visibility(e, f_unoccluded, total, at);
-                tally.rays += rays;
-                PI * f_unoccluded * visible
-            }
+            None => PI * f_unoccluded * self.fallback_visibility(e, f_unoccluded, at, tally),
         }
+    }
+
+    /// The exact method's fallback: the visible fraction of `e` at `at` from shadow rays.
+    fn fallback_visibility(
+        &self,
+        e: &AreaEmitter,
+        f_unoccluded: f64,
+        at: &SurfacePoint,
+        tally: &mut Tally,
+    ) -> f64 {
+        tally.fallbacks += 1;
+        let total = self.total_weight(at);
+        let (visible, rays) = self.sampled_visibility(e, f_unoccluded, total, at);
+        tally.rays += rays;
+        visible
     }
 
     /// Sum over the emitters of the unoccluded form factor times the summed radiance: how the

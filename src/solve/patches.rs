@@ -44,9 +44,10 @@ pub fn patches(scene: &Scene, target: usize) -> Vec<Patch> {
     let mut out = Vec::new();
     for m in &meshes {
         let poly = &scene.polygons[m.polygon];
-        let rho = scene.materials[poly.material].rho;
+        let albedo = crate::scene::AlbedoOver::new(scene, m.polygon);
         for t in &m.triangles {
             let p = t.map(|i| poly.frame.world_from_plane(m.vertices[i as usize]));
+            let rho = albedo.mean(&t.map(|i| m.vertices[i as usize]));
             out.push(Patch::new(m.polygon, p, poly.frame.n, rho));
         }
     }

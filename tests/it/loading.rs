@@ -27,7 +27,7 @@ fn add_view(json: &mut Value, bin: &mut Vec<u8>, data: &[u8]) -> usize {
 }
 
 /// Irradiance of every vertex of a bake, with its world position.
-fn vertex_values(b: &penumbra::Bake) -> Vec<(DVec3, DVec3)> {
+pub(crate) fn vertex_values(b: &penumbra::Bake) -> Vec<(DVec3, DVec3)> {
     let mut out = Vec::new();
     for (m, values) in b.meshes.iter().zip(&b.solution.irradiance) {
         let frame = &b.scene.polygons[m.polygon].frame;

@@ -20,6 +20,7 @@ mod reference;
 mod seams;
 mod sky;
 mod stability;
+mod textures;
 mod toolchain;
 mod untrusted;
 

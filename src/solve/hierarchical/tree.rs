@@ -366,7 +366,7 @@ impl Hierarchy {
             .enumerate()
             .map(|(mi, m)| {
                 let poly = &scene.polygons[m.polygon];
-                let rho = scene.materials[poly.material].rho;
+                let albedo = crate::scene::AlbedoOver::new(scene, m.polygon);
                 let mut out = Vec::new();
                 let (mut lo, mut hi) =
                     (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY));
@@ -399,7 +399,7 @@ impl Hierarchy {
                         p,
                         normal: poly.frame.n,
                         area,
-                        rho,
+                        rho: albedo.mean(&t.map(|i| m.vertices[i as usize])),
                         direct,
                         v: *t,
                     });

@@ -1,0 +1,256 @@
+//! Textured materials: albedo from a base-colour texture averaged over each element, the
+//! texture's UV set, wrap modes and transform, and alpha-tested (`MASK`) cut-outs in every ray.
+
+use crate::{bake, parse, quick};
+use glam::DVec3;
+use penumbra::fixtures::textured::{self, Floor};
+use penumbra::scene::Scene;
+use penumbra::solve::{self, Direct, SurfacePoint};
+use penumbra::visibility::Visibility;
+use penumbra::{Bake, fixtures};
+use serde_json::{Value, json};
+
+fn scene_of(bytes: &[u8]) -> Scene {
+    penumbra::load::scene(&parse(bytes, "fixture.glb")).unwrap()
+}
+
+/// Area-weighted mean over the wall (the polygons facing -x) of the indirect irradiance
+/// (vertex irradiance minus its direct part, linear over each triangle).
+fn wall_indirect(b: &Bake) -> DVec3 {
+    let (mut sum, mut area) = (DVec3::ZERO, 0.0);
+    for (mi, m) in b.meshes.iter().enumerate() {
+        let poly = &b.scene.polygons[m.polygon];
+        if poly.frame.n.x > -0.99 {
+            continue;
+        }
+        let indirect =
+            |v: u32| b.solution.irradiance[mi][v as usize] - b.solution.direct[mi][v as usize];
+        for t in &m.triangles {
+            let [p, q, r] = t.map(|v| m.vertices[v as usize]);
+            let a = 0.5 * (q - p).perp_dot(r - p).abs();
+            sum += (indirect(t[0]) + indirect(t[1]) + indirect(t[2])) / 3.0 * a;
+            area += a;
+        }
+    }
+    assert!(area > 7.9, "the wall is 8 m², found {area}");
+    sum / area
+}
+
+fn assert_close(what: &str, got: DVec3, want: DVec3, tol: f64) {
+    let worst = ((got - want) / want).abs().max_element();
+    eprintln!("{what}: {got} against {want} ({:.3}%)", 100.0 * worst);
+    assert!(worst <= tol, "{what}: {got} against {want}");
+}
+
+#[test]
+fn a_fine_checker_floor_bounces_like_a_plain_floor_of_its_mean_albedo() {
+    // Squares of albedo 0.8 and 0 (texture codes 255 and 0 times the factor 0.8): mean 0.4.
+    let checker = bake(
+        &textured::floor_room(Floor::Checker {
+            albedo: [0.8; 3],
+            cells: 32,
+        }),
+        &quick(),
+    );
+    let plain = bake(&textured::floor_room(Floor::Plain([0.4; 3])), &quick());
+    let (c, p) = (wall_indirect(&checker), wall_indirect(&plain));
+    assert!(p.x > 0.01, "the wall gets bounce light: {p}");
+    assert_close("checker against plain", c, p, 0.01);
+    // The checker is read: a floor of the factor alone would bounce twice the light.
+    let factor = bake(&textured::floor_room(Floor::Plain([0.8; 3])), &quick());
+    assert!(wall_indirect(&factor).x > 1.8 * p.x);
+}
+
+#[test]
+fn a_floor_textured_half_red_half_white_bounces_like_two_materials() {
+    // sRGB codes to the linear albedos the materials get.
+    let red = [200u8, 30, 30];
+    let white = [230u8, 230, 230];
+    let linear = |c: [u8; 3]| c.map(|v| penumbra::color::srgb_to_linear(f64::from(v) / 255.0));
+    let textured = bake(
+        &textured::floor_room(Floor::Halves {
+            left: red,
+            right: white,
+        }),
+        &quick(),
+    );
+    let materials = bake(
+        &textured::floor_room(Floor::TwoMaterials {
+            left: linear(red),
+            right: linear(white),
+        }),
+        &quick(),
+    );
+    let (t, m) = (wall_indirect(&textured), wall_indirect(&materials));
+    assert_close("texture halves against two materials", t, m, 0.01);
+    // The halves are told apart: the wall's bounce light is not grey.
+    assert!(t.x > 1.05 * t.y, "{t}");
+}
+
+/// A floor point's direct irradiance from `direct`.
+fn floor_irradiance(direct: &Direct, vis: &Visibility, x: f64, z: f64) -> f64 {
+    direct
+        .irradiance(&SurfacePoint::new(
+            DVec3::new(x, 0.0, z),
+            DVec3::Y,
+            solve::NO_POLYGON,
+            vis,
+        ))
+        .x
+}
+
+#[test]
+fn an_alpha_tested_plate_casts_the_shadow_of_its_cut_out_shape() {
+    let masked = scene_of(&textured::masked_occluder());
+    let ring = scene_of(&textured::ring_occluder());
+    let (mv, rv) = (Visibility::new(&masked), Visibility::new(&ring));
+    let md = Direct::new(&masked, &mv, 1024);
+    let rd = Direct::new(&ring, &rv, 64);
+    let (mut sq, mut n, mut peak) = (0.0, 0.0, 0.0f64);
+    for i in 0..=40 {
+        for j in 0..=40 {
+            let (x, z) = (-2.0 + 0.1 * i as f64, -2.0 + 0.1 * j as f64);
+            let (m, r) = (
+                floor_irradiance(&md, &mv, x, z),
+                floor_irradiance(&rd, &rv, x, z),
+            );
+            sq += (m - r) * (m - r);
+            n += 1.0;
+            peak = peak.max(r);
+        }
+    }
+    let rmse = (sq / n).sqrt() / peak;
+    eprintln!(
+        "cut-out against geometric ring: RMSE {:.3}% of the peak",
+        100.0 * rmse
+    );
+    assert!(rmse <= 0.02, "RMSE {rmse}");
+    // The light passes the hole: under its centre the whole source shows through it (the hole
+    // at half height is half the source's size), as without any occluder.
+    let open = floor_irradiance(&md, &mv, 0.0, 0.0);
+    let exact = floor_irradiance(&rd, &rv, 0.0, 0.0);
+    assert!((open - exact).abs() <= 0.01 * exact, "{open} vs {exact}");
+    // The cut-out's shadow comes from shadow rays; the ring's is exact.
+    assert!(md.stats().fallbacks > 0);
+    assert_eq!(rd.stats().fallbacks, 0);
+}
+
+#[test]
+fn rays_pass_the_holes_of_an_alpha_tested_surface_only() {
+    let scene = scene_of(&textured::masked_occluder());
+    let vis = Visibility::new(&scene);
+    let up = DVec3::Y;
+    // Through the hole (|x|, |z| < 0.25), and through the opaque part.
+    assert!(
+        vis.first_hit(DVec3::new(0.1, 0.5, -0.1), up, 10.0)
+            .is_some_and(|h| h.t > 1.4)
+    );
+    assert!(
+        vis.first_hit(DVec3::new(0.4, 0.5, 0.0), up, 10.0)
+            .is_some_and(|h| h.t < 0.6)
+    );
+    assert!(!vis.occluded(DVec3::new(0.0, 0.01, 0.0), DVec3::new(0.0, 1.99, 0.0)));
+    assert!(vis.occluded(DVec3::new(0.4, 0.01, 0.0), DVec3::new(0.4, 1.99, 0.0)));
+    // The solid ring blocks where the plate is opaque and lets the hole through alike.
+    let ring = scene_of(&textured::ring_occluder());
+    let rv = Visibility::new(&ring);
+    assert!(!rv.occluded(DVec3::new(0.0, 0.01, 0.0), DVec3::new(0.0, 1.99, 0.0)));
+    assert!(rv.occluded(DVec3::new(0.4, 0.01, 0.0), DVec3::new(0.4, 1.99, 0.0)));
+}
+
+#[test]
+fn an_alpha_tested_plate_bakes_with_the_shadow_of_its_cut_out_shape() {
+    let b = bake(&textured::masked_occluder(), &quick());
+    // Every floor vertex's direct light against the geometric ring's, exact, at that point.
+    let ring = scene_of(&textured::ring_occluder());
+    let rv = Visibility::new(&ring);
+    let rd = Direct::new(&ring, &rv, 64);
+    let (mut sq, mut n, mut peak) = (0.0, 0.0, 0.0f64);
+    for (mi, m) in b.meshes.iter().enumerate() {
+        let frame = &b.scene.polygons[m.polygon].frame;
+        if frame.n.y < 0.99 || frame.origin.y.abs() > 1e-9 {
+            continue;
+        }
+        for (v, h) in m.vertices.iter().zip(&b.solution.direct[mi]) {
+            let p = frame.world_from_plane(*v);
+            let want = floor_irradiance(&rd, &rv, p.x, p.z);
+            sq += (h.x - want).powi(2);
+            n += 1.0;
+            peak = peak.max(want);
+        }
+    }
+    let rmse = (sq / n).sqrt() / peak;
+    eprintln!(
+        "baked cut-out shadow against the ring's: RMSE {:.3}% of the peak",
+        100.0 * rmse
+    );
+    assert!(n > 100.0 && rmse <= 0.02, "{n} vertices, RMSE {rmse}");
+    assert!(b.stats.warnings.is_empty(), "{:?}", b.stats.warnings);
+}
+
+/// The half-red, half-white floor with its texture info edited by `edit`.
+fn halves_edited(edit: impl FnOnce(&mut Value)) -> Scene {
+    let bytes = textured::floor_room(Floor::Halves {
+        left: [255, 0, 0],
+        right: [255, 255, 255],
+    });
+    let (mut json, bin) = crate::output::split_glb(&bytes);
+    edit(&mut json["materials"][0]["pbrMetallicRoughness"]["baseColorTexture"]);
+    let bytes = penumbra::write::to_glb(&json, bin).unwrap();
+    scene_of(&bytes)
+}
+
+/// The albedo of the floor at world x (z = 0.3), from its first polygon's triangles.
+fn floor_albedo(scene: &Scene, x: f64) -> DVec3 {
+    let p = DVec3::new(x, 0.0, 0.3);
+    for (t, tri) in scene.triangles.iter().enumerate() {
+        if tri.normal.y < 0.99 {
+            continue;
+        }
+        let b = penumbra::geometry::barycentric_2d(
+            &tri.p.map(|q| glam::DVec2::new(q.x, q.z)),
+            glam::DVec2::new(p.x, p.z),
+        );
+        if b.iter().all(|&c| c >= 0.0) {
+            return scene.albedo_at(t, b);
+        }
+    }
+    panic!("no floor triangle under {p}")
+}
+
+#[test]
+fn the_texture_transform_and_texcoord_set_are_honoured() {
+    let plain = halves_edited(|_| {});
+    // x < 0 is u < 1/2: red; the factor is white and MAX_ALBEDO clamps 1.
+    let (l, r) = (floor_albedo(&plain, -1.0), floor_albedo(&plain, 1.0));
+    assert!(l.x > 0.98 && l.y < 1e-9 && r.y > 0.98, "{l} {r}");
+    // Mirrored in u by KHR_texture_transform (scale -1, offset 1): the halves swap.
+    let mirrored = halves_edited(|info| {
+        info["extensions"] =
+            json!({"KHR_texture_transform": {"offset": [1.0, 0.0], "scale": [-1.0, 1.0]}});
+    });
+    let (l, r) = (floor_albedo(&mirrored, -1.0), floor_albedo(&mirrored, 1.0));
+    assert!(r.y < 1e-9 && l.y > 0.98, "{l} {r}");
+    // A texCoord set the mesh lacks: a warning, and the texture's mean.
+    let missing = halves_edited(|info| info["texCoord"] = json!(1));
+    assert!(
+        missing.warnings.iter().any(|w| w.contains("TEXCOORD_1")),
+        "{:?}",
+        missing.warnings
+    );
+    let mean = floor_albedo(&missing, -1.0);
+    assert!((mean.y - 0.5).abs() < 0.01, "{mean}");
+}
+
+#[test]
+fn alpha_modes_without_a_texture_and_blend_are_named_in_warnings() {
+    let bytes = fixtures::box_on_floor();
+    let (mut json, bin) = crate::output::split_glb(&bytes);
+    json["materials"][0]["alphaMode"] = json!("MASK");
+    json["materials"][0]["pbrMetallicRoughness"]["baseColorFactor"] = json!([0.5, 0.5, 0.5, 0.2]);
+    json["materials"][1]["alphaMode"] = json!("BLEND");
+    let scene = scene_of(&penumbra::write::to_glb(&json, bin).unwrap());
+    let w = &scene.warnings;
+    assert!(w.iter().any(|w| w.contains("hole everywhere")), "{w:?}");
+    assert!(w.iter().any(|w| w.contains("BLEND")), "{w:?}");
+}
