@@ -894,11 +894,21 @@ fn add_primitive(
         colours,
         material,
         uvs,
+        emission: None,
     };
     // A double-sided material: the back is a second instance right after the front, its
     // winding reversed, so both sides receive, reflect (and emit) light. Not for a closed
     // surface: its back is inside the volume (and a box's bottom would lie face up on the
     // floor it stands on, a duplicate of the floor).
+    let mut front = front;
+    if let Some((radiance, texture)) = scene.materials[material]
+        .base
+        .as_ref()
+        .and_then(|b| b.emission.clone())
+    {
+        let images = scene.images.clone();
+        crate::scene::emission::split(&mut front, radiance, &texture, &images[texture.image]);
+    }
     let back = (prim.material().double_sided() && !front.is_closed()).then(|| front.back_side());
     scene.add_instance(front, material);
     if let Some(back) = back {
@@ -907,42 +917,49 @@ fn add_primitive(
     Ok(())
 }
 
-/// The `TEXCOORD_n` set that `material`'s base-colour texture reads, per vertex; `None` when it
-/// has no texture, or (with a warning: the texture's mean colour stands for it) when the
-/// primitive lacks the set.
+/// The `TEXCOORD_n` sets that `material`'s textures read (base colour, emission), per vertex.
+/// A set the primitive lacks is left out, with a warning: the texture's mean colour stands
+/// for it.
 fn texture_coordinates(
     gltf: &Gltf,
     scene: &mut Scene,
     prim: &gltf::Primitive,
     material: usize,
     item: &str,
-) -> Result<Option<Vec<DVec2>>> {
-    let Some(tex) = scene.materials[material]
-        .base
-        .as_ref()
-        .and_then(|b| b.texture.as_ref())
-    else {
-        return Ok(None);
+) -> Result<std::collections::BTreeMap<u32, Vec<DVec2>>> {
+    let mut sets = std::collections::BTreeMap::new();
+    let Some(base) = scene.materials[material].base.as_ref() else {
+        return Ok(sets);
     };
-    let n = tex.tex_coord;
-    let Some(acc) = prim.get(&gltf::Semantic::TexCoords(n)) else {
-        scene.warnings.push(format!(
-            "{item}: its material's base-colour texture reads TEXCOORD_{n}, which it does not \
-             have; the texture's mean colour stands for it"
-        ));
-        return Ok(None);
-    };
-    let values = gltf
-        .read_floats(&acc, Dimensions::Vec2)
-        .map_err(|e| e.within(&format!("{item}: TEXCOORD_{n}")))?;
-    let uvs: Vec<DVec2> = values
-        .chunks_exact(2)
-        .map(|c| DVec2::new(c[0], c[1]))
+    let wanted: Vec<u32> = [base.texture.as_ref(), base.emission.as_ref().map(|e| &e.1)]
+        .into_iter()
+        .flatten()
+        .map(|t| t.tex_coord)
         .collect();
-    if let Some(bad) = uvs.iter().find(|c| !c.is_finite()) {
-        return Err(gltf.bad(item, format!("TEXCOORD_{n} holds {bad}, not a coordinate")));
+    for n in wanted {
+        if sets.contains_key(&n) {
+            continue;
+        }
+        let Some(acc) = prim.get(&gltf::Semantic::TexCoords(n)) else {
+            scene.warnings.push(format!(
+                "{item}: its material's texture reads TEXCOORD_{n}, which it does not have; \
+                 the texture's mean colour stands for it"
+            ));
+            continue;
+        };
+        let values = gltf
+            .read_floats(&acc, Dimensions::Vec2)
+            .map_err(|e| e.within(&format!("{item}: TEXCOORD_{n}")))?;
+        let uvs: Vec<DVec2> = values
+            .chunks_exact(2)
+            .map(|c| DVec2::new(c[0], c[1]))
+            .collect();
+        if let Some(bad) = uvs.iter().find(|c| !c.is_finite()) {
+            return Err(gltf.bad(item, format!("TEXCOORD_{n} holds {bad}, not a coordinate")));
+        }
+        sets.insert(n, uvs);
     }
-    Ok(Some(uvs))
+    Ok(sets)
 }
 
 /// A primitive's `COLOR_0` as linear RGB per vertex (glTF stores vertex colours linear; alpha

@@ -9,6 +9,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 
 pub mod cut;
+pub mod emission;
 pub mod surface;
 pub mod texture;
 
@@ -225,9 +226,12 @@ pub struct Instance {
     pub(crate) colours: Option<Vec<DVec3>>,
     /// The material [`Scene::add_instance`] was given (before any `colours` tint).
     pub(crate) material: usize,
-    /// Per glTF vertex, the `TEXCOORD_n` set that the material's base-colour texture reads
-    /// (without its transform), when it has one.
-    pub(crate) uvs: Option<Vec<DVec2>>,
+    /// Per `TEXCOORD_n` set that the material's textures read: its coordinates per glTF
+    /// vertex (without a texture's transform).
+    pub(crate) uvs: BTreeMap<u32, Vec<DVec2>>,
+    /// Per triangle, its own emitted radiance, when the material's emission comes from a
+    /// texture and the triangles were split where it changes ([`emission`]).
+    pub(crate) emission: Option<Vec<DVec3>>,
 }
 
 /// A vertex that is not in the glTF primitive: a weighted mean of up to three of its vertices
@@ -256,7 +260,8 @@ impl Instance {
             derived: Vec::new(),
             colours: None,
             material: 0,
-            uvs: None,
+            uvs: BTreeMap::new(),
+            emission: None,
         }
     }
 
@@ -316,6 +321,9 @@ impl Instance {
 /// A warning that does not stop the bake (skipped items, degenerate triangles).
 pub(crate) type Warning = String;
 
+/// A tinted material's key: the material, the vertex-colour mean's bits, the radiance's bits.
+type Tint = (usize, [u64; 3], Option<[u64; 3]>);
+
 /// The whole scene.
 #[derive(Clone, Debug)]
 pub struct Scene {
@@ -333,7 +341,7 @@ pub struct Scene {
     /// the ray queries' alpha test).
     pub images: Arc<Vec<texture::Image>>,
     /// The material of each (material, vertex-colour tint) made so far ([`Scene::add_instance`]).
-    tints: BTreeMap<(usize, [u64; 3]), usize>,
+    tints: BTreeMap<Tint, usize>,
 }
 
 impl Default for Scene {
@@ -447,44 +455,61 @@ impl Scene {
     }
 
     /// Gives each polygon from `first` on (all of instance `id`'s) the material it was made
-    /// with times the area-weighted mean of the instance's vertex colours over it: the mean of
-    /// the linear interpolation over each triangle is its corners' mean. Polygons of one colour
-    /// share one material.
+    /// with, tinted: times the area-weighted mean of the instance's vertex colours over it (the
+    /// mean of the linear interpolation over each triangle is its corners' mean), and emitting
+    /// its triangles' own radiance where the instance has one per triangle ([`emission`]).
+    /// Polygons of one tint share one material.
     fn tint_polygons(&mut self, first: usize, id: usize) {
-        let Some(colours) = self.instances[id].colours.as_ref() else {
-            return;
-        };
         let inst = &self.instances[id];
-        let colour = |v: u32| -> DVec3 { inst.attribute(colours, v) };
-        let means: Vec<DVec3> = self.polygons[first..]
+        if inst.colours.is_none() && inst.emission.is_none() {
+            return;
+        }
+        let has_colours = inst.colours.is_some();
+        let tints: Vec<(DVec3, Option<DVec3>)> = self.polygons[first..]
             .iter()
             .map(|poly| {
-                let (mut sum, mut area) = (DVec3::ZERO, 0.0);
-                for &t in &poly.triangles {
-                    let tri = &self.triangles[t];
-                    let k = tri.local_index;
-                    let c = (0..3)
-                        .map(|e| colour(inst.indices[3 * k + e]))
-                        .sum::<DVec3>()
-                        / 3.0;
-                    sum += c * tri.area();
-                    area += tri.area();
-                }
-                if area > 0.0 { sum / area } else { DVec3::ONE }
+                let mean = inst.colours.as_ref().map_or(DVec3::ONE, |colours| {
+                    let (mut sum, mut area) = (DVec3::ZERO, 0.0);
+                    for &t in &poly.triangles {
+                        let tri = &self.triangles[t];
+                        let k = tri.local_index;
+                        let c = (0..3)
+                            .map(|e| inst.attribute(colours, inst.indices[3 * k + e]))
+                            .sum::<DVec3>()
+                            / 3.0;
+                        sum += c * tri.area();
+                        area += tri.area();
+                    }
+                    if area > 0.0 { sum / area } else { DVec3::ONE }
+                });
+                // Every triangle of a polygon emits alike (they merge only then).
+                let radiance = inst
+                    .emission
+                    .as_ref()
+                    .map(|e| e[self.triangles[poly.triangles[0]].local_index]);
+                (mean, radiance)
             })
             .collect();
-        for (i, mean) in means.into_iter().enumerate() {
+        for (i, (mean, radiance)) in tints.into_iter().enumerate() {
             let base = self.polygons[first + i].material;
-            let key = (base, mean.to_array().map(f64::to_bits));
+            let bits = |v: DVec3| v.to_array().map(f64::to_bits);
+            let key = (base, bits(mean), radiance.map(bits));
             let m = match self.tints.get(&key) {
                 Some(&m) => m,
                 None => {
                     let b = &self.materials[base];
+                    let mut name = b.name.clone();
+                    if has_colours {
+                        name.push_str(" x COLOR_0");
+                    }
+                    if radiance.is_some() {
+                        name.push_str(" (part of its emissive texture)");
+                    }
                     let tinted = Material {
-                        name: format!("{} x COLOR_0", b.name),
+                        name,
                         rho: (b.rho * mean)
                             .clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO)),
-                        radiance: b.radiance,
+                        radiance: radiance.unwrap_or(b.radiance),
                         base: b.base.clone(),
                     };
                     self.materials.push(tinted);
@@ -527,6 +552,9 @@ impl Scene {
             }
         }
         let tol = tolerance::INPUT * self.extent().max(1e-12);
+        // Triangles that emit differently (parts of an emissive texture) stay apart.
+        let emission = self.instances[instance].emission.as_ref();
+        let emits = |t: usize| emission.map(|e| e[self.triangles[t].local_index]);
         let mut assigned = vec![false; range.len()];
         let mut new_polygons = Vec::new();
         for seed in range.clone() {
@@ -549,7 +577,8 @@ impl Scene {
                         }
                         let tn = &self.triangles[nb];
                         let coplanar = tn.normal.dot(n0) > 1.0 - 1e-9
-                            && tn.p.iter().all(|q| (q - o0).dot(n0).abs() <= tol);
+                            && tn.p.iter().all(|q| (q - o0).dot(n0).abs() <= tol)
+                            && emits(nb) == emits(seed);
                         if coplanar {
                             assigned[i] = true;
                             members.push(nb);

@@ -234,7 +234,6 @@ pub(super) fn clip_wedge_to_polygon(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::triangle_bounds;
     use glam::DVec2;
 
     /// The grid's segment query finds every triangle the segment crosses or passes within

@@ -2,7 +2,8 @@
 //! clamped. A base-colour texture is decoded (within the image limits) and kept for lookups
 //! ([`crate::scene::Base`]), with its `texCoord`, sampler and `KHR_texture_transform`; its mean
 //! colour is the material's `rho` where one colour stands for the surface. An emissive texture
-//! scales the emission by its mean.
+//! is kept the same way (emitters are split where it changes, [`crate::scene::emission`]); its
+//! mean scales the material's radiance where one value stands for the surface.
 
 use super::{Gltf, MAX_ALBEDO, MIB, limits, name_suffix, short};
 use crate::color::srgb_to_linear;
@@ -38,10 +39,13 @@ pub(super) fn material(
         ));
     }
     let mut radiance = DVec3::from_array(m.emissive_factor().map(|c| c as f64)) * strength as f64;
+    let mut emission = None;
     if radiance.max_element() > 0.0
         && let Some(info) = m.emissive_texture()
     {
-        radiance *= textures.load(gltf, &info.texture(), false)?.0;
+        let (mean, image) = textures.load(gltf, &info.texture(), true)?;
+        emission = image.map(|image| (radiance, texture_ref(&info, image)));
+        radiance *= mean;
     }
     let name = m
         .name()
@@ -91,11 +95,12 @@ pub(super) fn material(
         }
         gltf::material::AlphaMode::Opaque => None,
     };
-    let base = (texture.is_some() || cutoff.is_some()).then(|| Base {
+    let base = (texture.is_some() || cutoff.is_some() || emission.is_some()).then_some(Base {
         factor,
         opacity,
         texture,
         cutoff,
+        emission,
     });
     Ok(Material {
         name,

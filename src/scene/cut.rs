@@ -219,6 +219,14 @@ fn bisect(inst: &mut Instance, max_edge: f64) -> usize {
         }
     }
     let split = pieces.iter().filter(|p| p.len() > 1).count();
+    if let Some(emission) = &mut inst.emission {
+        // Each piece emits as the triangle it came from.
+        *emission = pieces
+            .iter()
+            .zip(emission.iter())
+            .flat_map(|(p, &r)| std::iter::repeat_n(r, p.len()))
+            .collect();
+    }
     inst.indices = pieces.into_iter().flatten().flatten().collect();
     split
 }

@@ -26,6 +26,10 @@ pub struct Base {
     /// `alphaCutoff` under `alphaMode: MASK`: a point whose alpha (opacity x texture alpha) is
     /// under it is a hole, which neither occludes nor reflects.
     pub cutoff: Option<f64>,
+    /// `emissiveTexture` and the radiance it multiplies (`emissiveFactor` x
+    /// `emissiveStrength`, W/(m² sr)): the emitting triangles are split where it changes
+    /// ([`super::emission`]).
+    pub emission: Option<(DVec3, TextureRef)>,
 }
 
 /// One triangle's alpha test ([`Scene::cutout_of`]): a point is a hole where `opacity` x the
@@ -92,7 +96,7 @@ impl Scene {
     /// `t`; `None` when the instance has no such set.
     fn uv_at(&self, t: usize, texture: &TextureRef, bary: [f64; 3]) -> Option<DVec2> {
         let inst = &self.instances[self.triangles[t].instance];
-        let uvs = inst.uvs.as_ref()?;
+        let uvs = inst.uvs.get(&texture.tex_coord)?;
         let k = self.triangles[t].local_index;
         Some(texture.apply(inst.interpolate(uvs, k, bary)))
     }

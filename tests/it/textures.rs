@@ -254,3 +254,58 @@ fn alpha_modes_without_a_texture_and_blend_are_named_in_warnings() {
     assert!(w.iter().any(|w| w.contains("hole everywhere")), "{w:?}");
     assert!(w.iter().any(|w| w.contains("BLEND")), "{w:?}");
 }
+
+#[test]
+fn an_emissive_texture_lit_on_its_left_half_lights_like_an_emitter_of_that_half() {
+    let scene = scene_of(&textured::half_lit_emitter());
+    let emitters: Vec<usize> = scene.emitters().collect();
+    assert!(!emitters.is_empty());
+    // Only the lit half emits: what emits past x = 0 is the blur of the texture's bilinear
+    // filter next to the edge, half a texel (1/128 m) wide.
+    let (mut left, mut right) = (0.0, 0.0);
+    for &p in &emitters {
+        let poly = &scene.polygons[p];
+        let power = poly.area * scene.materials[poly.material].radiance.x;
+        let past = poly
+            .triangles
+            .iter()
+            .any(|&t| scene.triangles[t].p.iter().any(|q| q.x > 1e-9));
+        *(if past { &mut right } else { &mut left }) += power;
+    }
+    assert!(
+        (left - 0.5 * textured::HALF_LIT_RADIANCE).abs() < 0.01 * left,
+        "{left}"
+    );
+    assert!(
+        right < 0.01 * left,
+        "{right} past the edge, {left} before it"
+    );
+    let vis = Visibility::new(&scene);
+    let direct = Direct::new(&scene, &vis, 64);
+    let half = [
+        DVec3::new(-0.5, 1.0, -0.5),
+        DVec3::new(0.0, 1.0, -0.5),
+        DVec3::new(0.0, 1.0, 0.5),
+        DVec3::new(-0.5, 1.0, 0.5),
+    ];
+    let l = textured::HALF_LIT_RADIANCE;
+    let mut worst = 0.0f64;
+    let mut peak = 0.0f64;
+    for i in 0..=24 {
+        let x = -1.5 + 0.125 * i as f64;
+        for z in [0.0, 0.4, 1.0] {
+            let p = DVec3::new(x, 0.0, z);
+            let want = std::f64::consts::PI
+                * l
+                * penumbra::geometry::point_polygon_form_factor(p, DVec3::Y, &half);
+            let got = floor_irradiance(&direct, &vis, x, z);
+            worst = worst.max((got - want).abs());
+            peak = peak.max(want);
+        }
+    }
+    eprintln!(
+        "half-lit emitter: worst error {:.4}% of the peak",
+        100.0 * worst / peak
+    );
+    assert!(worst <= 0.01 * peak, "{worst} of {peak}");
+}
