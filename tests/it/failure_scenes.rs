@@ -155,7 +155,8 @@ fn every_failure_scene_is_listed_once() {
             "tessellated_occluder",
             "near_coplanar_light",
             "far_small_emitter",
-            "touching_shooter"
+            "touching_shooter",
+            "cutout_lattice"
         ]
     );
 }
@@ -198,6 +199,17 @@ fn tessellated_occluder_has_many_silhouette_wedges() {
     let d = b.stats.discontinuity.as_ref().unwrap();
     assert!(d.wedges >= 100, "{d:?}");
     assert!(b.scene.triangles.len() >= 1000);
+}
+
+#[test]
+fn cutout_lattice_casts_its_slats_shadows_through_shadow_rays() {
+    let b = check("cutout_lattice");
+    // The lattice is one quad: its cut-out slats cast no wedges (only the light's own quad
+    // and the floor's contacts are features), and the exact direct light fell back to rays.
+    let d = b.stats.discontinuity.as_ref().unwrap();
+    assert_eq!(d.kept, 0, "{d:?}");
+    let direct = &b.stats.solve.direct;
+    assert!(direct.fallbacks > 0, "{direct:?}");
 }
 
 #[test]

@@ -594,6 +594,16 @@ fn mutants_of_the_fixtures_fail_cleanly() {
         ("instanced", fixtures::instanced()),
         ("square-occluder", fixtures::square_occluder()),
         ("cornell-box", fixtures::cornell_box()),
+        // Textures: an alpha-tested plate, an emissive texture, a textured floor.
+        ("masked-occluder", fixtures::textured::masked_occluder()),
+        ("half-lit-emitter", fixtures::textured::half_lit_emitter()),
+        (
+            "checker-room",
+            fixtures::textured::floor_room(fixtures::textured::Floor::Checker {
+                albedo: [0.8; 3],
+                cells: 4,
+            }),
+        ),
     ];
     // More inputs to mutate: every .glb in the directory PENUMBRA_MUTANT_INPUTS (e.g. real
     // scenes; keep them small, each bake has the same time limit).
