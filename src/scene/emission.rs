@@ -3,13 +3,15 @@
 //! An emitter of the solvers has one radiance over a planar polygon (the exact direct light and
 //! the discontinuity wedges need that). So a primitive whose `emissiveTexture` varies is split:
 //! each triangle into `n x n` similar pieces (the same `n` over the primitive, so that shared
-//! edges split alike and no T-junction appears), `n` chosen so a piece spans about
-//! [`TEXELS_PER_PIECE`] texels (at most [`MAX_SPLIT`]). Each piece emits the texture's mean over
-//! it (filtered lookups), rounded to [`LEVELS`] steps of the primitive's brightest piece, so
-//! that neighbouring pieces of one level merge back into one polygon and a sign's dark
-//! background does not emit at all. A texture that is the same over every piece splits
-//! nothing. The new vertices are [`Derived`] ones, which the writer interpolates every
-//! attribute onto, as for [`super::cut`].
+//! edges split alike and no T-junction appears), each emitting the texture's mean over it
+//! (about a lookup per texel). `n` starts where a piece spans about [`TEXELS_PER_PIECE`] texels (at most
+//! [`MAX_SPLIT`]) and is halved while every piece stays within [`MERGE`] of the finer pieces
+//! inside it, so a texture of a few large regions makes a few pieces. Then the dimmest pieces
+//! that carry together at most [`DROPPED_POWER`] of the primitive's power (the soft edge of a
+//! filtered texture) are turned off, and edge-connected pieces within [`MERGE`] of each other
+//! emit their mean (the same power): a lit region is one emitter and a dark background none. A
+//! texture that is the same over every piece splits nothing. The new vertices are [`Derived`]
+//! ones, which the writer interpolates every attribute onto, as for [`super::cut`].
 //!
 //! Splitting rather than integrating the texture per receiving point keeps every emitter a
 //! uniform polygon, so shadows, penumbrae and discontinuities follow the emitting region with
@@ -28,11 +30,19 @@ pub const TEXELS_PER_PIECE: f64 = 4.0;
 /// The most pieces along a triangle's edge (`MAX_SPLIT²` pieces per triangle).
 pub const MAX_SPLIT: usize = 16;
 
-/// Steps between no emission and the brightest piece's.
-pub const LEVELS: f64 = 64.0;
+/// How far (a fraction of the brightest piece's radiance, per channel) an edge-connected
+/// piece's radiance may be from its group's first piece's to join it ([`merge_similar`]).
+pub const MERGE: f64 = 0.125;
 
-/// Points per piece side of the mean over a piece ([`triangle_grid`]).
+/// The most power (a fraction of the primitive's) that its dimmest pieces may lose
+/// ([`drop_dimmest`]).
+pub const DROPPED_POWER: f64 = 0.01;
+
+/// Points per piece side of the mean over a piece ([`triangle_grid`]): about one per texel
+/// along its longest edge, at least `SAMPLES` and at most `MAX_SAMPLES` (past it, the lookups
+/// read the mip level of their spacing).
 const SAMPLES: usize = 4;
+const MAX_SAMPLES: usize = 64;
 
 /// Splits `inst`'s triangles where `texture` (times `radiance`, W/(m² sr)) changes, giving it a
 /// radiance per triangle ([`Instance::emission`]); leaves it as it is when the texture's mean
@@ -57,46 +67,198 @@ pub(crate) fn split(
         .flat_map(|t| (0..3).map(move |e| (t[e], t[(e + 1) % 3])))
         .map(|(a, b)| ((uv(a) - uv(b)) * texels).length())
         .fold(0.0, f64::max);
-    let n = ((longest / TEXELS_PER_PIECE).ceil() as usize).clamp(1, MAX_SPLIT);
-    // The pieces of every triangle, as barycentric grid points (a, b) of it.
-    let pieces = grid_pieces(n);
-    let mean = |t: &[u32], piece: &[(usize, usize); 3]| -> DVec3 {
-        let corners = piece.map(|(a, b)| {
-            let (fa, fb) = (a as f64 / n as f64, b as f64 / n as f64);
-            uv(t[0]) * (1.0 - fa - fb) + uv(t[1]) * fa + uv(t[2]) * fb
-        });
-        let area = 0.5
-            * (corners[1] - corners[0])
-                .perp_dot(corners[2] - corners[0])
-                .abs();
-        let footprint = area.sqrt() / SAMPLES as f64;
-        let points: Vec<DVec2> = triangle_grid(&corners, SAMPLES).collect();
-        points
-            .iter()
-            .map(|&q| image.filtered(q, footprint, texture.wrap).0)
-            .sum::<DVec3>()
-            / points.len() as f64
-            * radiance
+    let finest = ((longest / TEXELS_PER_PIECE).ceil() as usize).clamp(1, MAX_SPLIT);
+    // The texture's mean over every piece of every triangle, split n times.
+    let means = |n: usize| -> Vec<DVec3> {
+        let mean = |t: &[u32], piece: &[(usize, usize); 3]| -> DVec3 {
+            let corners = piece.map(|(a, b)| {
+                let (fa, fb) = (a as f64 / n as f64, b as f64 / n as f64);
+                uv(t[0]) * (1.0 - fa - fb) + uv(t[1]) * fa + uv(t[2]) * fb
+            });
+            let area = 0.5
+                * (corners[1] - corners[0])
+                    .perp_dot(corners[2] - corners[0])
+                    .abs();
+            // About a point per texel along the longest edge (so the mean is the texture's
+            // own, not blurred by a coarse mip level), within limits.
+            let edge = (0..3)
+                .map(|e| ((corners[e] - corners[(e + 1) % 3]) * texels).length())
+                .fold(0.0, f64::max);
+            let samples = (edge.ceil() as usize).clamp(SAMPLES, MAX_SAMPLES);
+            let footprint = area.sqrt() / samples as f64;
+            let points: Vec<DVec2> = triangle_grid(&corners, samples).collect();
+            points
+                .iter()
+                .map(|&q| image.filtered(q, footprint, texture.wrap).0)
+                .sum::<DVec3>()
+                / points.len() as f64
+                * radiance
+        };
+        let pieces = grid_pieces(n);
+        inst.indices
+            .chunks_exact(3)
+            .flat_map(|t| pieces.iter().map(move |p| mean(t, p)))
+            .collect()
     };
-    let values: Vec<DVec3> = inst
-        .indices
-        .chunks_exact(3)
-        .flat_map(|t| pieces.iter().map(move |p| (t, p)))
-        .map(|(t, p)| mean(t, p))
-        .collect();
-    let top = values.iter().map(|v| v.max_element()).fold(0.0, f64::max);
+    let fine = means(finest);
+    let top = fine.iter().map(|v| v.max_element()).fold(0.0, f64::max);
     if top <= 0.0 {
         return 0;
     }
-    let level = |v: DVec3| (v / top * LEVELS).round() / LEVELS * top;
-    let values: Vec<DVec3> = values.into_iter().map(level).collect();
+    // The coarsest split, halving from the finest, whose every piece is within MERGE of the
+    // fine pieces inside it: a texture of a few large regions splits into a few pieces.
+    let (mut n, mut values) = (finest, fine.clone());
+    while n > 1 {
+        let coarser = n / 2;
+        let coarse = means(coarser);
+        let parent = parents(finest, coarser);
+        let (per_fine, per_coarse) = (finest * finest, coarser * coarser);
+        let fits = fine.iter().enumerate().all(|(k, f)| {
+            let (t, p) = (k / per_fine, k % per_fine);
+            let c = coarse[t * per_coarse + parent[p]];
+            (*f - c).abs().max_element() <= MERGE * top
+        });
+        if !fits {
+            break;
+        }
+        (n, values) = (coarser, coarse);
+    }
+    let pieces = grid_pieces(n);
+    drop_dimmest(
+        &mut values,
+        &inst.indices,
+        &inst.positions_world,
+        pieces.len(),
+        n,
+    );
     if values.iter().all(|v| *v == values[0]) {
         return 0;
     }
     let before = inst.indices.len() / 3;
     subdivide(inst, n, &pieces);
+    merge_similar(&mut values, &inst.indices, &inst.positions_world, top);
     inst.emission = Some(values);
     inst.indices.len() / 3 - before
+}
+
+/// Gives each group of edge-connected emitting pieces whose radiance is within [`MERGE`] of
+/// the brightest piece's from its first piece's the group's area-weighted mean radiance (the
+/// same power), so that they become one emitter; dark pieces never join one. `indices` are
+/// the split triangles, one per value.
+fn merge_similar(values: &mut [DVec3], indices: &[u32], positions: &[DVec3], top: f64) {
+    let mut edges: BTreeMap<(u32, u32), Vec<usize>> = BTreeMap::new();
+    for (k, t) in indices.chunks_exact(3).enumerate() {
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            edges.entry((a.min(b), a.max(b))).or_default().push(k);
+        }
+    }
+    let area = |k: usize| {
+        let p = [0, 1, 2].map(|e| positions[indices[3 * k + e] as usize]);
+        crate::geometry::triangle_area(&p)
+    };
+    let close = |a: DVec3, b: DVec3| (a - b).abs().max_element() <= MERGE * top;
+    let mut group = vec![usize::MAX; values.len()];
+    for seed in 0..values.len() {
+        if group[seed] != usize::MAX || values[seed] == DVec3::ZERO {
+            continue;
+        }
+        let first = values[seed];
+        let mut members = vec![seed];
+        group[seed] = seed;
+        let mut next = 0;
+        while next < members.len() {
+            let k = members[next];
+            next += 1;
+            let t = &indices[3 * k..3 * k + 3];
+            for e in 0..3 {
+                let (a, b) = (t[e], t[(e + 1) % 3]);
+                for &nb in &edges[&(a.min(b), a.max(b))] {
+                    if group[nb] == usize::MAX
+                        && values[nb] != DVec3::ZERO
+                        && close(values[nb], first)
+                    {
+                        group[nb] = seed;
+                        members.push(nb);
+                    }
+                }
+            }
+        }
+        let (mut power, mut total) = (DVec3::ZERO, 0.0);
+        for &k in &members {
+            let a = area(k);
+            power += values[k] * a;
+            total += a;
+        }
+        if total > 0.0 {
+            for &k in &members {
+                values[k] = power / total;
+            }
+        }
+    }
+}
+
+/// Turns off the dimmest pieces (by radiance, then in order) whose power together is at most
+/// [`DROPPED_POWER`] of the primitive's: a filtered texture's soft edge would otherwise make a
+/// row of tiny, faint emitters along every bright region, each with its own wedges.
+fn drop_dimmest(
+    values: &mut [DVec3],
+    indices: &[u32],
+    positions: &[DVec3],
+    per_triangle: usize,
+    n: usize,
+) {
+    // Every piece of a triangle has its area over n².
+    let area = |k: usize| {
+        let t = &indices[3 * (k / per_triangle)..];
+        let p = [t[0], t[1], t[2]].map(|v| positions[v as usize]);
+        crate::geometry::triangle_area(&p) / (n * n) as f64
+    };
+    let power: Vec<f64> = (0..values.len())
+        .map(|k| values[k].element_sum() * area(k))
+        .collect();
+    let total: f64 = power.iter().sum();
+    let mut order: Vec<usize> = (0..values.len()).filter(|&k| power[k] > 0.0).collect();
+    order.sort_by(|&a, &b| {
+        values[a]
+            .element_sum()
+            .total_cmp(&values[b].element_sum())
+            .then(a.cmp(&b))
+    });
+    let mut dropped = 0.0;
+    for k in order {
+        dropped += power[k];
+        if dropped > DROPPED_POWER * total {
+            break;
+        }
+        values[k] = DVec3::ZERO;
+    }
+}
+
+/// For each piece of a triangle split `fine` times, the index of the piece of its split
+/// `coarse` times (`coarse <= fine`) that holds its centroid.
+fn parents(fine: usize, coarse: usize) -> Vec<usize> {
+    let index: BTreeMap<((usize, usize), bool), usize> = grid_pieces(coarse)
+        .iter()
+        .enumerate()
+        .map(|(i, p)| ((p[0], p[1] == (p[0].0 + 1, p[0].1)), i))
+        .collect();
+    grid_pieces(fine)
+        .iter()
+        .map(|p| {
+            let scale = coarse as f64 / fine as f64 / 3.0;
+            let a = (p[0].0 + p[1].0 + p[2].0) as f64 * scale;
+            let b = (p[0].1 + p[1].1 + p[2].1) as f64 * scale;
+            let (a0, b0) = (a.floor(), b.floor());
+            let up = (a - a0) + (b - b0) < 1.0;
+            let corner = if up {
+                (a0 as usize, b0 as usize)
+            } else {
+                (a0 as usize + 1, b0 as usize)
+            };
+            index[&(corner, up)]
+        })
+        .collect()
 }
 
 /// The `n²` pieces of a triangle split `n` times along each edge, as grid points `(a, b)`
@@ -180,6 +342,23 @@ fn add(inst: &mut Instance, steps: &[(u32, usize)], n: usize) -> u32 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fine_piece_lies_in_its_coarse_parent() {
+        let grid = |p: &[(usize, usize); 3], n: usize| {
+            p.map(|(a, b)| DVec2::new(a as f64 / n as f64, b as f64 / n as f64))
+        };
+        for (fine, coarse) in [(16, 8), (8, 4), (9, 4), (5, 1), (7, 3)] {
+            let coarse_pieces = grid_pieces(coarse);
+            for (p, &parent) in grid_pieces(fine).iter().zip(&parents(fine, coarse)) {
+                let t = grid(p, fine);
+                let centroid = (t[0] + t[1] + t[2]) / 3.0;
+                let c = grid(&coarse_pieces[parent], coarse);
+                let b = crate::geometry::barycentric_2d(&c, centroid);
+                assert!(b.iter().all(|&x| x > -1e-12), "{fine}->{coarse}: {p:?}");
+            }
+        }
+    }
 
     #[test]
     fn a_split_triangle_is_covered_by_its_pieces_without_t_junctions() {
