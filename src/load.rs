@@ -15,7 +15,7 @@
 //! is inside the volume, which many exporters mark double-sided by default.
 
 use crate::error::{Error, Result};
-use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side};
+use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side, emission};
 use base64::Engine;
 use glam::{DMat3, DMat4, DVec2, DVec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -510,6 +510,10 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     });
     scene.warnings.append(&mut textures.warnings);
     scene.images = std::sync::Arc::new(textures.kept);
+    let mut walk = Walk {
+        default_material,
+        emission_plans: Default::default(),
+    };
     scene.warnings.extend(extensions::warnings(&gltf.json));
 
     let gscene = match doc.default_scene().or_else(|| doc.scenes().next()) {
@@ -629,7 +633,7 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
                             &mesh,
                             &prim,
                             world,
-                            default_material,
+                            &mut walk,
                         )?;
                     }
                 }
@@ -789,6 +793,14 @@ fn name_suffix(name: Option<&str>) -> String {
     name.map(|n| format!(" \"{n}\"")).unwrap_or_default()
 }
 
+/// What the node walk carries from one primitive to the next.
+struct Walk {
+    /// The index of the glTF default material in [`Scene::materials`].
+    default_material: usize,
+    /// Per (mesh, primitive) with a varying emissive texture: how its triangles split.
+    emission_plans: std::collections::BTreeMap<(usize, usize), Option<emission::Plan>>,
+}
+
 fn add_primitive(
     gltf: &Gltf,
     scene: &mut Scene,
@@ -796,8 +808,9 @@ fn add_primitive(
     mesh: &gltf::Mesh,
     prim: &gltf::Primitive,
     world: &DMat4,
-    default_material: usize,
+    walk: &mut Walk,
 ) -> Result<()> {
+    let default_material = walk.default_material;
     let item = format!(
         "mesh {}{} primitive {}",
         mesh.index(),
@@ -906,8 +919,16 @@ fn add_primitive(
         .as_ref()
         .and_then(|b| b.emission.clone())
     {
-        let images = scene.images.clone();
-        crate::scene::emission::split(&mut front, radiance, &texture, &images[texture.image]);
+        // One plan per primitive, whatever places it.
+        let plan = walk
+            .emission_plans
+            .entry((mesh.index(), prim.index()))
+            .or_insert_with(|| {
+                emission::plan(&front, radiance, &texture, &scene.images[texture.image])
+            });
+        if let Some(plan) = plan {
+            emission::apply(&mut front, plan);
+        }
     }
     let back = (prim.material().double_sided() && !front.is_closed()).then(|| front.back_side());
     scene.add_instance(front, material);

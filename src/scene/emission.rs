@@ -44,19 +44,34 @@ pub const DROPPED_POWER: f64 = 0.01;
 const SAMPLES: usize = 4;
 const MAX_SAMPLES: usize = 64;
 
-/// Splits `inst`'s triangles where `texture` (times `radiance`, W/(m² sr)) changes, giving it a
-/// radiance per triangle ([`Instance::emission`]); leaves it as it is when the texture's mean
-/// is the same over every piece or the instance lacks the texture's UV set. Returns the
-/// triangles added.
-pub(crate) fn split(
-    inst: &mut Instance,
+/// How to split a primitive's triangles ([`plan`]): `n` pieces along each edge, and each
+/// piece's radiance (W/(m² sr)), triangle by triangle.
+#[derive(Clone, Debug)]
+pub(crate) struct Plan {
+    n: usize,
+    values: Vec<DVec3>,
+}
+
+/// Splits `inst`'s triangles as `plan` says, giving it a radiance per triangle
+/// ([`Instance::emission`]). Returns the triangles added.
+pub(crate) fn apply(inst: &mut Instance, plan: &Plan) -> usize {
+    let before = inst.indices.len() / 3;
+    subdivide(inst, plan.n, &grid_pieces(plan.n));
+    inst.emission = Some(plan.values.clone());
+    inst.indices.len() / 3 - before
+}
+
+/// Where to split `inst`'s triangles so that each piece emits `texture`'s mean over it (times
+/// `radiance`, W/(m² sr)); `None` when the texture's mean is the same over every piece or the
+/// instance lacks the texture's UV set. It depends on the primitive's UVs alone (and, through
+/// the pieces' areas, little on its placement): one plan serves every placement.
+pub(crate) fn plan(
+    inst: &Instance,
     radiance: DVec3,
     texture: &TextureRef,
     image: &Image,
-) -> usize {
-    let Some(uvs) = inst.uvs.get(&texture.tex_coord) else {
-        return 0;
-    };
+) -> Option<Plan> {
+    let uvs = inst.uvs.get(&texture.tex_coord)?;
     let uv = |v: u32| texture.apply(uvs[v as usize]);
     // Pieces per edge: the longest triangle edge in texels over the aim.
     let (w, h) = image.size();
@@ -103,7 +118,7 @@ pub(crate) fn split(
     let fine = means(finest);
     let top = fine.iter().map(|v| v.max_element()).fold(0.0, f64::max);
     if top <= 0.0 {
-        return 0;
+        return None;
     }
     // The coarsest split, halving from the finest, whose every piece is within MERGE of the
     // fine pieces inside it: a texture of a few large regions splits into a few pieces.
@@ -132,13 +147,13 @@ pub(crate) fn split(
         n,
     );
     if values.iter().all(|v| *v == values[0]) {
-        return 0;
+        return None;
     }
-    let before = inst.indices.len() / 3;
-    subdivide(inst, n, &pieces);
-    merge_similar(&mut values, &inst.indices, &inst.positions_world, top);
-    inst.emission = Some(values);
-    inst.indices.len() / 3 - before
+    // Merged over the split triangles' edges (on a copy: the plan leaves `inst` as it is).
+    let mut split = inst.clone();
+    subdivide(&mut split, n, &pieces);
+    merge_similar(&mut values, &split.indices, &split.positions_world, top);
+    Some(Plan { n, values })
 }
 
 /// Gives each group of edge-connected emitting pieces whose radiance is within [`MERGE`] of
