@@ -99,6 +99,17 @@ fn floor_irradiance(direct: &Direct, vis: &Visibility, x: f64, z: f64) -> f64 {
         .x
 }
 
+/// RMS difference of (got, want) pairs over the largest `want`, and the number of pairs.
+fn rmse_of_peak(pairs: impl Iterator<Item = (f64, f64)>) -> (f64, usize) {
+    let (mut sq, mut n, mut peak) = (0.0, 0, 0.0f64);
+    for (got, want) in pairs {
+        sq += (got - want).powi(2);
+        n += 1;
+        peak = peak.max(want);
+    }
+    ((sq / n as f64).sqrt() / peak, n)
+}
+
 #[test]
 fn an_alpha_tested_plate_casts_the_shadow_of_its_cut_out_shape() {
     let masked = scene_of(&textured::masked_occluder());
@@ -106,20 +117,16 @@ fn an_alpha_tested_plate_casts_the_shadow_of_its_cut_out_shape() {
     let (mv, rv) = (Visibility::new(&masked), Visibility::new(&ring));
     let md = Direct::new(&masked, &mv, 1024);
     let rd = Direct::new(&ring, &rv, 64);
-    let (mut sq, mut n, mut peak) = (0.0, 0.0, 0.0f64);
-    for i in 0..=40 {
-        for j in 0..=40 {
+    let pairs = (0..=40)
+        .flat_map(|i| (0..=40).map(move |j| (i, j)))
+        .map(|(i, j)| {
             let (x, z) = (-2.0 + 0.1 * i as f64, -2.0 + 0.1 * j as f64);
-            let (m, r) = (
+            (
                 floor_irradiance(&md, &mv, x, z),
                 floor_irradiance(&rd, &rv, x, z),
-            );
-            sq += (m - r) * (m - r);
-            n += 1.0;
-            peak = peak.max(r);
-        }
-    }
-    let rmse = (sq / n).sqrt() / peak;
+            )
+        });
+    let (rmse, _) = rmse_of_peak(pairs);
     eprintln!(
         "cut-out against geometric ring: RMSE {:.3}% of the peak",
         100.0 * rmse
@@ -165,7 +172,7 @@ fn an_alpha_tested_plate_bakes_with_the_shadow_of_its_cut_out_shape() {
     let ring = scene_of(&textured::ring_occluder());
     let rv = Visibility::new(&ring);
     let rd = Direct::new(&ring, &rv, 64);
-    let (mut sq, mut n, mut peak) = (0.0, 0.0, 0.0f64);
+    let mut pairs = Vec::new();
     for (mi, m) in b.meshes.iter().enumerate() {
         let frame = &b.scene.polygons[m.polygon].frame;
         if frame.n.y < 0.99 || frame.origin.y.abs() > 1e-9 {
@@ -173,18 +180,15 @@ fn an_alpha_tested_plate_bakes_with_the_shadow_of_its_cut_out_shape() {
         }
         for (v, h) in m.vertices.iter().zip(&b.solution.direct[mi]) {
             let p = frame.world_from_plane(*v);
-            let want = floor_irradiance(&rd, &rv, p.x, p.z);
-            sq += (h.x - want).powi(2);
-            n += 1.0;
-            peak = peak.max(want);
+            pairs.push((h.x, floor_irradiance(&rd, &rv, p.x, p.z)));
         }
     }
-    let rmse = (sq / n).sqrt() / peak;
+    let (rmse, n) = rmse_of_peak(pairs.into_iter());
     eprintln!(
         "baked cut-out shadow against the ring's: RMSE {:.3}% of the peak",
         100.0 * rmse
     );
-    assert!(n > 100.0 && rmse <= 0.02, "{n} vertices, RMSE {rmse}");
+    assert!(n > 100 && rmse <= 0.02, "{n} vertices, RMSE {rmse}");
     assert!(b.stats.warnings.is_empty(), "{:?}", b.stats.warnings);
 }
 
