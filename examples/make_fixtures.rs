@@ -7,6 +7,7 @@
 //! cargo run --release --example make_fixtures -- --sill-town TRIANGLES FILE
 //! cargo run --release --example make_fixtures -- --tiled-box TILES FILE
 //! cargo run --example make_fixtures -- --box-on-ground FILE
+//! cargo run --example make_fixtures -- --textured DIR
 //! ```
 //!
 //! `OUTPUT_DIR` defaults to `fixtures` (relative to the current directory, so run it from the
@@ -23,6 +24,9 @@
 //! pictures (`penumbra::fixtures::tiled_box_on_floor`).
 //! `--box-on-ground FILE` writes the sky's scene (`penumbra::fixtures::box_on_ground`: no light
 //! of its own, so it is not in `fixtures/`; bake it with `--sky`).
+//! `--textured DIR` writes the textured scenes of the tests (`penumbra::fixtures::textured`:
+//! an alpha-tested plate and its geometric twin, a half-lit emissive texture, textured floors)
+//! and the failure sweep's `cutout_lattice` to `DIR/<name>.glb`.
 
 use std::path::PathBuf;
 
@@ -34,7 +38,7 @@ fn main() -> std::io::Result<()> {
              | make_fixtures --town TRIANGLES FILE | make_fixtures --sill-town TRIANGLES FILE \
              | make_fixtures --interior ROOMS FILE \
              | make_fixtures --tiled-box TILES FILE \
-             | make_fixtures --box-on-ground FILE"
+             | make_fixtures --box-on-ground FILE | make_fixtures --textured DIR"
         );
         std::process::exit(2);
     };
@@ -72,6 +76,41 @@ fn main() -> std::io::Result<()> {
         let glb = generate(size);
         std::fs::write(file, &glb)?;
         println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
+        return Ok(());
+    }
+    if args.first().is_some_and(|a| a == "--textured") {
+        use penumbra::fixtures::textured::{self, Floor};
+        let [_, dir] = args.as_slice() else { usage() };
+        let dir = PathBuf::from(dir);
+        std::fs::create_dir_all(&dir)?;
+        let scenes = [
+            ("masked-occluder", textured::masked_occluder()),
+            ("ring-occluder", textured::ring_occluder()),
+            ("half-lit-emitter", textured::half_lit_emitter()),
+            (
+                "checker-room",
+                textured::floor_room(Floor::Checker {
+                    albedo: [0.8; 3],
+                    cells: 32,
+                }),
+            ),
+            (
+                "halves-room",
+                textured::floor_room(Floor::Halves {
+                    left: [200, 30, 30],
+                    right: [230, 230, 230],
+                }),
+            ),
+            (
+                "cutout-lattice",
+                penumbra::fixtures::failure::cutout_lattice(),
+            ),
+        ];
+        for (name, glb) in scenes {
+            let path = dir.join(format!("{name}.glb"));
+            std::fs::write(&path, &glb)?;
+            println!("{} ({} bytes)", path.display(), glb.len());
+        }
         return Ok(());
     }
     if args.first().is_some_and(|a| a == "--box-on-ground") {
