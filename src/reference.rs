@@ -463,11 +463,49 @@ impl<'a> Tracer<'a> {
             return DVec3::ZERO;
         }
         let dir = cosine_direction(at.n, rng);
-        if self.vis.first_hit(at.ray_origin, dir, f64::MAX).is_none() {
-            self.sky * PI
-        } else {
-            DVec3::ZERO
+        match self.next_hit(at.ray_origin, dir, rng) {
+            (None, through) => self.sky * through * PI,
+            (Some(_), _) => DVec3::ZERO,
         }
+    }
+
+    /// The surface a path's ray from `origin` along unit `dir` stops at, and the weight of the
+    /// see-through surfaces it passed (`BLEND`, transmission). At each see-through hit the
+    /// path goes on with probability `q`, the mean of its transmittance `T` (kept within 0.05
+    /// and 0.95), weighted `T / q`, or stops there weighted `1 / (1 - q)`: in expectation, `T`
+    /// of the light passes and the surface reflects the rest ([`Scene::albedo_at`] counts
+    /// only what does not pass). A scene without such surfaces draws no random number here.
+    fn next_hit(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        rng: &mut SplitMix64,
+    ) -> (Option<crate::visibility::Hit>, DVec3) {
+        let mut weight = DVec3::ONE;
+        let (mut o, mut travelled) = (origin, 0.0);
+        // Past this many panes in a row the path is dropped (a stack of glass).
+        for _ in 0..64 {
+            let Some(hit) = self.vis.first_hit(o, dir, f64::MAX) else {
+                return (None, weight);
+            };
+            let at = crate::visibility::Hit {
+                t: travelled + hit.t,
+                triangle: hit.triangle,
+            };
+            let Some(pane) = self.scene.pane_of(hit.triangle) else {
+                return (Some(at), weight);
+            };
+            let p = o + dir * hit.t;
+            let bary = crate::geometry::barycentric_3d(&self.scene.triangles[hit.triangle].p, p);
+            let t = pane.transmittance(&self.scene.images, bary);
+            let q = (t.element_sum() / 3.0).clamp(0.05, 0.95);
+            if rng.next_f64() >= q {
+                return (Some(at), weight / (1.0 - q));
+            }
+            weight *= t / q;
+            (o, travelled) = (p, at.t);
+        }
+        (None, DVec3::ZERO)
     }
 
     /// Irradiance from the punctual lights (exact, no randomness), W/m².
@@ -512,18 +550,18 @@ impl<'a> Tracer<'a> {
             if let Some(probe) = probe.as_deref_mut() {
                 probe.unoccluded += plain;
             }
-            if self
+            let through = self
                 .vis
-                .occluded_skipping(at.ray_origin, y, [at.polygon, e.polygon])
-            {
+                .transmitted_skipping(at.ray_origin, y, [at.polygon, e.polygon]);
+            if through == DVec3::ZERO {
                 continue;
             }
             if let Some(probe) = probe.as_deref_mut() {
-                probe.visible += plain;
+                probe.visible += plain * luminance(through) / luminance(DVec3::ONE);
             }
             let p_l = r2 / (e.area() * cos_y);
             let p_b = if mis { cos_x / PI } else { 0.0 };
-            h += e.radiance * (cos_x / (p_l + p_b));
+            h += e.radiance * through * (cos_x / (p_l + p_b));
         }
         h
     }
@@ -542,7 +580,9 @@ impl<'a> Tracer<'a> {
         let mut depth = 0u32;
         while traces(depth) {
             let dir = cosine_direction(at.n, rng);
-            let Some(hit) = self.vis.first_hit(at.ray_origin, dir, f64::MAX) else {
+            let (hit, through) = self.next_hit(at.ray_origin, dir, rng);
+            throughput *= through;
+            let Some(hit) = hit else {
                 // Left the scene: the sky's light, `L_sky cos / p_b`.
                 total += throughput * self.sky * PI;
                 break;

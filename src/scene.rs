@@ -13,7 +13,7 @@ pub mod emission;
 pub mod surface;
 pub mod texture;
 
-pub use surface::{AlbedoOver, Base};
+pub use surface::{AlbedoOver, Base, Passes};
 
 /// The geometric tolerances of every stage, as fractions of [`Scene::extent`] (times it: scene
 /// units), so a scene bakes alike at any size. Three levels, by the rounding each must absorb:

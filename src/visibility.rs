@@ -10,7 +10,7 @@
 //! ([`take_recorded_rays`]); it is off unless switched on, and never changes an answer.
 
 use crate::scene::Scene;
-use crate::scene::surface::Cutout;
+use crate::scene::surface::{Cutout, Pane};
 use crate::scene::texture::Image;
 use glam::{DVec3, Vec3, Vec3A};
 use obvhs::{BvhBuildParams, aabb::Aabb, bvh2::Bvh2, ray::Ray, ray::RayHit, triangle::Triangle};
@@ -50,6 +50,11 @@ pub struct Visibility {
     /// Per BVH primitive, its index in `cutouts` (alpha-tested triangles), or `u32::MAX`.
     cut: Vec<u32>,
     cutouts: Vec<Cutout>,
+    /// Per BVH primitive, its index in `panes` (see-through triangles), or `u32::MAX`; and
+    /// whether the pane counts when a ray meets its back (it has no coincident twin facing
+    /// the other way, which would count instead).
+    pane: Vec<(u32, bool)>,
+    panes: Vec<Pane>,
     /// The images the cut-outs read.
     images: Arc<Vec<Image>>,
     center: DVec3,
@@ -129,6 +134,17 @@ impl Visibility {
                 None => u32::MAX,
             })
             .collect();
+        let mut panes = Vec::new();
+        let pane = ids
+            .iter()
+            .map(|&i| match scene.pane_of(i) {
+                Some(p) => {
+                    panes.push(p);
+                    ((panes.len() - 1) as u32, scene.twin_triangle(i).is_none())
+                }
+                None => (u32::MAX, false),
+            })
+            .collect();
         Visibility {
             bvh,
             tris,
@@ -136,6 +152,8 @@ impl Visibility {
             polygons,
             cut,
             cutouts,
+            pane,
+            panes,
             images: scene.images.clone(),
             center,
             eps: crate::scene::tolerance::RAY * scene.extent(),
@@ -226,10 +244,7 @@ impl Visibility {
         if c == u32::MAX || !t.is_finite() {
             return t;
         }
-        let tri = &self.tris[id];
-        let p = (r.origin + r.direction * t).as_dvec3();
-        let corners = [tri.v0, tri.v1, tri.v2].map(|q| q.as_dvec3());
-        let bary = crate::geometry::barycentric_3d(&corners, p);
+        let bary = self.barycentric(r, id, t);
         if self.cutouts[c as usize].hole(&self.images, bary) {
             f32::INFINITY
         } else {
@@ -346,6 +361,94 @@ impl Visibility {
             record(&ray, query, skip, blocked);
         }
         blocked
+    }
+
+    /// The fraction of light (per linear RGB channel) that reaches `b` from `a` ([`Visibility::
+    /// occluded_skipping`]'s segment, triangles of the polygons in `skip` left out): 0 where an
+    /// opaque surface blocks it, else the product of the see-through surfaces' transmittances
+    /// along it (`BLEND`, transmission; a pane and its double-sided twin count once). Without
+    /// see-through surfaces in the scene, 1 or 0 exactly as `occluded_skipping` says.
+    pub fn transmitted_skipping(&self, a: DVec3, b: DVec3, skip: [usize; 2]) -> DVec3 {
+        let d = b - a;
+        let len = d.length();
+        if len <= 2.0 * self.eps {
+            return DVec3::ONE;
+        }
+        self.transmitted(a, d / len, len - self.eps, skip, Query::Segment)
+    }
+
+    /// [`Visibility::transmitted_skipping`] along the ray from `a` in unit direction `dir` to
+    /// infinity, polygon `skip` left out ([`Visibility::unoccluded_towards`]).
+    pub fn transmitted_towards(&self, a: DVec3, dir: DVec3, skip: usize) -> DVec3 {
+        self.transmitted(
+            a,
+            dir,
+            f64::from(f32::MAX),
+            [skip, usize::MAX],
+            Query::Towards,
+        )
+    }
+
+    fn transmitted(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        tmax: f64,
+        skip: [usize; 2],
+        query: Query,
+    ) -> DVec3 {
+        if self.panes.is_empty() {
+            return if self.blocked(origin, dir, tmax, skip, query) {
+                DVec3::ZERO
+            } else {
+                DVec3::ONE
+            };
+        }
+        if self.tris.is_empty() {
+            return DVec3::ONE;
+        }
+        let ray = self.ray(origin, dir, self.eps, tmax);
+        let skip = skip.map(|s| s as u32);
+        let d = Vec3A::from(dir.as_vec3());
+        let mut through = DVec3::ONE;
+        // The panes counted, by polygon and distance: a ray through the edge between two
+        // triangles of one pane meets both, and must count the pane once.
+        let mut counted: Vec<(u32, f32)> = Vec::new();
+        let tie = (TIE * self.eps) as f32;
+        let blocked = !self.bvh.ray_traverse_miss(ray, |r, id| {
+            if self.polygons[id] == skip[0] || self.polygons[id] == skip[1] {
+                return f32::INFINITY;
+            }
+            let t = self.intersect(r, id);
+            let (k, alone) = self.pane[id];
+            if k == u32::MAX || !t.is_finite() {
+                return t;
+            }
+            // A see-through triangle: the ray goes on, dimmed; its back counts only when no
+            // twin facing the ray stands in the same place.
+            let poly = self.polygons[id];
+            let again = counted
+                .iter()
+                .any(|&(p, s)| p == poly && (s - t).abs() <= tie);
+            if (alone || !self.shows_back(id, d)) && !again {
+                counted.push((poly, t));
+                let bary = self.barycentric(r, id, t);
+                through *= self.panes[k as usize].transmittance(&self.images, bary);
+            }
+            f32::INFINITY
+        });
+        if RECORDING.load(Ordering::Relaxed) {
+            record(&ray, query, skip, blocked);
+        }
+        if blocked { DVec3::ZERO } else { through }
+    }
+
+    /// Barycentric coordinates on BVH primitive `id` of the point at `t` along ray `r`.
+    fn barycentric(&self, r: &Ray, id: usize, t: f32) -> [f64; 3] {
+        let tri = &self.tris[id];
+        let p = (r.origin + r.direction * t).as_dvec3();
+        let corners = [tri.v0, tri.v1, tri.v2].map(|q| q.as_dvec3());
+        crate::geometry::barycentric_3d(&corners, p)
     }
 
     /// Appends to `out` the scene triangles whose bounding boxes overlap the box `[min, max]`

@@ -12,7 +12,7 @@
 //!   punctual lights, emissive strength).
 //! - **Kept**: what a client shows but the diffuse light does not depend on (clearcoat, sheen,
 //!   specular, variants, ...), or what penumbra approximates with a warning (a KTX2 texture's
-//!   colour is its material's factor; transmission is baked as an opaque surface).
+//!   colour is its material's factor).
 //! - **Refused**, with the way out: Draco, whose geometry penumbra cannot decode.
 //! - **Unknown** and required: refused, naming it. Unknown and only used: kept, with a warning.
 
@@ -54,10 +54,7 @@ const KNOWN: &[(&str, Support)] = &[
             "AVIF images are not decoded: a material's colour is its factor alone",
         ),
     ),
-    (
-        "KHR_materials_transmission",
-        Support::Approximated("transmissive surfaces are baked as opaque: they cast full shadows"),
-    ),
+    ("KHR_materials_transmission", Support::Read),
     (
         "KHR_materials_volume",
         Support::Approximated("volumes are baked as opaque surfaces"),

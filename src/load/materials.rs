@@ -9,7 +9,7 @@ use super::{Gltf, MAX_ALBEDO, MIB, limits, name_suffix, short};
 use crate::color::srgb_to_linear;
 use crate::error::Result;
 use crate::scene::texture::{Image, TextureRef, Wrap};
-use crate::scene::{Base, Material};
+use crate::scene::{Base, Material, Passes};
 use glam::{DVec2, DVec3};
 use std::collections::BTreeMap;
 
@@ -86,21 +86,34 @@ pub(super) fn material(
             }
             Some(cutoff)
         }
-        gltf::material::AlphaMode::Blend => {
-            textures.warnings.push(format!(
-                "material {name}: alphaMode BLEND is baked as an opaque surface (it casts a full \
-                 shadow); alphaMode MASK cuts holes"
-            ));
-            None
-        }
-        gltf::material::AlphaMode::Opaque => None,
+        _ => None,
     };
-    let base = (texture.is_some() || cutoff.is_some() || emission.is_some()).then_some(Base {
+    // What passes through: transmission wins over BLEND (glTF viewers draw such a surface as
+    // transmissive).
+    let transmission = m
+        .extensions()
+        .and_then(|e| e.get("KHR_materials_transmission"))
+        .map(|t| {
+            t["transmissionFactor"]
+                .as_f64()
+                .filter(|f| f.is_finite())
+                .unwrap_or(0.0)
+                .clamp(0.0, 1.0)
+        })
+        .filter(|&f| f > 0.0);
+    let passes = match (transmission, m.alpha_mode()) {
+        (Some(f), _) => Some(Passes::Transmission(f)),
+        (None, gltf::material::AlphaMode::Blend) => Some(Passes::Blend),
+        _ => None,
+    };
+    let varies = texture.is_some() || cutoff.is_some() || emission.is_some() || passes.is_some();
+    let base = varies.then_some(Base {
         factor,
         opacity,
         texture,
         cutoff,
         emission,
+        passes,
     });
     Ok(Material {
         name,

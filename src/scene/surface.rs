@@ -30,6 +30,48 @@ pub struct Base {
     /// `emissiveStrength`, W/(m² sr)): the emitting triangles are split where it changes
     /// ([`super::emission`]).
     pub emission: Option<(DVec3, TextureRef)>,
+    /// How light passes through the surface, if it does: `alphaMode: BLEND`, or
+    /// `KHR_materials_transmission`.
+    pub passes: Option<Passes>,
+}
+
+/// How light passes through a see-through surface ([`Pane`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Passes {
+    /// `alphaMode: BLEND`: `1 - alpha` of the light passes, tinted by the base colour.
+    Blend,
+    /// `KHR_materials_transmission`: `transmissionFactor` of it passes, tinted by the base
+    /// colour.
+    Transmission(f64),
+}
+
+/// One see-through triangle ([`Scene::pane_of`]): at a point, light passes through it times
+/// `(1 - alpha)` x the base colour (`BLEND`) or `transmissionFactor` x the base colour
+/// (transmission), alpha and colour read from the texture (bilinear, finest level).
+#[derive(Clone, Debug)]
+pub(crate) struct Pane {
+    texture: Option<(usize, [Wrap; 2], [DVec2; 3])>,
+    factor: DVec3,
+    opacity: f64,
+    passes: Passes,
+}
+
+impl Pane {
+    /// The fraction of light (per channel) that passes at barycentric point `bary`.
+    pub(crate) fn transmittance(&self, images: &[Image], bary: [f64; 3]) -> DVec3 {
+        let (rgb, alpha) = self
+            .texture
+            .as_ref()
+            .map_or((DVec3::ONE, 1.0), |(image, wrap, uv)| {
+                let uv = uv[0] * bary[0] + uv[1] * bary[1] + uv[2] * bary[2];
+                images[*image].bilinear(uv, *wrap)
+            });
+        let through = match self.passes {
+            Passes::Blend => 1.0 - (self.opacity * alpha).clamp(0.0, 1.0),
+            Passes::Transmission(t) => t,
+        };
+        (self.factor * rgb).clamp(DVec3::ZERO, DVec3::ONE) * through
+    }
 }
 
 /// One triangle's alpha test ([`Scene::cutout_of`]): a point is a hole where `opacity` x the
@@ -129,6 +171,28 @@ impl Scene {
         })
     }
 
+    /// Triangle `t`'s see-through material, when it has one (`BLEND`, transmission).
+    pub(crate) fn pane_of(&self, t: usize) -> Option<Pane> {
+        let base = self.base_of(t).0?;
+        let passes = base.passes?;
+        let texture = base.texture.as_ref().and_then(|tex| {
+            let uv =
+                [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(|b| self.uv_at(t, tex, b));
+            Some((tex.image, tex.wrap, [uv[0]?, uv[1]?, uv[2]?]))
+        });
+        Some(Pane {
+            texture,
+            factor: base.factor,
+            opacity: base.opacity,
+            passes,
+        })
+    }
+
+    /// True when triangle `t` lets light through (`BLEND`, transmission).
+    pub fn is_see_through(&self, t: usize) -> bool {
+        self.base_of(t).0.is_some_and(|b| b.passes.is_some())
+    }
+
     /// True when the point at barycentric `bary` of triangle `t` is a hole of an alpha-tested
     /// material (its alpha under `alphaCutoff`).
     pub fn cut_out_at(&self, t: usize, bary: [f64; 3]) -> bool {
@@ -169,7 +233,19 @@ impl Scene {
                     })
                 });
                 // Without a texture, or without its UV set, the material's mean colour.
-                texel.map_or(self.materials[inst.material].rho, |c| base.factor * c)
+                let rho = texel.map_or(self.materials[inst.material].rho, |c| base.factor * c);
+                // A see-through surface reflects what does not pass through it.
+                match base.passes {
+                    Some(Passes::Blend) => {
+                        let alpha = base.texture.as_ref().and_then(|tex| {
+                            let uv = self.uv_at(t, tex, bary)?;
+                            Some(self.images[tex.image].bilinear(uv, tex.wrap).1)
+                        });
+                        rho * (base.opacity * alpha.unwrap_or(1.0)).clamp(0.0, 1.0)
+                    }
+                    Some(Passes::Transmission(f)) => rho * (1.0 - f),
+                    None => rho,
+                }
             }
         };
         (rho * colour).clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO))

@@ -48,8 +48,9 @@ pub struct OccluderPiece {
     pub polygon: usize,
     /// Corners in world space (the scene's own triangle corners), convex, planar.
     pub vertices: Vec<DVec3>,
-    /// True when the polygon is alpha-tested: its outline is not its shadow's, so a point it
-    /// may shadow takes shadow rays instead ([`crate::scene::Scene::cut_out_at`]).
+    /// True when the polygon is alpha-tested or see-through: its outline is not its shadow's
+    /// (or its shadow is not black), so a point it may shadow takes shadow rays instead
+    /// ([`crate::scene::Scene::cut_out_at`], [`crate::visibility::Visibility::transmitted_skipping`]).
     pub cut_out: bool,
 }
 
@@ -68,7 +69,10 @@ impl Occluders {
         for (id, poly) in scene.polygons.iter().enumerate() {
             let first = pieces.len() as u32;
             let (convex, owner) = convex_pieces(&poly.triangles_plane);
-            let cut_out = poly.triangles.iter().any(|&t| scene.is_cut_out(t));
+            let cut_out = poly
+                .triangles
+                .iter()
+                .any(|&t| scene.is_cut_out(t) || scene.is_see_through(t));
             for piece in convex {
                 let vertices = piece
                     .iter()

@@ -229,7 +229,7 @@ impl<'a> Direct<'a> {
         }
         let mut h = vec![DVec3::ZERO; points.len()];
         let mut tally = Tally::default();
-        let mut scale = vec![0.0; points.len()];
+        let mut scale = vec![DVec3::ZERO; points.len()];
         let tree = ClusterTree::new(points);
         let mut scratch = Scratch::default();
         // Per point, the light tree's cut: the emitters to evaluate exactly (gathered per
@@ -341,7 +341,7 @@ impl<'a> Direct<'a> {
         job: &EmitterJob,
         node: usize,
         candidates: &[u32],
-        scale: &mut [f64],
+        scale: &mut [DVec3],
         tally: &mut Tally,
         scratch: &mut Scratch,
     ) {
@@ -395,10 +395,10 @@ impl<'a> Direct<'a> {
         candidates: &[u32],
         tally: &mut Tally,
         scratch: &mut Scratch,
-    ) -> f64 {
+    ) -> DVec3 {
         tally.evaluations += 1;
         if candidates.is_empty() {
-            return PI * f_unoccluded;
+            return DVec3::splat(PI * f_unoccluded);
         }
         tally.candidates += candidates.len() as u64;
         let pieces = &self.occluders.pieces;
@@ -408,7 +408,7 @@ impl<'a> Direct<'a> {
         });
         if cut_out {
             // An alpha-tested occluder in the way: shadow rays, which see through its holes.
-            return PI * f_unoccluded * self.fallback_visibility(e, f_unoccluded, at, tally);
+            return self.fallback_visibility(e, f_unoccluded, at, tally) * (PI * f_unoccluded);
         }
         let occluders = candidates
             .iter()
@@ -428,20 +428,21 @@ impl<'a> Direct<'a> {
         tally.pieces_max = tally.pieces_max.max(r.pieces as u64);
         match r.form_factor {
             // Nothing in the way: the same value as the sampled method's unoccluded one.
-            Some(_) if r.occluders == 0 => PI * f_unoccluded,
-            Some(f) => PI * f,
-            None => PI * f_unoccluded * self.fallback_visibility(e, f_unoccluded, at, tally),
+            Some(_) if r.occluders == 0 => DVec3::splat(PI * f_unoccluded),
+            Some(f) => DVec3::splat(PI * f),
+            None => self.fallback_visibility(e, f_unoccluded, at, tally) * (PI * f_unoccluded),
         }
     }
 
-    /// The exact method's fallback: the visible fraction of `e` at `at` from shadow rays.
+    /// The exact method's fallback: the visible fraction of `e` at `at` from shadow rays (per
+    /// channel: see-through surfaces tint it).
     fn fallback_visibility(
         &self,
         e: &AreaEmitter,
         f_unoccluded: f64,
         at: &SurfacePoint,
         tally: &mut Tally,
-    ) -> f64 {
+    ) -> DVec3 {
         tally.fallbacks += 1;
         let total = self.total_weight(at);
         let (visible, rays) = self.sampled_visibility(e, f_unoccluded, total, at);
@@ -467,7 +468,7 @@ impl<'a> Direct<'a> {
         f: f64,
         total: f64,
         at: &SurfacePoint,
-    ) -> (f64, u64) {
+    ) -> (DVec3, u64) {
         let (p, n, p_ray) = (at.p, at.n, at.ray_origin);
         let mut rays = 0;
         let wanted =
@@ -476,7 +477,7 @@ impl<'a> Direct<'a> {
         while level + 1 < e.samples.len() && e.samples[level + 1].len() as f64 >= wanted {
             level += 1;
         }
-        let mut seen = 0.0;
+        let mut seen = DVec3::ZERO;
         let mut all = 0.0;
         for &(s, a) in &e.samples[level] {
             let d = s - p;
@@ -489,15 +490,13 @@ impl<'a> Direct<'a> {
             let w = a * cos_r * cos_e / (r2 * r2);
             all += w;
             rays += 1;
-            if !self
+            seen += self
                 .vis
-                .occluded_skipping(p_ray, s, [at.polygon, e.polygon])
-            {
-                seen += w;
-            }
+                .transmitted_skipping(p_ray, s, [at.polygon, e.polygon])
+                * w;
         }
         // When every sample is below the horizon the sliver that remains is taken as seen.
-        (if all > 0.0 { seen / all } else { 1.0 }, rays)
+        (if all > 0.0 { seen / all } else { DVec3::ONE }, rays)
     }
 
     /// Sampled direct light at one point: exact unoccluded form factor x visibility fraction
@@ -526,7 +525,7 @@ impl<'a> Direct<'a> {
             c.nanos
                 .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
             rays += r;
-            h += e.radiance * (PI * f * visible);
+            h += e.radiance * (visible * (PI * f));
         }
         for light in self.scene.lights.iter().filter(|_| punctual) {
             let (value, r) = punctual_irradiance(light, self.vis, at);
@@ -725,28 +724,22 @@ pub fn punctual_irradiance(
     let Some(e) = punctual_unoccluded(light, at.p, at.n) else {
         return (DVec3::ZERO, 0);
     };
-    (
-        if punctual_visible(light, vis, at) {
-            e
-        } else {
-            DVec3::ZERO
-        },
-        1,
-    )
+    (e * punctual_transmitted(light, vis, at), 1)
 }
 
-/// Whether one shadow ray from `at` reaches a punctual light (it starts on the line through the
-/// point, [`SurfacePoint::ray_origin_towards`]).
-fn punctual_visible(light: &PunctualLight, vis: &Visibility, at: &SurfacePoint) -> bool {
+/// What of a punctual light one shadow ray from `at` lets through, per channel (it starts on
+/// the line through the point, [`SurfacePoint::ray_origin_towards`]): 1 or 0, or less than 1
+/// through see-through surfaces ([`Visibility::transmitted_skipping`]).
+fn punctual_transmitted(light: &PunctualLight, vis: &Visibility, at: &SurfacePoint) -> DVec3 {
     match light.kind {
         LightKind::Directional => {
             let dir = -light.direction;
-            vis.unoccluded_towards(at.ray_origin_towards(dir), dir, at.polygon)
+            vis.transmitted_towards(at.ray_origin_towards(dir), dir, at.polygon)
         }
         LightKind::Point | LightKind::Spot { .. } => {
             let dir = (light.position - at.p).normalize_or_zero();
             let origin = at.ray_origin_towards(dir);
-            !vis.occluded_skipping(origin, light.position, [at.polygon, NO_POLYGON])
+            vis.transmitted_skipping(origin, light.position, [at.polygon, NO_POLYGON])
         }
     }
 }
@@ -789,7 +782,8 @@ fn punctual_over_fans(
         })
         .collect();
     let mut rays = 0;
-    let mut weights = vec![[0.0f64; 2]; points.len()];
+    // Per vertex: the lit weight (per channel) and all the weight.
+    let mut weights = vec![(DVec3::ZERO, 0.0f64); points.len()];
     for light in &scene.lights {
         let unoccluded: Vec<Option<DVec3>> = points
             .iter()
@@ -798,11 +792,11 @@ fn punctual_over_fans(
         if unoccluded.iter().all(Option::is_none) {
             continue;
         }
-        weights.fill([0.0; 2]);
+        weights.fill((DVec3::ZERO, 0.0));
         // The samples' visibility first, and which vertices see the light anywhere in their
         // fan; a triangle skipped (the light below every corner's horizon) is dark.
         let mut seen = vec![false; points.len()];
-        let lit: Vec<Option<[bool; FAN_SAMPLES.len()]>> = mesh
+        let lit: Vec<Option<[DVec3; FAN_SAMPLES.len()]>> = mesh
             .triangles
             .iter()
             .zip(&samples)
@@ -812,13 +806,13 @@ fn punctual_over_fans(
                 }
                 let lit = at.map(|p| {
                     rays += 1;
-                    punctual_visible(
+                    punctual_transmitted(
                         light,
                         vis,
                         &SurfacePoint::new(p, frame.n, mesh.polygon, vis),
                     )
                 });
-                if lit.contains(&true) {
+                if lit.iter().any(|l| *l != DVec3::ZERO) {
                     t.iter().for_each(|&i| seen[i as usize] = true);
                 }
                 Some(lit)
@@ -834,21 +828,20 @@ fn punctual_over_fans(
                 // only until one of its samples counts (then it is 0, whatever else counts).
                 let matters = t
                     .iter()
-                    .any(|&i| seen[i as usize] || weights[i as usize][1] == 0.0);
-                if !lit && matters && vis.buried(p, frame.n) {
+                    .any(|&i| seen[i as usize] || weights[i as usize].1 == 0.0);
+                if lit == DVec3::ZERO && matters && vis.buried(p, frame.n) {
                     continue;
                 }
-                let lit = if lit { 1.0 } else { 0.0 };
                 for (k, &i) in t.iter().enumerate() {
                     let w = area * b[k];
-                    weights[i as usize][0] += w * lit;
-                    weights[i as usize][1] += w;
+                    weights[i as usize].0 += lit * w;
+                    weights[i as usize].1 += w;
                 }
             }
         }
         for (i, e) in unoccluded.iter().enumerate() {
             let Some(e) = e else { continue };
-            let [lit, all] = weights[i];
+            let (lit, all) = weights[i];
             if all > 0.0 {
                 h[i] += *e * (lit / all);
             } else {

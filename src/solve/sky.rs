@@ -105,20 +105,30 @@ impl Sky {
     /// The cosine-weighted unblocked fraction `V` of the hemisphere of `at` (dimensionless,
     /// 0..1), and the rays cast: 1 without a ray when the scene's bounding box lies at or below
     /// the plane of `at`'s ray origin, else the fraction of the point's rays
-    /// ([`Sky::directions`]) that leave the scene.
+    /// ([`Sky::directions`]) that leave the scene (the mean over the channels of
+    /// [`Sky::transmitted_fraction`]).
     pub fn visible_fraction(&self, vis: &Visibility, at: &SurfacePoint) -> (f64, u64) {
+        let (v, rays) = self.transmitted_fraction(vis, at);
+        let mean = if v.x == v.y && v.y == v.z {
+            v.x
+        } else {
+            v.element_sum() / 3.0
+        };
+        (mean, rays)
+    }
+
+    /// [`Sky::visible_fraction`] per linear RGB channel: a ray through see-through surfaces
+    /// counts for what they let through ([`Visibility::transmitted_towards`]).
+    pub fn transmitted_fraction(&self, vis: &Visibility, at: &SurfacePoint) -> (DVec3, u64) {
         let o = at.ray_origin;
         if self.corners.iter().all(|c| at.n.dot(*c - o) <= 0.0) {
-            return (1.0, 0);
+            return (DVec3::ONE, 0);
         }
-        let free = self
+        let free: DVec3 = self
             .directions(at)
-            .filter(|d| vis.unoccluded_towards(o, *d, at.polygon))
-            .count();
-        (
-            free as f64 / self.square.len() as f64,
-            self.square.len() as u64,
-        )
+            .map(|d| vis.transmitted_towards(o, d, at.polygon))
+            .sum();
+        (free / self.square.len() as f64, self.square.len() as u64)
     }
 
     /// The rays of `at`: the point set shifted by the hash of `at.p`, mapped to the disk and
@@ -165,8 +175,8 @@ impl Sky {
         let start = Instant::now();
         let (mut open, mut rays) = (0, 0);
         for (at, h) in points.iter().zip(h) {
-            let (v, r) = self.visible_fraction(vis, at);
-            *h += self.radiance * (PI * v);
+            let (v, r) = self.transmitted_fraction(vis, at);
+            *h += self.radiance * (v * PI);
             rays += r;
             open += u64::from(r == 0);
         }

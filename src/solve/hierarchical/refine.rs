@@ -295,7 +295,7 @@ impl Hierarchy {
         };
         let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
             *rays += 1;
-            !vis.occluded_skipping(a.ray, b.ray, [a.polygon, b.polygon])
+            vis.transmitted_skipping(a.ray, b.ray, [a.polygon, b.polygon]) != DVec3::ZERO
         };
         let Some((f, n)) = factors else {
             // A cluster end (or a large straddling source): the geometric bound decides, with

@@ -93,8 +93,18 @@ pub(super) fn pair_visibility(
     weight: impl Fn(&Sample, &Sample) -> f64,
     stop_if_partial: bool,
 ) -> PairVisibility {
-    let visible =
-        |p: &Sample, q: &Sample| !vis.occluded_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
+    // What passes from one sample to the other: 1 or 0, or the mean over the channels of a
+    // see-through surface's transmittance (the bounces through glass are not tinted).
+    let visible = |p: &Sample, q: &Sample| {
+        let t = vis.transmitted_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
+        if t.x == t.y && t.y == t.z {
+            t.x
+        } else {
+            t.element_sum() / 3.0
+        }
+    };
+    // The sum of what passes over the pairs that see each other.
+    let mut through = 0.0;
     let mut mask = 0u16;
     let first = a.len().max(b.len());
     let diagonal = |i: usize, j: usize| (0..first).any(|k| (k % a.len(), k % b.len()) == (i, j));
@@ -106,9 +116,11 @@ pub(super) fn pair_visibility(
         if w > 0.0 {
             cast += 1;
             tested += w;
-            if visible(p, q) {
+            let f = visible(p, q);
+            if f > 0.0 {
                 hits += 1;
-                seen += w;
+                through += f;
+                seen += w * f;
                 mask |= pair_bit(k % a.len(), k % b.len());
             }
         }
@@ -135,15 +147,17 @@ pub(super) fn pair_visibility(
             tested += w;
             if agree {
                 if hits > 0 {
-                    seen += w;
+                    seen += w * (through / hits as f64);
                     mask |= pair_bit(i, j);
                 }
                 continue;
             }
             cast += 1;
-            if visible(p, q) {
+            let f = visible(p, q);
+            if f > 0.0 {
                 hits += 1;
-                seen += w;
+                through += f;
+                seen += w * f;
                 mask |= pair_bit(i, j);
             }
         }
