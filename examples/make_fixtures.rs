@@ -25,7 +25,8 @@
 //! `--box-on-ground FILE` writes the sky's scene (`penumbra::fixtures::box_on_ground`: no light
 //! of its own, so it is not in `fixtures/`; bake it with `--sky`).
 //! `--textured DIR` writes the textured scenes of the tests (`penumbra::fixtures::textured`:
-//! an alpha-tested plate and its geometric twin, a half-lit emissive texture, textured floors)
+//! an alpha-tested plate and its geometric twin, a half-lit emissive texture, textured floors,
+//! a glass pane)
 //! and the failure sweep's `cutout_lattice` to `DIR/<name>.glb`.
 
 use std::path::PathBuf;
@@ -104,6 +105,10 @@ fn main() -> std::io::Result<()> {
             (
                 "cutout-lattice",
                 penumbra::fixtures::failure::cutout_lattice(),
+            ),
+            (
+                "glass-pane",
+                textured::glass_pane(textured::Glass::Blend(0.5)),
             ),
         ];
         for (name, glb) in scenes {

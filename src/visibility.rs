@@ -50,10 +50,8 @@ pub struct Visibility {
     /// Per BVH primitive, its index in `cutouts` (alpha-tested triangles), or `u32::MAX`.
     cut: Vec<u32>,
     cutouts: Vec<Cutout>,
-    /// Per BVH primitive, its index in `panes` (see-through triangles), or `u32::MAX`; and
-    /// whether the pane counts when a ray meets its back (it has no coincident twin facing
-    /// the other way, which would count instead).
-    pane: Vec<(u32, bool)>,
+    /// Per BVH primitive, its index in `panes` (see-through triangles), or `u32::MAX`.
+    pane: Vec<u32>,
     panes: Vec<Pane>,
     /// The images the cut-outs read.
     images: Arc<Vec<Image>>,
@@ -140,9 +138,9 @@ impl Visibility {
             .map(|&i| match scene.pane_of(i) {
                 Some(p) => {
                     panes.push(p);
-                    ((panes.len() - 1) as u32, scene.twin_triangle(i).is_none())
+                    (panes.len() - 1) as u32
                 }
-                None => (u32::MAX, false),
+                None => u32::MAX,
             })
             .collect();
         Visibility {
@@ -366,7 +364,7 @@ impl Visibility {
     /// The fraction of light (per linear RGB channel) that reaches `b` from `a` ([`Visibility::
     /// occluded_skipping`]'s segment, triangles of the polygons in `skip` left out): 0 where an
     /// opaque surface blocks it, else the product of the see-through surfaces' transmittances
-    /// along it (`BLEND`, transmission; a pane and its double-sided twin count once). Without
+    /// along it (`BLEND`, transmission; coincident panes count once). Without
     /// see-through surfaces in the scene, 1 or 0 exactly as `occluded_skipping` says.
     pub fn transmitted_skipping(&self, a: DVec3, b: DVec3, skip: [usize; 2]) -> DVec3 {
         let d = b - a;
@@ -409,29 +407,24 @@ impl Visibility {
         }
         let ray = self.ray(origin, dir, self.eps, tmax);
         let skip = skip.map(|s| s as u32);
-        let d = Vec3A::from(dir.as_vec3());
         let mut through = DVec3::ONE;
-        // The panes counted, by polygon and distance: a ray through the edge between two
-        // triangles of one pane meets both, and must count the pane once.
-        let mut counted: Vec<(u32, f32)> = Vec::new();
+        // The distances of the panes counted: panes met at one distance are one pane (the two
+        // sides of a double-sided one, its back written as a primitive of its own, the two
+        // triangles at an edge the ray passes through).
+        let mut counted: Vec<f32> = Vec::new();
         let tie = (TIE * self.eps) as f32;
         let blocked = !self.bvh.ray_traverse_miss(ray, |r, id| {
             if self.polygons[id] == skip[0] || self.polygons[id] == skip[1] {
                 return f32::INFINITY;
             }
             let t = self.intersect(r, id);
-            let (k, alone) = self.pane[id];
+            let k = self.pane[id];
             if k == u32::MAX || !t.is_finite() {
                 return t;
             }
-            // A see-through triangle: the ray goes on, dimmed; its back counts only when no
-            // twin facing the ray stands in the same place.
-            let poly = self.polygons[id];
-            let again = counted
-                .iter()
-                .any(|&(p, s)| p == poly && (s - t).abs() <= tie);
-            if (alone || !self.shows_back(id, d)) && !again {
-                counted.push((poly, t));
+            // A see-through triangle: the ray goes on, dimmed once per pane.
+            if !counted.iter().any(|&s| (s - t).abs() <= tie) {
+                counted.push(t);
                 let bary = self.barycentric(r, id, t);
                 through *= self.panes[k as usize].transmittance(&self.images, bary);
             }

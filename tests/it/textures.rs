@@ -410,3 +410,24 @@ fn a_glass_pane_bakes_with_its_tinted_shadow() {
         .unwrap();
     assert!(h.x > 0.0 && (h.z / h.x - 0.25).abs() < 0.05, "{h}");
 }
+
+/// The baked file writes a double-sided pane's back as a primitive of its own: read again
+/// (as `penumbra reference` and `render` read it), the glass still counts once.
+#[test]
+fn a_baked_glass_pane_read_again_still_lets_half_through() {
+    let dir = crate::scratch("glass-read-again");
+    let input = textured::glass_pane(textured::Glass::Blend(0.5));
+    let baked = crate::output::bake_to_file_with(&input, &dir, 2, &quick());
+    let _ = std::fs::remove_dir_all(dir);
+    for bytes in [input, baked] {
+        let scene = scene_of(&bytes);
+        let vis = Visibility::new(&scene);
+        let t = vis.transmitted_skipping(
+            DVec3::new(0.1, 0.001, -0.2),
+            DVec3::new(0.2, 1.999, 0.1),
+            [usize::MAX; 2],
+        );
+        let want = DVec3::from(textured::GLASS_TINT) * 0.5;
+        assert!((t - want).abs().max_element() < 1e-3, "{t} against {want}");
+    }
+}
