@@ -50,7 +50,7 @@ pub enum Passes {
 /// (transmission), alpha and colour read from the texture (bilinear, finest level).
 #[derive(Clone, Debug)]
 pub(crate) struct Pane {
-    texture: Option<(usize, [Wrap; 2], [DVec2; 3])>,
+    texture: Option<TriangleTexture>,
     factor: DVec3,
     opacity: f64,
     passes: Passes,
@@ -59,13 +59,7 @@ pub(crate) struct Pane {
 impl Pane {
     /// The fraction of light (per channel) that passes at barycentric point `bary`.
     pub(crate) fn transmittance(&self, images: &[Image], bary: [f64; 3]) -> DVec3 {
-        let (rgb, alpha) = self
-            .texture
-            .as_ref()
-            .map_or((DVec3::ONE, 1.0), |(image, wrap, uv)| {
-                let uv = uv[0] * bary[0] + uv[1] * bary[1] + uv[2] * bary[2];
-                images[*image].bilinear(uv, *wrap)
-            });
+        let (rgb, alpha) = TriangleTexture::at(self.texture.as_ref(), images, bary);
         let through = match self.passes {
             Passes::Blend => 1.0 - (self.opacity * alpha).clamp(0.0, 1.0),
             Passes::Transmission(t) => t,
@@ -74,12 +68,31 @@ impl Pane {
     }
 }
 
+/// A triangle's base-colour texture: the image, its wrap modes and the corners' texture
+/// coordinates (transform applied), for lookups at barycentric points.
+#[derive(Clone, Debug)]
+struct TriangleTexture {
+    image: usize,
+    wrap: [Wrap; 2],
+    uv: [DVec2; 3],
+}
+
+impl TriangleTexture {
+    /// Linear RGB and alpha at barycentric `bary` (bilinear, finest level); white and opaque
+    /// without a texture.
+    fn at(texture: Option<&Self>, images: &[Image], bary: [f64; 3]) -> (DVec3, f64) {
+        texture.map_or((DVec3::ONE, 1.0), |t| {
+            let uv = t.uv[0] * bary[0] + t.uv[1] * bary[1] + t.uv[2] * bary[2];
+            images[t.image].bilinear(uv, t.wrap)
+        })
+    }
+}
+
 /// One triangle's alpha test ([`Scene::cutout_of`]): a point is a hole where `opacity` x the
 /// texture's alpha (bilinear on its finest level) is under `cutoff`.
 #[derive(Clone, Debug)]
 pub(crate) struct Cutout {
-    /// The image, its wrap modes and the corners' texture coordinates (transform applied).
-    texture: Option<(usize, [Wrap; 2], [DVec2; 3])>,
+    texture: Option<TriangleTexture>,
     opacity: f64,
     cutoff: f64,
 }
@@ -87,11 +100,8 @@ pub(crate) struct Cutout {
 impl Cutout {
     /// True when barycentric point `bary` of the triangle is a hole.
     pub(crate) fn hole(&self, images: &[Image], bary: [f64; 3]) -> bool {
-        let texel = self.texture.as_ref().map_or(1.0, |(image, wrap, uv)| {
-            let uv = uv[0] * bary[0] + uv[1] * bary[1] + uv[2] * bary[2];
-            images[*image].bilinear(uv, *wrap).1
-        });
-        self.opacity * texel < self.cutoff
+        let (_, alpha) = TriangleTexture::at(self.texture.as_ref(), images, bary);
+        self.opacity * alpha < self.cutoff
     }
 }
 
@@ -155,17 +165,23 @@ impl Scene {
         self.base_of(t).0.is_some_and(|b| b.cutoff.is_some())
     }
 
+    /// Triangle `t`'s base-colour texture with its corners' coordinates, when it has both.
+    fn triangle_texture(&self, t: usize, base: &Base) -> Option<TriangleTexture> {
+        let tex = base.texture.as_ref()?;
+        let uv = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(|b| self.uv_at(t, tex, b));
+        Some(TriangleTexture {
+            image: tex.image,
+            wrap: tex.wrap,
+            uv: [uv[0]?, uv[1]?, uv[2]?],
+        })
+    }
+
     /// Triangle `t`'s alpha test, when its material has one (`alphaMode: MASK`).
     pub(crate) fn cutout_of(&self, t: usize) -> Option<Cutout> {
         let base = self.base_of(t).0?;
         let cutoff = base.cutoff?;
-        let texture = base.texture.as_ref().and_then(|tex| {
-            let uv =
-                [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(|b| self.uv_at(t, tex, b));
-            Some((tex.image, tex.wrap, [uv[0]?, uv[1]?, uv[2]?]))
-        });
         Some(Cutout {
-            texture,
+            texture: self.triangle_texture(t, base),
             opacity: base.opacity,
             cutoff,
         })
@@ -175,13 +191,8 @@ impl Scene {
     pub(crate) fn pane_of(&self, t: usize) -> Option<Pane> {
         let base = self.base_of(t).0?;
         let passes = base.passes?;
-        let texture = base.texture.as_ref().and_then(|tex| {
-            let uv =
-                [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(|b| self.uv_at(t, tex, b));
-            Some((tex.image, tex.wrap, [uv[0]?, uv[1]?, uv[2]?]))
-        });
         Some(Pane {
-            texture,
+            texture: self.triangle_texture(t, base),
             factor: base.factor,
             opacity: base.opacity,
             passes,
