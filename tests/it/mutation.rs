@@ -594,8 +594,12 @@ fn mutants_of_the_fixtures_fail_cleanly() {
         ("instanced", fixtures::instanced()),
         ("square-occluder", fixtures::square_occluder()),
         ("cornell-box", fixtures::cornell_box()),
-        // Textures: an alpha-tested plate, an emissive texture, a textured floor.
+        // Textures: an alpha-tested plate, an emissive texture, a textured floor, glass.
         ("masked-occluder", fixtures::textured::masked_occluder()),
+        (
+            "glass-pane",
+            fixtures::textured::glass_pane(fixtures::textured::Glass::Blend(0.5)),
+        ),
         ("half-lit-emitter", fixtures::textured::half_lit_emitter()),
         (
             "checker-room",
