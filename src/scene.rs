@@ -221,8 +221,9 @@ pub struct Instance {
     /// Vertices added by [`cut::cut_long_edges`], in order: vertex `positions_world.len() -
     /// derived.len() + i` is `derived[i]`. Empty when nothing was cut.
     pub derived: Vec<Derived>,
-    /// Linear RGB per glTF vertex from `COLOR_0`, which multiplies the material's base colour;
-    /// each polygon of the instance reflects its area-weighted mean ([`Scene::add_instance`]).
+    /// Linear RGB per glTF vertex from `COLOR_0`, which multiplies the material's base colour:
+    /// per mesh element ([`AlbedoOver`]); a polygon's material takes its area-weighted mean
+    /// where one colour stands for the polygon ([`Scene::add_instance`]).
     pub(crate) colours: Option<Vec<DVec3>>,
     /// The material [`Scene::add_instance`] was given (before any `colours` tint).
     pub(crate) material: usize,
