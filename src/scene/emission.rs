@@ -5,7 +5,7 @@
 //! each triangle into `n x n` similar pieces (the same `n` over the primitive, so that shared
 //! edges split alike and no T-junction appears), each emitting the texture's mean over it
 //! (about a lookup per texel). `n` starts where a piece spans about [`TEXELS_PER_PIECE`] texels (at most
-//! [`MAX_SPLIT`]) and is halved while every piece stays within [`MERGE`] of the finer pieces
+//! [`MAX_SPLIT`], and at most [`MAX_PIECES`] pieces over the primitive) and is halved while every piece stays within [`MERGE`] of the finer pieces
 //! inside it, so a texture of a few large regions makes a few pieces. Then the dimmest pieces
 //! that carry together at most [`DROPPED_POWER`] of the primitive's power (the soft edge of a
 //! filtered texture) are turned off, and edge-connected pieces within [`MERGE`] of each other
@@ -29,6 +29,13 @@ pub const TEXELS_PER_PIECE: f64 = 4.0;
 
 /// The most pieces along a triangle's edge (`MAX_SPLIT²` pieces per triangle).
 pub const MAX_SPLIT: usize = 16;
+
+/// The most triangles a primitive's split may make: `n² x triangles` stays within it. A
+/// finely tessellated emitter (a sphere of a thousand triangles) is not split at all: each of
+/// its triangles already emits its own mean, and pieces smaller still would multiply the
+/// emitters that every shadow and wedge test goes through for light that only a receiver
+/// within a triangle's size of the surface could tell apart.
+pub const MAX_PIECES: usize = 1024;
 
 /// How far (a fraction of the brightest piece's radiance, per channel) an edge-connected
 /// piece's radiance may be from its group's first piece's to join it ([`merge_similar`]).
@@ -82,7 +89,10 @@ pub(crate) fn plan(
         .flat_map(|t| (0..3).map(move |e| (t[e], t[(e + 1) % 3])))
         .map(|(a, b)| ((uv(a) - uv(b)) * texels).length())
         .fold(0.0, f64::max);
-    let finest = ((longest / TEXELS_PER_PIECE).ceil() as usize).clamp(1, MAX_SPLIT);
+    let triangles = inst.indices.len() / 3;
+    let most = ((MAX_PIECES / triangles.max(1)) as f64).sqrt() as usize;
+    let finest =
+        ((longest / TEXELS_PER_PIECE).ceil() as usize).clamp(1, MAX_SPLIT.min(most).max(1));
     // The texture's mean over every piece of every triangle, split n times.
     let means = |n: usize| -> Vec<DVec3> {
         let mean = |t: &[u32], piece: &[(usize, usize); 3]| -> DVec3 {
@@ -399,5 +409,53 @@ mod tests {
         for d in &inst.derived {
             assert!((d.weights.iter().map(|w| w.1).sum::<f64>() - 1.0).abs() < 1e-12);
         }
+    }
+
+    /// A 128x128 texture of random texels over the unit square: the 2-triangle quad splits to
+    /// the finest level; the same square tessellated into 512 triangles, each spanning 8x8
+    /// texels, is not split (each triangle emits its own mean): a split would exceed
+    /// [`MAX_PIECES`].
+    #[test]
+    fn a_finely_tessellated_emitter_is_not_split_further() {
+        let mut rng = crate::rng::SplitMix64(7);
+        let texels = (0..128 * 128)
+            .map(|_| {
+                let v = (rng.next_u64() >> 56) as u8;
+                [v, v, v, 255]
+            })
+            .collect();
+        let image = Image::new(128, 128, texels).unwrap();
+        let texture = TextureRef {
+            image: 0,
+            tex_coord: 0,
+            wrap: [super::super::texture::Wrap::ClampToEdge; 2],
+            transform: TextureRef::IDENTITY,
+        };
+        let square = |cells: usize| {
+            let side = cells + 1;
+            let at = |i: usize, j: usize| DVec2::new(i as f64, j as f64) / cells as f64;
+            let positions = (0..side * side)
+                .map(|k| at(k % side, k / side).extend(0.0))
+                .collect();
+            let mut indices = Vec::new();
+            for j in 0..cells as u32 {
+                for i in 0..cells as u32 {
+                    let v = j * side as u32 + i;
+                    let up = v + side as u32;
+                    indices.extend([v, v + 1, up + 1, v, up + 1, up]);
+                }
+            }
+            let mut inst = Instance::new(positions, indices);
+            let uvs = (0..side * side).map(|k| at(k % side, k / side)).collect();
+            inst.uvs.insert(0, uvs);
+            inst
+        };
+        let quad = plan(&square(1), DVec3::ONE, &texture, &image).unwrap();
+        assert_eq!(quad.n, MAX_SPLIT);
+        let fine = square(16);
+        let plan = plan(&fine, DVec3::ONE, &texture, &image).unwrap();
+        assert_eq!(plan.n, 1);
+        assert_eq!(plan.values.len(), fine.indices.len() / 3);
+        assert!(plan.values.len() * plan.n * plan.n <= MAX_PIECES.max(fine.indices.len() / 3));
     }
 }
