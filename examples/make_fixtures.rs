@@ -26,7 +26,7 @@
 //! of its own, so it is not in `fixtures/`; bake it with `--sky`).
 //! `--textured DIR` writes the textured scenes of the tests (`penumbra::fixtures::textured`:
 //! an alpha-tested plate and its geometric twin, a half-lit emissive texture, textured floors,
-//! a glass pane)
+//! a glass pane, a glass pane before a wall)
 //! and the failure sweep's `cutout_lattice` to `DIR/<name>.glb`.
 
 use std::path::PathBuf;
@@ -109,6 +109,10 @@ fn main() -> std::io::Result<()> {
             (
                 "glass-pane",
                 textured::glass_pane(textured::Glass::Blend(0.5)),
+            ),
+            (
+                "glass-before-wall",
+                textured::glass_before_wall(textured::Glass::Blend(0.5)),
             ),
         ];
         for (name, glb) in scenes {

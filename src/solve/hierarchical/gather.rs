@@ -3,6 +3,7 @@
 
 use super::REGULARIZATION;
 use super::refine::Link;
+use super::transfer::{WHITE, tinted};
 use super::tree::Hierarchy;
 use crate::light::NO_POLYGON;
 use glam::{DMat3, DVec3};
@@ -55,7 +56,11 @@ impl Hierarchy {
                             }
                             _ => b[s],
                         };
-                        b * l.k
+                        if l.tint == WHITE {
+                            b * l.k
+                        } else {
+                            b * l.k * tinted(l.tint)
+                        }
                     })
                     .sum::<DVec3>();
                 (group[0].receiver, h)

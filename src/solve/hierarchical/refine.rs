@@ -2,8 +2,8 @@
 //! refinement passes from the root-to-root link or from a previous pass's links.
 
 use super::transfer::{
-    Factors, PairVisibility, across_plane, facing, pair_visibility, point_bound, power_bound,
-    seen_offset,
+    Factors, PairVisibility, Tint, WHITE, across_plane, facing, pair_visibility, point_bound,
+    power_bound, seen_offset,
 };
 use super::tree::{Hierarchy, Node, Sample};
 use super::{DEFAULT_HR_TOLERANCE, MAX_LINKS, PARTIAL_VISIBILITY, SHADOWED_SOURCE};
@@ -50,6 +50,10 @@ pub struct Link {
     /// this much along the source's radiosity gradient (see [`Hierarchy::gradients`]); zero
     /// for a cluster end.
     pub toward: [f32; 3],
+    /// The colour of the see-through surfaces between the ends ([`Tint`]): the gather takes
+    /// `k` per channel as `k x tinted(tint)`. [`WHITE`] for most links; three bytes that the
+    /// struct's alignment would leave empty anyway.
+    pub tint: Tint,
 }
 
 /// The source radiosities the refinement oracle reads, per node (W/m², mean over RGB).
@@ -281,18 +285,20 @@ impl Hierarchy {
             (r, _) => r.is_some(),
         };
         // The kept link `r ← s` (the oracle's factors in f32, see `Link`).
-        let keep = |k: f64, power: f64, spread: f64, reach: f64, shade: f64, toward: DVec3| {
-            Decision::Keep(Link {
-                receiver: r,
-                source: s,
-                k,
-                power: power as f32,
-                spread: spread as f32,
-                reach: reach as f32,
-                shade: shade as f32,
-                toward: toward.as_vec3().to_array(),
-            })
-        };
+        let keep =
+            |k: f64, power: f64, spread: f64, reach: f64, shade: f64, toward: DVec3, tint: Tint| {
+                Decision::Keep(Link {
+                    receiver: r,
+                    source: s,
+                    k,
+                    power: power as f32,
+                    spread: spread as f32,
+                    reach: reach as f32,
+                    shade: shade as f32,
+                    toward: toward.as_vec3().to_array(),
+                    tint,
+                })
+            };
         let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
             *rays += 1;
             vis.transmitted_skipping(a.ray, b.ray, [a.polygon, b.polygon]) != DVec3::ZERO
@@ -341,7 +347,7 @@ impl Hierarchy {
             };
             // A zero estimate is kept (as `K = 0`) for the next pass to test again: four
             // samples of a cluster may miss what it sees.
-            return keep(t.k, power, spread, reach, 0.0, DVec3::ZERO);
+            return keep(t.k, power, spread, reach, 0.0, DVec3::ZERO, t.tint);
         };
         let f = &f[..n];
         let unoccluded = f.iter().sum::<f64>() / n as f64;
@@ -356,7 +362,7 @@ impl Hierarchy {
                 if b_s * bound > variation {
                     return Decision::Split(true);
                 }
-                return keep(0.0, 0.0, bound, 0.0, 0.0, DVec3::ZERO);
+                return keep(0.0, 0.0, bound, 0.0, 0.0, DVec3::ZERO, WHITE);
             }
             return Decision::Drop;
         }
@@ -396,7 +402,7 @@ impl Hierarchy {
             // `shade` (the same rays would answer again; a later pass with brighter sources may
             // split it).
             if hidden && tested && b_s * unoccluded <= limits.visibility {
-                return keep(0.0, 0.0, 0.0, 0.0, unoccluded, DVec3::ZERO);
+                return keep(0.0, 0.0, 0.0, 0.0, unoccluded, DVec3::ZERO, WHITE);
             }
             return split;
         }
@@ -413,6 +419,7 @@ impl Hierarchy {
             partial,
             rays: cast,
             visible,
+            tint,
         } = pair_visibility(vis, sr, ss, facing, can_split || !over);
         *rays += cast;
         if partial && splits_if_partial {
@@ -429,7 +436,7 @@ impl Hierarchy {
         } else {
             DVec3::ZERO
         };
-        keep(unoccluded * v, power, spread, reach, shade, toward)
+        keep(unoccluded * v, power, spread, reach, shade, toward, tint)
     }
 
     /// The links from refining the root-to-root link with the source radiosities `b` (W/m²,

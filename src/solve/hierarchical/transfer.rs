@@ -62,6 +62,8 @@ pub struct Transfer {
     pub rays: u64,
     /// The bound on `k` the refinement oracle uses.
     pub bound: f64,
+    /// The colour of what passes (see [`Tint`]).
+    pub tint: Tint,
 }
 
 /// The unoccluded point form factors from a link's receiver samples to its source, and how
@@ -93,18 +95,20 @@ pub(super) fn pair_visibility(
     weight: impl Fn(&Sample, &Sample) -> f64,
     stop_if_partial: bool,
 ) -> PairVisibility {
-    // What passes from one sample to the other: 1 or 0, or the mean over the channels of a
-    // see-through surface's transmittance (the bounces through glass are not tinted).
+    // What passes from one sample to the other, per channel: 1 or 0, or a see-through
+    // surface's transmittance; and its mean over the channels.
     let visible = |p: &Sample, q: &Sample| {
         let t = vis.transmitted_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
-        if t.x == t.y && t.y == t.z {
+        let mean = if t.x == t.y && t.y == t.z {
             t.x
         } else {
             t.element_sum() / 3.0
-        }
+        };
+        (mean, t)
     };
-    // The sum of what passes over the pairs that see each other.
-    let mut through = 0.0;
+    // The sum of what passes over the pairs that see each other (mean, and per channel), and
+    // the weighted sum per channel.
+    let (mut through, mut through_rgb, mut seen_rgb) = (0.0, DVec3::ZERO, DVec3::ZERO);
     let mut mask = 0u16;
     let first = a.len().max(b.len());
     let diagonal = |i: usize, j: usize| (0..first).any(|k| (k % a.len(), k % b.len()) == (i, j));
@@ -116,11 +120,11 @@ pub(super) fn pair_visibility(
         if w > 0.0 {
             cast += 1;
             tested += w;
-            let f = visible(p, q);
+            let (f, t) = visible(p, q);
             if f > 0.0 {
                 hits += 1;
-                through += f;
-                seen += w * f;
+                (through, through_rgb) = (through + f, through_rgb + t);
+                (seen, seen_rgb) = (seen + w * f, seen_rgb + w * t);
                 mask |= pair_bit(k % a.len(), k % b.len());
             }
         }
@@ -133,6 +137,7 @@ pub(super) fn pair_visibility(
             partial: true,
             rays: cast,
             visible: mask,
+            tint: tint_of(seen, seen_rgb),
         };
     }
     for (i, p) in a.iter().enumerate() {
@@ -148,16 +153,17 @@ pub(super) fn pair_visibility(
             if agree {
                 if hits > 0 {
                     seen += w * (through / hits as f64);
+                    seen_rgb += w * (through_rgb / hits as f64);
                     mask |= pair_bit(i, j);
                 }
                 continue;
             }
             cast += 1;
-            let f = visible(p, q);
+            let (f, t) = visible(p, q);
             if f > 0.0 {
                 hits += 1;
-                through += f;
-                seen += w * f;
+                (through, through_rgb) = (through + f, through_rgb + t);
+                (seen, seen_rgb) = (seen + w * f, seen_rgb + w * t);
                 mask |= pair_bit(i, j);
             }
         }
@@ -169,7 +175,38 @@ pub(super) fn pair_visibility(
         partial: !agree && hits > 0 && hits < cast,
         rays: cast,
         visible: mask,
+        tint: tint_of(seen, seen_rgb),
     }
+}
+
+/// The colour of what passes along a link, per channel over its mean ([`Tint`]): `seen_rgb`
+/// (the weighted transmittance per channel) over `seen` (its channels' mean), normalised to its
+/// largest channel. White when nothing passes, and exactly white when every channel passes alike.
+fn tint_of(seen: f64, seen_rgb: DVec3) -> Tint {
+    let top = seen_rgb.max_element();
+    if seen <= 0.0 || top <= 0.0 || (seen_rgb.x == seen_rgb.y && seen_rgb.y == seen_rgb.z) {
+        return WHITE;
+    }
+    (seen_rgb / top * 255.0)
+        .round()
+        .as_uvec3()
+        .to_array()
+        .map(|c| c as u8)
+}
+
+/// What a link passes per channel, relative to its largest channel, in 255ths: the colour of
+/// the see-through surfaces (glass) between its ends. Its gather scales each channel by it,
+/// renormalised so that the channels' mean is the link's `k` ([`tinted`]).
+pub(super) type Tint = [u8; 3];
+
+/// A link with nothing coloured between its ends.
+pub(super) const WHITE: Tint = [255; 3];
+
+/// The factor per channel that a link of tint `t` multiplies its `k` by: the tint over its
+/// channels' mean (exactly one for [`WHITE`]).
+pub(super) fn tinted(t: Tint) -> DVec3 {
+    let c = DVec3::new(f64::from(t[0]), f64::from(t[1]), f64::from(t[2]));
+    c * (3.0 / c.element_sum())
 }
 
 /// What [`pair_visibility`] found for a link's sample pairs.
@@ -184,6 +221,8 @@ pub(super) struct PairVisibility {
     pub(super) rays: u64,
     /// The pairs that see each other ([`pair_bit`]).
     pub(super) visible: u16,
+    /// The colour of what passes ([`tint_of`]).
+    pub(super) tint: Tint,
 }
 
 /// The bit of the sample pair `(i, j)` (at most four samples a node) in a mask of pairs.
@@ -290,6 +329,7 @@ impl Hierarchy {
                     partial: false,
                     rays: 0,
                     bound: 0.0,
+                    tint: WHITE,
                 };
             }
             let PairVisibility {
@@ -297,6 +337,7 @@ impl Hierarchy {
                 tested,
                 partial,
                 rays,
+                tint,
                 ..
             } = pair_visibility(vis, sr, ss, facing, false);
             let v = if tested > 0.0 { seen / tested } else { 1.0 };
@@ -306,6 +347,7 @@ impl Hierarchy {
                 partial,
                 rays,
                 bound: if partial { unoccluded } else { unoccluded * v },
+                tint,
             };
         }
         Transfer {
@@ -339,6 +381,7 @@ impl Hierarchy {
             tested: unoccluded,
             partial,
             rays,
+            tint,
             ..
         } = pair_visibility(vis, sr, ss, disk, false);
         let pairs = (sr.len() * ss.len()) as f64;
@@ -348,6 +391,7 @@ impl Hierarchy {
             partial,
             rays,
             bound: 0.0,
+            tint,
         }
     }
 
