@@ -89,10 +89,11 @@ pub(super) fn material(
         _ => None,
     };
     // What passes through: transmission wins over BLEND (glTF viewers draw such a surface as
-    // transmissive).
-    let transmission = m
+    // transmissive). Its texture's red channel scales the factor.
+    let extension = m
         .extensions()
-        .and_then(|e| e.get("KHR_materials_transmission"))
+        .and_then(|e| e.get("KHR_materials_transmission"));
+    let transmission = extension
         .map(|t| {
             t["transmissionFactor"]
                 .as_f64()
@@ -101,6 +102,28 @@ pub(super) fn material(
                 .clamp(0.0, 1.0)
         })
         .filter(|&f| f > 0.0);
+    let mut transmission_texture = None;
+    if transmission.is_some()
+        && let Some(info) = extension.map(|t| &t["transmissionTexture"])
+        && !info.is_null()
+    {
+        let item = || format!("material {name}: KHR_materials_transmission transmissionTexture");
+        let texture = info["index"]
+            .as_u64()
+            .and_then(|i| gltf.document.textures().nth(i as usize))
+            .ok_or_else(|| gltf.bad(item(), "names no texture of the file"))?;
+        let (_, image) = textures.load(gltf, &texture, true)?;
+        let tex_coord = info["texCoord"].as_u64().unwrap_or(0);
+        transmission_texture = image.map(|image| {
+            texture_ref_of(
+                &texture,
+                image,
+                tex_coord.min(u64::from(u32::MAX)) as u32,
+                info.get("extensions")
+                    .and_then(|e| e.get("KHR_texture_transform")),
+            )
+        });
+    }
     let passes = match (transmission, m.alpha_mode()) {
         (Some(f), _) => Some(Passes::Transmission(f)),
         (None, gltf::material::AlphaMode::Blend) => Some(Passes::Blend),
@@ -114,6 +137,7 @@ pub(super) fn material(
         cutoff,
         emission,
         passes,
+        transmission_texture,
     });
     Ok(Material {
         name,
@@ -127,13 +151,28 @@ pub(super) fn material(
 /// `texCoord` set, the sampler's wrap modes and the `KHR_texture_transform` (whose own
 /// `texCoord` overrides the info's, as the extension says).
 fn texture_ref(info: &gltf::texture::Info, image: usize) -> TextureRef {
-    let sampler = info.texture().sampler();
-    let mut tex_coord = info.tex_coord();
+    texture_ref_of(
+        &info.texture(),
+        image,
+        info.tex_coord(),
+        info.extensions()
+            .and_then(|e| e.get("KHR_texture_transform")),
+    )
+}
+
+/// [`texture_ref`] from a texture info's parts: the texture, its kept image, its `texCoord` and
+/// its `KHR_texture_transform` object, if any (for texture infos inside extensions, which the
+/// gltf crate leaves as JSON).
+fn texture_ref_of(
+    texture: &gltf::Texture,
+    image: usize,
+    tex_coord: u32,
+    transform_json: Option<&serde_json::Value>,
+) -> TextureRef {
+    let sampler = texture.sampler();
+    let mut tex_coord = tex_coord;
     let mut transform = TextureRef::IDENTITY;
-    if let Some(t) = info
-        .extensions()
-        .and_then(|e| e.get("KHR_texture_transform"))
-    {
+    if let Some(t) = transform_json {
         let pair = |key: &str, default: f64| {
             let v = |i: usize| {
                 t[key][i]

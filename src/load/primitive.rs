@@ -163,11 +163,15 @@ fn texture_coordinates(
     let Some(base) = scene.materials[material].base.as_ref() else {
         return Ok(sets);
     };
-    let wanted: Vec<u32> = [base.texture.as_ref(), base.emission.as_ref().map(|e| &e.1)]
-        .into_iter()
-        .flatten()
-        .map(|t| t.tex_coord)
-        .collect();
+    let wanted: Vec<u32> = [
+        base.texture.as_ref(),
+        base.emission.as_ref().map(|e| &e.1),
+        base.transmission_texture.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    .map(|t| t.tex_coord)
+    .collect();
     for n in wanted {
         if sets.contains_key(&n) {
             continue;

@@ -33,6 +33,9 @@ pub struct Base {
     /// How light passes through the surface, if it does: `alphaMode: BLEND`, or
     /// `KHR_materials_transmission`.
     pub passes: Option<Passes>,
+    /// `KHR_materials_transmission`'s `transmissionTexture`: its red channel scales the
+    /// transmission factor.
+    pub transmission_texture: Option<TextureRef>,
 }
 
 /// How light passes through a see-through surface ([`Pane`]).
@@ -51,6 +54,8 @@ pub enum Passes {
 #[derive(Clone, Debug)]
 pub(crate) struct Pane {
     texture: Option<TriangleTexture>,
+    /// The transmission texture (its red channel scales a transmission factor).
+    transmission: Option<TriangleTexture>,
     factor: DVec3,
     opacity: f64,
     passes: Passes,
@@ -62,7 +67,10 @@ impl Pane {
         let (rgb, alpha) = TriangleTexture::at(self.texture.as_ref(), images, bary);
         let through = match self.passes {
             Passes::Blend => 1.0 - (self.opacity * alpha).clamp(0.0, 1.0),
-            Passes::Transmission(t) => t,
+            Passes::Transmission(t) => {
+                let (r, _) = TriangleTexture::at(self.transmission.as_ref(), images, bary);
+                t * r.x
+            }
         };
         (self.factor * rgb).clamp(DVec3::ZERO, DVec3::ONE) * through
     }
@@ -167,7 +175,11 @@ impl Scene {
 
     /// Triangle `t`'s base-colour texture with its corners' coordinates, when it has both.
     fn triangle_texture(&self, t: usize, base: &Base) -> Option<TriangleTexture> {
-        let tex = base.texture.as_ref()?;
+        self.triangle_texture_of(t, base.texture.as_ref()?)
+    }
+
+    /// Texture `tex` at triangle `t`'s corners; `None` when the triangle lacks its UV set.
+    fn triangle_texture_of(&self, t: usize, tex: &TextureRef) -> Option<TriangleTexture> {
         let uv = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]].map(|b| self.uv_at(t, tex, b));
         Some(TriangleTexture {
             image: tex.image,
@@ -193,6 +205,10 @@ impl Scene {
         let passes = base.passes?;
         Some(Pane {
             texture: self.triangle_texture(t, base),
+            transmission: base
+                .transmission_texture
+                .as_ref()
+                .and_then(|tex| self.triangle_texture_of(t, tex)),
             factor: base.factor,
             opacity: base.opacity,
             passes,
@@ -254,7 +270,15 @@ impl Scene {
                         });
                         rho * (base.opacity * alpha.unwrap_or(1.0)).clamp(0.0, 1.0)
                     }
-                    Some(Passes::Transmission(f)) => rho * (1.0 - f),
+                    Some(Passes::Transmission(f)) => {
+                        let scale = base.transmission_texture.as_ref().map_or(1.0, |tex| {
+                            let texture = self.triangle_texture_of(t, tex);
+                            TriangleTexture::at(texture.as_ref(), &self.images, bary)
+                                .0
+                                .x
+                        });
+                        rho * (1.0 - f * scale)
+                    }
                     None => rho,
                 }
             }

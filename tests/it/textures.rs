@@ -206,9 +206,13 @@ fn halves_edited(edit: impl FnOnce(&mut Value)) -> Scene {
 
 /// The albedo of the floor at world x (z = 0.3), from its first polygon's triangles.
 fn floor_albedo(scene: &Scene, x: f64) -> DVec3 {
-    let p = DVec3::new(x, 0.0, 0.3);
+    albedo_facing_up(scene, DVec3::new(x, 0.0, 0.3))
+}
+
+/// The albedo at `p` of the triangle facing up (+y) that holds it.
+fn albedo_facing_up(scene: &Scene, p: DVec3) -> DVec3 {
     for (t, tri) in scene.triangles.iter().enumerate() {
-        if tri.normal.y < 0.99 {
+        if tri.normal.y < 0.99 || (tri.p[0].y - p.y).abs() > 1e-9 {
             continue;
         }
         let b = penumbra::geometry::barycentric_2d(
@@ -219,7 +223,7 @@ fn floor_albedo(scene: &Scene, x: f64) -> DVec3 {
             return scene.albedo_at(t, b);
         }
     }
-    panic!("no floor triangle under {p}")
+    panic!("no triangle facing up holds {p}")
 }
 
 #[test]
@@ -394,6 +398,64 @@ fn glass_lets_its_share_of_the_direct_light_through_tinted() {
         let free = DVec3::splat(unoccluded(3.5, 0.0));
         assert_close(&format!("{glass:?} at (3.5, 0)"), at(3.5, 0.0), free, 0.01);
     }
+}
+
+/// `transmissionTexture`'s red channel scales the factor: the pane lets light through on its
+/// white half (x < 0) only. A floor point whose view of the source crosses the white half gets
+/// the factor's share, tinted; one whose view crosses the black half gets nothing.
+#[test]
+fn a_transmission_texture_scales_what_passes() {
+    let scene = scene_of(&textured::glass_pane(textured::Glass::TransmissionHalves(
+        0.8,
+    )));
+    assert!(scene.warnings.is_empty(), "{:?}", scene.warnings);
+    let vis = Visibility::new(&scene);
+    let direct = Direct::new(&scene, &vis, 64);
+    let at = |x: f64| {
+        let p = DVec3::new(x, 0.0, 0.0);
+        let unoccluded: f64 = direct
+            .emitters
+            .iter()
+            .map(|e| std::f64::consts::PI * e.radiance.x * e.form_factor(p, DVec3::Y))
+            .sum();
+        let h = direct.irradiance(&SurfacePoint::new(p, DVec3::Y, solve::NO_POLYGON, &vis));
+        (h, unoccluded)
+    };
+    let (h, free) = at(-1.2);
+    let want = DVec3::from(textured::GLASS_TINT) * (0.8 * free);
+    assert_close("under the white half", h, want, 0.01);
+    let (h, free) = at(1.2);
+    assert!(
+        free > 0.0 && h.max_element() <= 1e-9 * free,
+        "under the black half: {h}"
+    );
+    // The pane reflects what does not pass: 0.2 of its colour on the white half, all of it on
+    // the black half.
+    let tint = DVec3::from(textured::GLASS_TINT);
+    let pane = |x: f64| albedo_facing_up(&scene, DVec3::new(x, textured::OCCLUDER_Y, 0.3));
+    assert_close("the white half's albedo", pane(-0.5), tint * 0.2, 1e-3);
+    assert_close("the black half's albedo", pane(0.5), tint, 1e-3);
+}
+
+/// A `transmissionTexture` that names no texture is an error that names it.
+#[test]
+fn a_transmission_texture_of_no_texture_is_refused_by_name() {
+    let bytes = textured::glass_pane(textured::Glass::TransmissionHalves(0.8));
+    let (mut json, bin) = crate::output::split_glb(&bytes);
+    let glass = json["materials"]
+        .as_array_mut()
+        .unwrap()
+        .iter_mut()
+        .find(|m| m["name"] == "glass")
+        .unwrap();
+    glass["extensions"]["KHR_materials_transmission"]["transmissionTexture"]["index"] = json!(99);
+    let bytes = penumbra::write::to_glb(&json, bin).unwrap();
+    let err = penumbra::load::scene(&parse(&bytes, "fixture.glb")).unwrap_err();
+    let msg = err.to_string();
+    assert!(
+        msg.contains("fixture.glb") && msg.contains("transmissionTexture"),
+        "{msg}"
+    );
 }
 
 #[test]
