@@ -495,6 +495,19 @@ pub fn scene(gltf: &Gltf) -> Result<Scene> {
 /// [`scene`] within `limits`: the instances and the triangles are counted as the node graph is
 /// walked, before each primitive's geometry is read.
 pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
+    scene_walked(gltf, limits, true)
+}
+
+/// [`scene`] with every emissive texture left unsplit: each emitter emits its material's mean
+/// radiance, and [`Scene::emission_at`] gives the texture's value at a point. For
+/// `penumbra reference`, which reads the emissive texture at its own sample points, apart from
+/// the baker's split.
+pub(crate) fn scene_unsplit(gltf: &Gltf) -> Result<Scene> {
+    scene_walked(gltf, &gltf.options.limits, false)
+}
+
+/// [`scene_limited`], splitting the emitters of emissive textures when `split_emission`.
+fn scene_walked(gltf: &Gltf, limits: &Limits, split_emission: bool) -> Result<Scene> {
     let doc = &gltf.document;
     let mut scene = Scene::default();
     let mut textures = Textures::default();
@@ -515,6 +528,7 @@ pub(crate) fn scene_limited(gltf: &Gltf, limits: &Limits) -> Result<Scene> {
     let mut walk = Walk {
         default_material,
         emission_plans: Default::default(),
+        split_emission,
     };
     scene.warnings.extend(extensions::warnings(&gltf.json));
 

@@ -369,9 +369,12 @@ fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
 /// One area emitter for next-event estimation: its triangles with a cumulative area table.
 struct Emitter {
     polygon: usize,
-    /// W/(m² sr), front face.
+    /// W/(m² sr), front face: the material's (its emissive texture's mean, where it has one;
+    /// the texture itself is read at each point, [`Scene::emission_at`]).
     radiance: DVec3,
     normal: DVec3,
+    /// Scene triangle ids.
+    ids: Vec<usize>,
     triangles: Vec<[DVec3; 3]>,
     /// Cumulative triangle areas; the last is the total area.
     cdf: Vec<f64>,
@@ -382,8 +385,8 @@ impl Emitter {
         *self.cdf.last().unwrap_or(&0.0)
     }
 
-    /// A point uniform by area.
-    fn sample(&self, rng: &mut SplitMix64) -> DVec3 {
+    /// A point uniform by area, with its radiance (W/(m² sr)).
+    fn sample(&self, scene: &Scene, rng: &mut SplitMix64) -> (DVec3, DVec3) {
         let a = rng.next_f64() * self.area();
         let k = self
             .cdf
@@ -392,7 +395,14 @@ impl Emitter {
         let t = &self.triangles[k];
         let (u, v) = (rng.next_f64(), rng.next_f64());
         let su = u.sqrt();
-        t[0] * (1.0 - su) + t[1] * (su * (1.0 - v)) + t[2] * (su * v)
+        let bary = [1.0 - su, su * (1.0 - v), su * v];
+        let p = t[0] * bary[0] + t[1] * bary[1] + t[2] * bary[2];
+        (p, self.radiance_at(scene, self.ids[k], bary))
+    }
+
+    /// The radiance at barycentric `bary` of scene triangle `t` (one of the emitter's).
+    fn radiance_at(&self, scene: &Scene, t: usize, bary: [f64; 3]) -> DVec3 {
+        scene.emission_at(t, bary).unwrap_or(self.radiance)
     }
 }
 
@@ -437,6 +447,7 @@ impl<'a> Tracer<'a> {
                     polygon: id,
                     radiance: scene.materials[poly.material].radiance,
                     normal: poly.frame.n,
+                    ids: poly.triangles.clone(),
                     triangles,
                     cdf,
                 })
@@ -534,7 +545,7 @@ impl<'a> Tracer<'a> {
             if e.polygon == at.polygon {
                 continue;
             }
-            let y = e.sample(rng);
+            let (y, radiance) = e.sample(self.scene, rng);
             let d = y - at.p;
             let r2 = d.length_squared();
             if r2 <= 0.0 {
@@ -546,7 +557,7 @@ impl<'a> Tracer<'a> {
             if cos_x <= 0.0 || cos_y <= 0.0 {
                 continue;
             }
-            let plain = luminance(e.radiance) * cos_x * cos_y / r2 * e.area();
+            let plain = luminance(radiance) * cos_x * cos_y / r2 * e.area();
             if let Some(probe) = probe.as_deref_mut() {
                 probe.unoccluded += plain;
             }
@@ -561,7 +572,7 @@ impl<'a> Tracer<'a> {
             }
             let p_l = r2 / (e.area() * cos_y);
             let p_b = if mis { cos_x / PI } else { 0.0 };
-            h += e.radiance * through * (cos_x / (p_l + p_b));
+            h += radiance * through * (cos_x / (p_l + p_b));
         }
         h
     }
@@ -596,17 +607,18 @@ impl<'a> Tracer<'a> {
                 break; // the back of a one-sided surface neither emits nor reflects
             }
             let Some(poly) = tri.polygon else { break };
+            let p = at.ray_origin + dir * hit.t;
+            let bary = crate::geometry::barycentric_3d(&tri.p, p);
             if let Some(e) = self.emitter_of[poly] {
                 // The emitter's light found by the hemisphere ray, MIS-weighted.
                 let e = &self.emitters[e];
                 let p_l = hit.t * hit.t / (e.area() * cos_y);
                 let cos_x = at.n.dot(dir);
-                total += throughput * e.radiance * (cos_x / (p_l + cos_x / PI));
+                let radiance = e.radiance_at(self.scene, hit.triangle, bary);
+                total += throughput * radiance * (cos_x / (p_l + cos_x / PI));
             }
-            let p = at.ray_origin + dir * hit.t;
             // The albedo at the hit, read from the texture at that point (the baker averages
             // it over each element instead).
-            let bary = crate::geometry::barycentric_3d(&tri.p, p);
             let rho = self.scene.albedo_at(hit.triangle, bary);
             if rho.max_element() <= 0.0 {
                 break;
@@ -683,7 +695,8 @@ pub fn reference_and_layout(
         option: "--sky",
         reason,
     })?;
-    let scene = load::scene(gltf)?;
+    // Emissive textures are read at each sample point, not split as the baker splits them.
+    let scene = load::scene_unsplit(gltf)?;
     let vis = Visibility::new(&scene);
     let layout = texel_layout(gltf, &scene, &vis, options.supersample)?;
     let map = reference_with(&scene, &vis, &layout, options);

@@ -10,6 +10,8 @@ pub(super) struct Walk {
     pub(super) default_material: usize,
     /// Per (mesh, primitive) with a varying emissive texture: how its triangles split.
     pub(super) emission_plans: std::collections::BTreeMap<(usize, usize), Option<emission::Plan>>,
+    /// Whether emitters with an emissive texture are split where it changes.
+    pub(super) split_emission: bool,
 }
 
 pub(super) fn add_primitive(
@@ -129,6 +131,7 @@ pub(super) fn add_primitive(
         .base
         .as_ref()
         .and_then(|b| b.emission.clone())
+        .filter(|_| walk.split_emission)
     {
         // One plan per primitive, whatever places it.
         let plan = walk

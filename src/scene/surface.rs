@@ -199,6 +199,15 @@ impl Scene {
         })
     }
 
+    /// The radiance (W/(m² sr), linear RGB) that triangle `t`'s emissive texture gives at
+    /// barycentric `bary` (bilinear, finest level): `emissiveFactor` x strength x the texel;
+    /// `None` when its material has no emissive texture or the triangle lacks its UV set.
+    pub(crate) fn emission_at(&self, t: usize, bary: [f64; 3]) -> Option<DVec3> {
+        let (radiance, tex) = self.base_of(t).0?.emission.as_ref()?;
+        let uv = self.uv_at(t, tex, bary)?;
+        Some(*radiance * self.images[tex.image].bilinear(uv, tex.wrap).0)
+    }
+
     /// Triangle `t`'s see-through material, when it has one (`BLEND`, transmission).
     pub(crate) fn pane_of(&self, t: usize) -> Option<Pane> {
         let base = self.base_of(t).0?;
