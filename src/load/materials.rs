@@ -64,7 +64,8 @@ pub(super) fn material(
         ));
     }
     let clamped = rho.clamp(DVec3::ZERO, DVec3::splat(MAX_ALBEDO));
-    if clamped != rho {
+    // Not for the rounding of an f32 factor (0.99 is read as 0.990000009).
+    if (clamped - rho).abs().max_element() > 1e-6 {
         textures.warnings.push(format!(
             "material {name}: albedo {} is outside [0, {MAX_ALBEDO}], clamped to {} \
              (a surface that reflects all light it receives is not physical, and the bounces \

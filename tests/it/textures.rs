@@ -61,6 +61,56 @@ fn a_fine_checker_floor_bounces_like_a_plain_floor_of_its_mean_albedo() {
     assert!(wall_indirect(&factor).x > 1.8 * p.x);
 }
 
+/// A floor whose colour is in its vertices (`COLOR_0`, times a material of 0.99) bounces the
+/// light of the same floor coloured by its material, within 0.5%.
+#[test]
+fn a_vertex_coloured_floor_bounces_like_a_material_coloured_one() {
+    let colour = [0.8f32, 0.4, 0.2];
+    let material = bake(
+        &textured::floor_room(Floor::Plain(colour.map(f64::from))),
+        &quick(),
+    );
+    let (mut json, mut bin) =
+        crate::output::split_glb(&textured::floor_room(Floor::Plain([0.99; 3])));
+    let floor = json["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .position(|m| m["name"] == "floor")
+        .unwrap();
+    let position = json["meshes"][floor]["primitives"][0]["attributes"]["POSITION"]
+        .as_u64()
+        .unwrap() as usize;
+    let count = json["accessors"][position]["count"].as_u64().unwrap() as usize;
+    while !bin.len().is_multiple_of(4) {
+        bin.push(0);
+    }
+    let at = bin.len();
+    for _ in 0..count {
+        bin.extend(colour.iter().flat_map(|c| (c / 0.99).to_le_bytes()));
+    }
+    let views = json["bufferViews"].as_array_mut().unwrap();
+    views.push(json!({"buffer": 0, "byteOffset": at, "byteLength": 12 * count}));
+    let view = views.len() - 1;
+    let accessors = json["accessors"].as_array_mut().unwrap();
+    accessors
+        .push(json!({"bufferView": view, "componentType": 5126, "count": count, "type": "VEC3"}));
+    json["meshes"][floor]["primitives"][0]["attributes"]["COLOR_0"] = json!(accessors.len() - 1);
+    json["buffers"][0]["byteLength"] = json!(bin.len());
+    let vertex = bake(&penumbra::write::to_glb(&json, bin).unwrap(), &quick());
+    assert!(
+        vertex.stats.warnings.is_empty(),
+        "{:?}",
+        vertex.stats.warnings
+    );
+    assert_close(
+        "vertex-coloured floor",
+        wall_indirect(&vertex),
+        wall_indirect(&material),
+        0.005,
+    );
+}
+
 #[test]
 fn a_floor_textured_half_red_half_white_bounces_like_two_materials() {
     // sRGB codes to the linear albedos the materials get.
