@@ -128,10 +128,18 @@ fn piece_form_factor(
         return 0.0;
     }
     *rays += 1;
-    if vis.occluded_skipping(p_ray, c, skip) {
-        0.0
+    f * passed(vis, p_ray, c, skip)
+}
+
+/// The fraction of light that passes from `a` to `b` (see [`Visibility::transmitted_skipping`]),
+/// as the mean over the channels: 1 or 0, or less through glass. The patch solvers keep one
+/// number per form factor, so their bounces through glass are dimmed, not tinted.
+fn passed(vis: &Visibility, a: DVec3, b: DVec3, skip: [usize; 2]) -> f64 {
+    let t = vis.transmitted_skipping(a, b, skip);
+    if t.x == t.y && t.y == t.z {
+        t.x
     } else {
-        f
+        t.element_sum() / 3.0
     }
 }
 
@@ -163,8 +171,9 @@ pub(crate) fn raycast_form_factor(
             return;
         }
         *rays += 1;
-        if !vis.occluded_skipping(at.ray_origin, q, skip) {
-            f += da * cos_r * cos_s / (PI * r2 + da);
+        let v = passed(vis, at.ray_origin, q, skip);
+        if v > 0.0 {
+            f += v * (da * cos_r * cos_s / (PI * r2 + da));
         }
     };
     for i in 0..RAYCAST_SPLIT {

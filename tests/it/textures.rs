@@ -660,3 +660,25 @@ fn bounce_light_through_glass_is_tinted() {
     assert!(off.abs() < 0.15, "{baked_sum} against {reference_sum}");
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The patch solvers pass the floor's bounce light through the glass before the wall too,
+/// dimmed by the channels' mean transmittance (one number per form factor): the wall's
+/// indirect light, mean over the channels, within 10% of the hierarchical solver's. Measured:
+/// 3.2% (progressive), 3.3% (matrix); 17.6% short when glass blocked their rays.
+#[test]
+fn the_patch_solvers_pass_bounce_light_through_glass() {
+    use penumbra::solve::Solver;
+    let input = textured::glass_before_wall(textured::Glass::Blend(0.5));
+    let want = wall_indirect(&bake(&input, &quick())).element_sum();
+    for solver in [Solver::Progressive, Solver::Matrix] {
+        let mut o = quick();
+        o.solve.solver = solver;
+        let got = wall_indirect(&bake(&input, &o)).element_sum();
+        let off = got / want - 1.0;
+        eprintln!(
+            "{solver:?}: wall indirect {got:.4} against {want:.4} ({:.1}%)",
+            100.0 * off
+        );
+        assert!(off.abs() < 0.1, "{solver:?}: {got} against {want}");
+    }
+}
