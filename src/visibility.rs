@@ -701,6 +701,17 @@ fn record(ray: &Ray, query: Query, skip: [u32; 2], hit: bool) {
         });
 }
 
+/// The mean over the channels of a transmittance ([`Visibility::transmitted_skipping`]):
+/// exactly the value when the channels agree (1 or 0 without glass), so that scenes without
+/// glass keep their arithmetic.
+pub(crate) fn channel_mean(t: DVec3) -> f64 {
+    if t.x == t.y && t.y == t.z {
+        t.x
+    } else {
+        t.element_sum() / 3.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

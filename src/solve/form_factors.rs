@@ -135,12 +135,7 @@ fn piece_form_factor(
 /// as the mean over the channels: 1 or 0, or less through glass. The patch solvers keep one
 /// number per form factor, so their bounces through glass are dimmed, not tinted.
 fn passed(vis: &Visibility, a: DVec3, b: DVec3, skip: [usize; 2]) -> f64 {
-    let t = vis.transmitted_skipping(a, b, skip);
-    if t.x == t.y && t.y == t.z {
-        t.x
-    } else {
-        t.element_sum() / 3.0
-    }
+    crate::visibility::channel_mean(vis.transmitted_skipping(a, b, skip))
 }
 
 /// Ray-cast form factor from the receiving point `at` to `patch` (Wallace, Elmquist, Haines

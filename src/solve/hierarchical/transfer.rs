@@ -99,12 +99,7 @@ pub(super) fn pair_visibility(
     // surface's transmittance; and its mean over the channels.
     let visible = |p: &Sample, q: &Sample| {
         let t = vis.transmitted_skipping(p.ray, q.ray, [p.polygon, q.polygon]);
-        let mean = if t.x == t.y && t.y == t.z {
-            t.x
-        } else {
-            t.element_sum() / 3.0
-        };
-        (mean, t)
+        (crate::visibility::channel_mean(t), t)
     };
     // The sum of what passes over the pairs that see each other (mean, and per channel), and
     // the weighted sum per channel.
