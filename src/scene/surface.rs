@@ -68,12 +68,22 @@ impl Pane {
         let through = match self.passes {
             Passes::Blend => 1.0 - (self.opacity * alpha).clamp(0.0, 1.0),
             Passes::Transmission(t) => {
-                let (r, _) = TriangleTexture::at(self.transmission.as_ref(), images, bary);
-                t * r.x
+                t * transmission_scale(self.transmission.as_ref(), images, bary)
             }
         };
         (self.factor * rgb).clamp(DVec3::ZERO, DVec3::ONE) * through
     }
+}
+
+/// What `transmissionTexture` scales the transmission factor by at `bary`: its red channel as
+/// data (1 without a texture). Images are kept decoded from sRGB, as colour textures are; a
+/// transmission texture holds linear data, so the lookup is encoded back (exact at texel
+/// centres).
+fn transmission_scale(texture: Option<&TriangleTexture>, images: &[Image], bary: [f64; 3]) -> f64 {
+    texture.map_or(1.0, |t| {
+        let (rgb, _) = TriangleTexture::at(Some(t), images, bary);
+        crate::color::linear_to_srgb(rgb.x.clamp(0.0, 1.0))
+    })
 }
 
 /// A triangle's base-colour texture: the image, its wrap modes and the corners' texture
@@ -280,13 +290,11 @@ impl Scene {
                         rho * (base.opacity * alpha.unwrap_or(1.0)).clamp(0.0, 1.0)
                     }
                     Some(Passes::Transmission(f)) => {
-                        let scale = base.transmission_texture.as_ref().map_or(1.0, |tex| {
-                            let texture = self.triangle_texture_of(t, tex);
-                            TriangleTexture::at(texture.as_ref(), &self.images, bary)
-                                .0
-                                .x
-                        });
-                        rho * (1.0 - f * scale)
+                        let texture = base
+                            .transmission_texture
+                            .as_ref()
+                            .and_then(|tex| self.triangle_texture_of(t, tex));
+                        rho * (1.0 - f * transmission_scale(texture.as_ref(), &self.images, bary))
                     }
                     None => rho,
                 }

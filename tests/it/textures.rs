@@ -512,9 +512,10 @@ fn glass_lets_its_share_of_the_direct_light_through_tinted() {
     }
 }
 
-/// `transmissionTexture`'s red channel scales the factor: the pane lets light through on its
-/// white half (x < 0) only. A floor point whose view of the source crosses the white half gets
-/// the factor's share, tinted; one whose view crosses the black half gets nothing.
+/// `transmissionTexture`'s red channel, as data, scales the factor: the pane lets light through
+/// on its grey half (x < 0, 128/255) only. A floor point whose view of the source crosses the
+/// grey half gets that share of the factor, tinted (read through the sRGB curve, as a colour,
+/// it would be 0.216); one whose view crosses the black half gets nothing.
 #[test]
 fn a_transmission_texture_scales_what_passes() {
     let scene = scene_of(&textured::glass_pane(textured::Glass::TransmissionHalves(
@@ -534,18 +535,20 @@ fn a_transmission_texture_scales_what_passes() {
         (h, unoccluded)
     };
     let (h, free) = at(-1.2);
-    let want = DVec3::from(textured::GLASS_TINT) * (0.8 * free);
-    assert_close("under the white half", h, want, 0.01);
+    let grey = f64::from(textured::TRANSMISSION_GREY) / 255.0;
+    let want = DVec3::from(textured::GLASS_TINT) * (0.8 * grey * free);
+    assert_close("under the grey half", h, want, 0.01);
     let (h, free) = at(1.2);
     assert!(
         free > 0.0 && h.max_element() <= 1e-9 * free,
         "under the black half: {h}"
     );
-    // The pane reflects what does not pass: 0.2 of its colour on the white half, all of it on
-    // the black half.
+    // The pane reflects what does not pass: 1 - 0.8 x 128/255 of its colour on the grey half,
+    // all of it on the black half.
     let tint = DVec3::from(textured::GLASS_TINT);
     let pane = |x: f64| albedo_facing_up(&scene, DVec3::new(x, textured::OCCLUDER_Y, 0.3));
-    assert_close("the white half's albedo", pane(-0.5), tint * 0.2, 1e-3);
+    let kept = 1.0 - 0.8 * grey;
+    assert_close("the grey half's albedo", pane(-0.5), tint * kept, 1e-3);
     assert_close("the black half's albedo", pane(0.5), tint, 1e-3);
 }
 
