@@ -366,7 +366,7 @@ fn texture_size(gltf: &Gltf, texture: usize) -> Result<(u32, u32)> {
     Ok((w, h))
 }
 
-/// One area emitter for next-event estimation: its triangles with a cumulative area table.
+/// One area emitter for next-event estimation: its scene triangles with a cumulative area table.
 struct Emitter {
     polygon: usize,
     /// W/(m² sr), front face: the material's (its emissive texture's mean, where it has one;
@@ -375,7 +375,6 @@ struct Emitter {
     normal: DVec3,
     /// Scene triangle ids.
     ids: Vec<usize>,
-    triangles: Vec<[DVec3; 3]>,
     /// Cumulative triangle areas; the last is the total area.
     cdf: Vec<f64>,
 }
@@ -392,7 +391,7 @@ impl Emitter {
             .cdf
             .partition_point(|&c| c <= a)
             .min(self.cdf.len() - 1);
-        let t = &self.triangles[k];
+        let t = &scene.triangles[self.ids[k]].p;
         let (u, v) = (rng.next_f64(), rng.next_f64());
         let su = u.sqrt();
         let bary = [1.0 - su, su * (1.0 - v), su * v];
@@ -429,11 +428,6 @@ impl<'a> Tracer<'a> {
             .emitters()
             .filter_map(|id| {
                 let poly = &scene.polygons[id];
-                let triangles: Vec<[DVec3; 3]> = poly
-                    .triangles
-                    .iter()
-                    .map(|&t| scene.triangles[t].p)
-                    .collect();
                 let mut sum = 0.0;
                 let cdf: Vec<f64> = poly
                     .triangles
@@ -448,7 +442,6 @@ impl<'a> Tracer<'a> {
                     radiance: scene.materials[poly.material].radiance,
                     normal: poly.frame.n,
                     ids: poly.triangles.clone(),
-                    triangles,
                     cdf,
                 })
             })

@@ -76,14 +76,17 @@ impl Pane {
 }
 
 /// What `transmissionTexture` scales the transmission factor by at `bary`: its red channel as
-/// data (1 without a texture). Images are kept decoded from sRGB, as colour textures are; a
-/// transmission texture holds linear data, so the lookup is encoded back (exact at texel
-/// centres).
+/// data (1 without a texture).
 fn transmission_scale(texture: Option<&TriangleTexture>, images: &[Image], bary: [f64; 3]) -> f64 {
     texture.map_or(1.0, |t| {
-        let (rgb, _) = TriangleTexture::at(Some(t), images, bary);
-        crate::color::linear_to_srgb(rgb.x.clamp(0.0, 1.0))
+        as_data(TriangleTexture::at(Some(t), images, bary).0.x)
     })
+}
+
+/// A data texture's value from a lookup: images are kept decoded from sRGB, as colour textures
+/// are, so the lookup is encoded back (exact at texel centres).
+fn as_data(decoded: f64) -> f64 {
+    crate::color::linear_to_srgb(decoded.clamp(0.0, 1.0))
 }
 
 /// A triangle's base-colour texture: the image, its wrap modes and the corners' texture
@@ -290,11 +293,13 @@ impl Scene {
                         rho * (base.opacity * alpha.unwrap_or(1.0)).clamp(0.0, 1.0)
                     }
                     Some(Passes::Transmission(f)) => {
-                        let texture = base
-                            .transmission_texture
-                            .as_ref()
-                            .and_then(|tex| self.triangle_texture_of(t, tex));
-                        rho * (1.0 - f * transmission_scale(texture.as_ref(), &self.images, bary))
+                        // One lookup at the point (no corner coordinates, as a pane keeps).
+                        let scale = base.transmission_texture.as_ref().map_or(1.0, |tex| {
+                            self.uv_at(t, tex, bary).map_or(1.0, |uv| {
+                                as_data(self.images[tex.image].bilinear(uv, tex.wrap).0.x)
+                            })
+                        });
+                        rho * (1.0 - f * scale)
                     }
                     None => rho,
                 }
