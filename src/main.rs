@@ -296,6 +296,10 @@ struct RenderArgs {
     /// or emission
     #[arg(long, conflicts_with = "irradiance")]
     lightmap_alone: bool,
+    /// Darken the lightmap by the materials' `occlusionTexture` (a bake's `--ao`), as three.js,
+    /// Bevy and Godot apply occlusion to baked light.
+    #[arg(long, conflicts_with_all = ["irradiance", "lightmap_alone"])]
+    occlusion: bool,
     #[command(flatten)]
     input_args: InputArgs,
 }
@@ -408,6 +412,14 @@ struct BakeArgs {
     /// the material left double-sided.
     #[arg(long, value_enum, default_value_t = penumbra::DoubleSided::Separate)]
     double_sided: penumbra::DoubleSided,
+    /// Also bake ambient occlusion within DISTANCE (scene units): the cosine-weighted open
+    /// fraction of each texel's hemisphere, written as the lightmapped materials'
+    /// `occlusionTexture` on the lightmap's UVs (a material's own occlusion texture is kept).
+    #[arg(long, value_name = "DISTANCE")]
+    ao: Option<f64>,
+    /// Rays per texel of the ambient occlusion.
+    #[arg(long, value_name = "N", default_value_t = penumbra::lightmap::ao::DEFAULT_SAMPLES)]
+    ao_samples: usize,
     /// Also write the float lightmap (irradiance, W/m², linear) as OpenEXR: page 0 to FILE,
     /// page p >= 1 to FILE's stem plus `-p` (`light.exr`, `light-1.exr`, ...).
     #[arg(long, value_name = "FILE")]
@@ -711,6 +723,7 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let shading = match &map {
         Some(map) => penumbra::render::Shading::Irradiance(map),
         None if args.lightmap_alone => penumbra::render::Shading::LightmapAlone,
+        None if args.occlusion => penumbra::render::Shading::LightmapOccluded,
         None => penumbra::render::Shading::Lightmap,
     };
     let img =
@@ -751,6 +764,10 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         supersample: args.supersample,
         seams: args.seams,
         double_sided: args.double_sided,
+        ao: args.ao.map(|distance| penumbra::lightmap::ao::AoOptions {
+            distance,
+            samples: args.ao_samples,
+        }),
         load: args.input_args.options(),
     };
     let bars = Bars::new(args.quiet);

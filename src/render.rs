@@ -133,6 +133,10 @@ impl Camera {
 pub enum Shading<'a> {
     /// `albedo/pi x H` with H from the file's own lightmap texture (as a client shows it).
     Lightmap,
+    /// [`Shading::Lightmap`] with H times the material's `occlusionTexture` (its red channel,
+    /// linear, by its `strength`: `1 + strength (ao - 1)`), as three.js applies an `aoMap` to
+    /// a `lightMap` (and Bevy and Godot their occlusion to baked indirect light).
+    LightmapOccluded,
     /// `H/pi` from the file's own lightmap texture: the lightmap alone, on white surfaces, no
     /// emission (what a lightmap holds, whatever the textures and colours).
     LightmapAlone,
@@ -215,6 +219,9 @@ pub fn render_radiance(
     // Lightmap bindings per instance with their page, decoded textures per texture index.
     let mut textures: BTreeMap<usize, Lightmap> = BTreeMap::new();
     let mut bindings: Vec<Option<(Binding, usize)>> = Vec::new();
+    // With [`Shading::LightmapOccluded`]: the occlusion texture per instance, decoded per index.
+    let mut occlusion_maps: BTreeMap<usize, Lightmap> = BTreeMap::new();
+    let mut occlusions: Vec<Option<Binding>> = Vec::new();
     for inst in &scene.instances {
         let b = binding::binding(gltf, inst)?;
         if let Some(b) = &b
@@ -241,6 +248,30 @@ pub fn render_radiance(
             let page = binding::texture_page(gltf, b.texture);
             (b, page)
         }));
+        if matches!(shading, Shading::LightmapOccluded) {
+            let o = binding::occlusion(gltf, inst)?;
+            if let Some(o) = &o
+                && let std::collections::btree_map::Entry::Vacant(e) =
+                    occlusion_maps.entry(o.texture)
+            {
+                let item = format!("texture {}", o.texture);
+                let bytes = binding::texture_bytes(gltf, o.texture)?;
+                let img = gltf
+                    .decode_image(&bytes, &item)?
+                    .map_err(|e| bad(item, &e))?
+                    .to_rgb32f();
+                e.insert(Lightmap {
+                    width: img.width(),
+                    height: img.height(),
+                    texels: img
+                        .pixels()
+                        .map(|p| DVec3::splat(f64::from(p.0[0])))
+                        .collect(),
+                    coverage: Vec::new(),
+                });
+            }
+            occlusions.push(o);
+        }
     }
     let aspect = width as f64 / height as f64;
     let tan = (camera.yfov * 0.5).tan();
@@ -277,10 +308,17 @@ pub fn render_radiance(
                 DVec3::ZERO
             };
             if let Some((b, page, uv)) = uv {
-                let h = match shading {
+                let mut h = match shading {
                     Shading::Irradiance(map) => sample_page(map, page, uv),
                     _ => sample_map(&textures[&b.texture], uv) * b.intensity,
                 };
+                if let Some(Some(o)) = occlusions.get(tri.instance) {
+                    let inst = &scene.instances[tri.instance];
+                    let ids = &inst.indices[3 * tri.local_index..3 * tri.local_index + 3];
+                    let uv: DVec2 = (0..3).map(|c| o.uv[ids[c] as usize] * bary[c]).sum();
+                    let ao = sample_map(&occlusion_maps[&o.texture], uv).x;
+                    h *= 1.0 + o.intensity * (ao - 1.0);
+                }
                 let albedo = if alone {
                     DVec3::ONE
                 } else {

@@ -67,6 +67,9 @@ pub struct Stats {
     /// Seam edges, samples, stitched texels, and the seam mismatch before and after
     /// stitching (`lightmap::seams`).
     pub seams: crate::lightmap::seams::SeamStats,
+    /// Ambient occlusion (`--ao`); its time is in `timings_s.lightmap`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ao: Option<crate::lightmap::ao::AoStats>,
     pub timings_s: Timings,
     pub warnings: Vec<String>,
 }

@@ -47,6 +47,16 @@ pub struct LightmapImage {
     pub intensity: f64,
     /// Transfer curve of the PNGs' 8-bit values.
     pub encoding: Encoding,
+    /// The ambient occlusion (`--ao`), same pages.
+    pub ao: Option<AoImage>,
+}
+
+/// The ambient occlusion as it goes into the file.
+pub struct AoImage {
+    /// PNG bytes (8-bit grey, linear: AO = value / 255), one per atlas page, in page order.
+    pub(crate) pngs: Vec<Vec<u8>>,
+    /// The occlusion distance, scene units.
+    pub distance: f64,
 }
 
 const ARRAY_BUFFER: u64 = 34962;
@@ -217,6 +227,33 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
         moz_of_page
             .push(json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity}));
     }
+    // The ambient occlusion (`--ao`): one texture per page, bound below as `occlusionTexture`.
+    let mut ao_of_page = Vec::new();
+    if let Some(ao) = &image.ao {
+        for (page, png) in ao.pngs.iter().enumerate() {
+            let name = match page {
+                0 => "penumbra ambient occlusion".to_string(),
+                p => format!("penumbra ambient occlusion {p}"),
+            };
+            let png_view = push_view(&mut root, &mut bin, png, None, None);
+            let images = array_mut(&mut root, "images");
+            images.push(json!({"name": name, "bufferView": png_view, "mimeType": "image/png"}));
+            let image_index = images.len() - 1;
+            let textures = array_mut(&mut root, "textures");
+            textures.push(json!({
+                "name": name,
+                "sampler": sampler_index,
+                "source": image_index,
+                "extras": {"penumbra": {
+                    "quantity": "ambient occlusion",
+                    "distance": ao.distance,
+                    "encoding": "linear",
+                    "page": page,
+                }},
+            }));
+            ao_of_page.push(json!({"index": textures.len() - 1, "texCoord": 1}));
+        }
+    }
 
     // 4. Which nodes use each mesh, and which of those placements are lightmapped.
     let mut lit_nodes: BTreeMap<usize, BTreeMap<usize, Vec<usize>>> = BTreeMap::new();
@@ -362,6 +399,12 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                 .cloned()
                 .ok_or_else(|| Error::Image(format!("atlas page {page} has no lightmap image")))?;
             m["extensions"]["MOZ_lightmap"] = moz;
+            // A material's own occlusion texture (authored at its own UVs) is kept.
+            if let Some(ao) = ao_of_page.get(page as usize)
+                && m.get("occlusionTexture").is_none()
+            {
+                m["occlusionTexture"] = ao.clone();
+            }
             if separate_backs.contains(mat)
                 && let Some(o) = m.as_object_mut()
             {
@@ -837,10 +880,24 @@ fn glb_length(json: usize, bin: usize) -> Result<u32> {
 
 /// Encodes 8-bit RGB as PNG.
 pub(crate) fn png_bytes(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
+    encode_png(rgb, width, height, image::ExtendedColorType::Rgb8)
+}
+
+/// Encodes 8-bit grey texels (row-major, `width x height`) as PNG.
+pub(crate) fn grey_png_bytes(grey: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
+    encode_png(grey, width, height, image::ExtendedColorType::L8)
+}
+
+fn encode_png(
+    texels: &[u8],
+    width: u32,
+    height: u32,
+    kind: image::ExtendedColorType,
+) -> Result<Vec<u8>> {
     use image::ImageEncoder;
     let mut png = Vec::new();
     image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
+        .write_image(texels, width, height, kind)
         .map_err(|e| Error::Image(format!("PNG encoding failed: {e}")))?;
     Ok(png)
 }

@@ -49,6 +49,8 @@ pub struct BakeOptions {
     /// How the output lightmaps the two sides of a double-sided surface (both are solved
     /// either way).
     pub double_sided: DoubleSided,
+    /// Ambient occlusion (`--ao`): written as the lightmapped materials' `occlusionTexture`.
+    pub ao: Option<lightmap::ao::AoOptions>,
     /// Resource limits, and the folders besides the input's own that its URIs may name files
     /// in ([`load::uri`]).
     pub load: load::LoadOptions,
@@ -104,6 +106,7 @@ impl Default for BakeOptions {
             supersample: 4,
             seams: Seams::Stitch,
             double_sided: DoubleSided::Separate,
+            ao: None,
             load: load::LoadOptions::default(),
         }
     }
@@ -118,6 +121,8 @@ pub struct Bake {
     pub solution: Solution,
     pub atlas: Atlas,
     pub lightmap: Lightmap,
+    /// The ambient occlusion, in the lightmap's layout (`--ao`).
+    pub ao: Option<Lightmap>,
     pub stats: Stats,
 }
 
@@ -194,6 +199,14 @@ impl BakeOptions {
         if !(0.0..=1.0).contains(&self.dm_threshold) {
             return bad("--dm-threshold", "must be between 0 and 1");
         }
+        if let Some(ao) = &self.ao {
+            if !(ao.distance.is_finite() && ao.distance > 0.0) {
+                return bad("--ao", "must be a positive distance in scene units");
+            }
+            if !lightmap::ao::SAMPLES_RANGE.contains(&ao.samples) {
+                return bad("--ao-samples", "must be between 1 and 65536");
+            }
+        }
         Ok(())
     }
 }
@@ -227,6 +240,27 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         lightmap_stage(&scene, &vis, &meshes, &solution, &atlas, options)
     });
     stats.seams = seams;
+    let ao = options.ao.map(|ao| {
+        let (map, ao_stats) = stage(
+            &mut stats.timings_s.lightmap,
+            "ambient occlusion",
+            progress,
+            || {
+                lightmap::ao::ambient_occlusion(
+                    &scene,
+                    &vis,
+                    &meshes,
+                    &mesh_of_polygon(&scene, &meshes),
+                    &atlas,
+                    options.supersample,
+                    options.seams == Seams::Stitch,
+                    &ao,
+                )
+            },
+        );
+        stats.ao = Some(ao_stats);
+        map
+    });
     stats.gather(&scene, &meshes, &solution, &atlas, &options.solve);
     check_light_is_finite(gltf, &solution)?;
     Ok(Bake {
@@ -236,6 +270,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         solution,
         atlas,
         lightmap,
+        ao,
         stats,
     })
 }
@@ -394,22 +429,27 @@ fn lightmap_stage(
     atlas: &Atlas,
     options: &BakeOptions,
 ) -> (Lightmap, lightmap::seams::SeamStats) {
-    let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
-    for (i, m) in meshes.iter().enumerate() {
-        mesh_of_polygon[m.polygon] = i;
-    }
     let mut map = lightmap::rasterize(
         scene,
         vis,
         meshes,
         &solution.irradiance,
-        &mesh_of_polygon,
+        &mesh_of_polygon(scene, meshes),
         atlas,
         options.supersample,
     );
     let on = options.seams == Seams::Stitch;
     let seams = lightmap::seams::stitch_seams(&mut map, scene, vis, atlas, on);
     (map, seams)
+}
+
+/// The receiver mesh of each polygon (an index into `meshes`; `usize::MAX` for none).
+fn mesh_of_polygon(scene: &Scene, meshes: &[ReceiverMesh]) -> Vec<usize> {
+    let mut of = vec![usize::MAX; scene.polygons.len()];
+    for (i, m) in meshes.iter().enumerate() {
+        of[m.polygon] = i;
+    }
+    of
 }
 
 /// Refuses a solution whose light is not finite or diverged (its unshot power grew).
@@ -888,12 +928,35 @@ pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake, encoding: Encoding) -> Result<Vec
         .map(|page| write::png_bytes(page, map.width, map.height))
         .collect::<Result<Vec<_>>>()?;
     bake.stats.lightmap_intensity = intensity;
+    let ao = match (&bake.ao, &bake.stats.ao) {
+        (Some(map), Some(stats)) => Some(write::AoImage {
+            pngs: grey_pngs(map)?,
+            distance: stats.distance,
+        }),
+        _ => None,
+    };
     let image = LightmapImage {
         pngs,
         intensity,
         encoding,
+        ao,
     };
     write::build(gltf, &bake.scene, &bake.atlas, &image)
+}
+
+/// One linear 8-bit grey PNG per page of `map`, whose values are in 0..1 (the red channel's).
+fn grey_pngs(map: &Lightmap) -> Result<Vec<Vec<u8>>> {
+    let page = map.width as usize * map.height as usize;
+    map.texels
+        .chunks(page.max(1))
+        .map(|texels| {
+            let grey: Vec<u8> = texels
+                .iter()
+                .map(|t| (t.x.clamp(0.0, 1.0) * 255.0).round() as u8)
+                .collect();
+            write::grey_png_bytes(&grey, map.width, map.height)
+        })
+        .collect()
 }
 
 #[cfg(test)]

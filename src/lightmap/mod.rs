@@ -15,6 +15,7 @@ use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
+pub mod ao;
 pub mod seams;
 
 /// Float RGB images of irradiance H (W/m², linear, without albedo): one or more pages of
@@ -267,14 +268,47 @@ pub(crate) fn rasterize(
     atlas: &Atlas,
     supersample: u32,
 ) -> Lightmap {
-    // The pages are rasterized as one tall image, page p's rows at p x height.
-    let (w, page_h) = (atlas.width as usize, atlas.height as usize);
-    let h = page_h * atlas.pages.max(1) as usize;
     let locators: Vec<Locator> = meshes
         .iter()
         .zip(values)
         .map(|(m, v)| Locator::new(m, v))
         .collect();
+    rasterize_with(
+        scene,
+        vis,
+        meshes,
+        mesh_of_polygon,
+        atlas,
+        supersample,
+        &|at, hint| locators[at.mesh].value_near(at.q, hint),
+    )
+}
+
+/// A visible sub-sample of a texel, as [`rasterize_with`] asks for its value.
+pub(crate) struct SubSample {
+    /// The receiver mesh it lies on (an index into `meshes`).
+    pub mesh: usize,
+    /// Its point in the polygon's plane coordinates (scene units).
+    pub q: DVec2,
+    /// Its point in world space.
+    pub p: DVec3,
+}
+
+/// [`rasterize`] of any quantity: `value` gives the value at a visible sub-sample (with a
+/// hint that it may keep between calls: see [`Locator::value_near`]); a texel holds the mean
+/// over its visible sub-samples, and the rest is dilated.
+pub(crate) fn rasterize_with(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    mesh_of_polygon: &[usize],
+    atlas: &Atlas,
+    supersample: u32,
+    value: &(dyn Fn(&SubSample, &mut Option<u32>) -> DVec3 + Sync),
+) -> Lightmap {
+    // The pages are rasterized as one tall image, page p's rows at p x height.
+    let (w, page_h) = (atlas.width as usize, atlas.height as usize);
+    let h = page_h * atlas.pages.max(1) as usize;
     // Every atlas triangle with its UVs, world corners and mesh, bucketed by bands of rows.
     struct UvTri {
         uv: [DVec2; 3],
@@ -409,8 +443,12 @@ pub(crate) fn rasterize(
                             if buried {
                                 continue;
                             }
-                            let q = poly.frame.plane_from_world(p);
-                            sum[idx] += locators[t.mesh].value_near(q, &mut hint);
+                            let at = SubSample {
+                                mesh: t.mesh,
+                                q: poly.frame.plane_from_world(p),
+                                p,
+                            };
+                            sum[idx] += value(&at, &mut hint);
                             count[idx] += 1;
                         }
                     }

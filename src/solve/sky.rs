@@ -71,8 +71,8 @@ pub struct SkyStats {
 pub struct Sky {
     /// `L_sky`, W/(m² sr), linear RGB; some channel is positive.
     pub radiance: DVec3,
-    /// The Hammersley set in the unit square.
-    square: Vec<DVec2>,
+    /// The rays of every receiving point.
+    rays_of: CosineRays,
     /// The scene's bounding-box corners.
     corners: [DVec3; 8],
     points: AtomicU64,
@@ -88,12 +88,9 @@ impl Sky {
         if radiance.max_element() <= 0.0 {
             return None;
         }
-        let n = samples.max(1);
         Some(Sky {
             radiance,
-            square: (0..n)
-                .map(|k| DVec2::new((k as f64 + 0.5) / n as f64, radical_inverse2(k as u32)))
-                .collect(),
+            rays_of: CosineRays::new(samples),
             corners: box_corners(scene.bounds_min, scene.bounds_max),
             points: AtomicU64::new(0),
             open: AtomicU64::new(0),
@@ -128,20 +125,13 @@ impl Sky {
             .directions(at)
             .map(|d| vis.transmitted_towards(o, d, at.polygon))
             .sum();
-        (free / self.square.len() as f64, self.square.len() as u64)
+        let n = self.rays_of.len();
+        (free / n as f64, n as u64)
     }
 
-    /// The rays of `at`: the point set shifted by the hash of `at.p`, mapped to the disk and
-    /// lifted to the hemisphere about `at.n` (unit directions, cosine-distributed).
+    /// The rays of `at` ([`CosineRays::directions`]).
     pub fn directions<'s>(&'s self, at: &SurfacePoint) -> impl Iterator<Item = DVec3> + 's {
-        let shift = point_shift(at.p);
-        let (t, b) = at.n.any_orthonormal_pair();
-        let n = at.n;
-        self.square.iter().map(move |q| {
-            let d = concentric_disk((*q + shift).fract());
-            let z = (1.0 - d.length_squared()).max(0.0).sqrt();
-            (t * d.x + b * d.y + n * z).normalize()
-        })
+        self.rays_of.directions(at)
     }
 
     /// The fraction of the rays of `at` ([`Sky::directions`], cosine-weighted) whose first hit
@@ -161,7 +151,7 @@ impl Sky {
                     .is_some_and(|hit| accept(hit.triangle, *d))
             })
             .count();
-        hits as f64 / self.square.len() as f64
+        hits as f64 / self.rays_of.len() as f64
     }
 
     /// Adds the sky's irradiance `pi L_sky V` (W/m²) of each of `points` to `h`; counts the
@@ -193,7 +183,7 @@ impl Sky {
         let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
         SkyStats {
             radiance: self.radiance.to_array(),
-            samples: self.square.len(),
+            samples: self.rays_of.len(),
             points: load(&self.points),
             open: load(&self.open),
             rays: load(&self.rays),
@@ -204,6 +194,46 @@ impl Sky {
     /// Sky shadow rays cast so far.
     pub fn rays(&self) -> u64 {
         self.rays.load(Ordering::Relaxed)
+    }
+}
+
+/// A fixed set of cosine-distributed directions over a point's hemisphere, each weighing
+/// `1/N`: the `N`-point Hammersley set, shifted per point by a hash of its position (a
+/// Cranley-Patterson rotation), mapped to the disk by the concentric map and lifted to the
+/// hemisphere (see the module doc). The sky's shadow rays and the ambient occlusion's rays
+/// ([`crate::lightmap::ao`]).
+pub(crate) struct CosineRays {
+    /// The Hammersley set in the unit square.
+    square: Vec<DVec2>,
+}
+
+impl CosineRays {
+    /// `n` (at least 1) directions per point.
+    pub(crate) fn new(n: usize) -> CosineRays {
+        let n = n.max(1);
+        CosineRays {
+            square: (0..n)
+                .map(|k| DVec2::new((k as f64 + 0.5) / n as f64, radical_inverse2(k as u32)))
+                .collect(),
+        }
+    }
+
+    /// Directions per point.
+    pub(crate) fn len(&self) -> usize {
+        self.square.len()
+    }
+
+    /// The rays of `at`: the point set shifted by the hash of `at.p`, mapped to the disk and
+    /// lifted to the hemisphere about `at.n` (unit directions, cosine-distributed).
+    pub(crate) fn directions<'s>(&'s self, at: &SurfacePoint) -> impl Iterator<Item = DVec3> + 's {
+        let shift = point_shift(at.p);
+        let (t, b) = at.n.any_orthonormal_pair();
+        let n = at.n;
+        self.square.iter().map(move |q| {
+            let d = concentric_disk((*q + shift).fract());
+            let z = (1.0 - d.length_squared()).max(0.0).sqrt();
+            (t * d.x + b * d.y + n * z).normalize()
+        })
     }
 }
 

@@ -33,6 +33,42 @@ pub(crate) fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
     else {
         return Ok(None);
     };
+    let (tex_coord, uv) = uv_set(gltf, inst, moz, 1, "MOZ_lightmap")?;
+    Ok(Some(Binding {
+        tex_coord,
+        uv,
+        texture: moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
+        intensity: moz.get("intensity").and_then(|v| v.as_f64()).unwrap_or(1.0),
+    }))
+}
+
+/// The material's `occlusionTexture` of a scene instance's primitive, as a [`Binding`] whose
+/// `intensity` is the texture's `strength` (1 when absent): `None` when its material has none.
+pub(crate) fn occlusion(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
+    let Some(info) = inst
+        .gltf_material
+        .and_then(|m| gltf.json["materials"][m]["occlusionTexture"].as_object())
+    else {
+        return Ok(None);
+    };
+    let (tex_coord, uv) = uv_set(gltf, inst, info, 0, "occlusionTexture")?;
+    Ok(Some(Binding {
+        tex_coord,
+        uv,
+        texture: info.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
+        intensity: info.get("strength").and_then(|v| v.as_f64()).unwrap_or(1.0),
+    }))
+}
+
+/// The UV set that a texture reference (`info`, of the property `what`) names in its
+/// `texCoord` (`default` when absent), read from the instance's primitive.
+fn uv_set(
+    gltf: &Gltf,
+    inst: &Instance,
+    info: &serde_json::Map<String, serde_json::Value>,
+    default: u64,
+    what: &str,
+) -> Result<(u32, Vec<DVec2>)> {
     let item = format!("mesh {} primitive {}", inst.mesh, inst.primitive);
     let prim = gltf
         .document
@@ -40,18 +76,16 @@ pub(crate) fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
         .nth(inst.mesh)
         .and_then(|m| m.primitives().nth(inst.primitive))
         .ok_or_else(|| bad(gltf, item.clone(), "missing primitive".into()))?;
-    let tex_coord = u32::try_from(moz.get("texCoord").and_then(|v| v.as_u64()).unwrap_or(1))
-        .map_err(|_| {
-            bad(
-                gltf,
-                item.clone(),
-                "MOZ_lightmap.texCoord is too large".into(),
-            )
-        })?;
+    let tex_coord = u32::try_from(
+        info.get("texCoord")
+            .and_then(|v| v.as_u64())
+            .unwrap_or(default),
+    )
+    .map_err(|_| bad(gltf, item.clone(), format!("{what}.texCoord is too large")))?;
     let acc = prim
         .get(&gltf::Semantic::TexCoords(tex_coord))
         .ok_or_else(|| {
-            let reason = format!("MOZ_lightmap names TEXCOORD_{tex_coord}, which it does not have");
+            let reason = format!("{what} names TEXCOORD_{tex_coord}, which it does not have");
             bad(gltf, item.clone(), reason)
         })?;
     let uv = gltf
@@ -59,12 +93,7 @@ pub(crate) fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
         .chunks_exact(2)
         .map(|c| DVec2::new(c[0], c[1]))
         .collect();
-    Ok(Some(Binding {
-        tex_coord,
-        uv,
-        texture: moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
-        intensity: moz.get("intensity").and_then(|v| v.as_f64()).unwrap_or(1.0),
-    }))
+    Ok((tex_coord, uv))
 }
 
 /// The encoding of a lightmap texture, from its `extras.penumbra.encoding` (absent: linear, the

@@ -134,4 +134,8 @@ export const breakages = {
       if (json[key].length === 0) delete json[key];
     }
   },
+  /** No `occlusionTexture` on any material: the baked AO is not shown. */
+  removeOcclusion(json) {
+    for (const m of json.materials ?? []) delete m.occlusionTexture;
+  },
 };

@@ -1,5 +1,6 @@
 //! Integration tests: one binary, one module per concern.
 
+mod ao;
 mod bad_input;
 mod compare;
 mod direct;

@@ -45,6 +45,9 @@ function toLambert(root) {
           emissiveMap: m.emissiveMap,
           lightMap: m.lightMap,
           lightMapIntensity: m.lightMapIntensity,
+          // glTF's occlusionTexture: three applies it to the indirect light, the lightmap's too.
+          aoMap: m.aoMap,
+          aoMapIntensity: m.aoMapIntensity,
           side: m.side,
           vertexColors: m.vertexColors,
         }));
@@ -62,7 +65,7 @@ function dispose(root) {
     if (!obj.isMesh) return;
     obj.geometry.dispose();
     for (const m of [obj.material].flat()) {
-      for (const t of [m.map, m.emissiveMap, m.lightMap]) t?.dispose();
+      for (const t of [m.map, m.emissiveMap, m.lightMap, m.aoMap]) t?.dispose();
       m.dispose();
     }
   });
