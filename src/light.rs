@@ -349,6 +349,8 @@ mod tests {
             direction: DVec3::NEG_Y,
             intensity: DVec3::splat(10.0),
             range,
+            node: 0,
+            index: 0,
         }
     }
 

@@ -573,7 +573,7 @@ fn scene_walked(gltf: &Gltf, limits: &Limits, split_emission: bool) -> Result<Sc
         if let Some(light) = node.light() {
             scene
                 .lights
-                .push(punctual(gltf, &light, &world, lights_seen)?);
+                .push(punctual(gltf, &light, &world, lights_seen, node.index())?);
             lights_seen += 1;
         }
         if let Some(mesh) = node.mesh() {
@@ -819,6 +819,7 @@ fn punctual(
     light: &gltf::khr_lights_punctual::Light,
     world: &DMat4,
     n: usize,
+    node: usize,
 ) -> Result<PunctualLight> {
     use gltf::khr_lights_punctual::Kind;
     let item = format!(
@@ -881,5 +882,7 @@ fn punctual(
             .unwrap_or(DVec3::NEG_Y),
         intensity,
         range: light.range().map(|r| r as f64),
+        node,
+        index: light.index(),
     })
 }

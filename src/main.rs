@@ -417,6 +417,16 @@ struct BakeArgs {
     /// `occlusionTexture` on the lightmap's UVs (a material's own occlusion texture is kept).
     #[arg(long, value_name = "DISTANCE")]
     ao: Option<f64>,
+    /// How matching lights are baked: PATTERN=all|indirect|none (repeatable; later ones win).
+    /// PATTERN matches a light's name, its node's or its emissive material's (`*`: any
+    /// characters). `indirect`: only its bounces (the engine draws its direct light in real
+    /// time); `none`: not baked. Overrides `penumbra_bake` in the file's extras.
+    #[arg(long, value_name = "PATTERN=MODE", value_parser = penumbra::scene::mixed::CliRule::bake)]
+    light_bake: Vec<penumbra::scene::mixed::CliRule>,
+    /// Also write matching lights' light as a lightmap layer named NAME, which a game scales
+    /// at run time: PATTERN=NAME (repeatable). Overrides `penumbra_group` in the extras.
+    #[arg(long, value_name = "PATTERN=NAME", value_parser = penumbra::scene::mixed::CliRule::group)]
+    light_group: Vec<penumbra::scene::mixed::CliRule>,
     /// Rays per texel of the ambient occlusion.
     #[arg(long, value_name = "N", default_value_t = penumbra::lightmap::ao::DEFAULT_SAMPLES)]
     ao_samples: usize,
@@ -768,6 +778,12 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             distance,
             samples: args.ao_samples,
         }),
+        lights: args
+            .light_bake
+            .iter()
+            .chain(&args.light_group)
+            .cloned()
+            .collect(),
         load: args.input_args.options(),
     };
     let bars = Bars::new(args.quiet);

@@ -10,6 +10,7 @@ use std::sync::Arc;
 
 pub mod cut;
 pub mod emission;
+pub mod mixed;
 pub mod surface;
 pub mod texture;
 
@@ -178,6 +179,9 @@ pub struct PunctualLight {
     pub intensity: DVec3,
     /// Range in scene units beyond which the light has no effect (glTF `range`), if any.
     pub range: Option<f64>,
+    /// The glTF node that places it, and its index in `KHR_lights_punctual.lights`.
+    pub node: usize,
+    pub index: usize,
 }
 
 /// Which side of a glTF primitive an [`Instance`] is.
@@ -343,6 +347,9 @@ pub struct Scene {
     pub images: Arc<Vec<texture::Image>>,
     /// The material of each (material, vertex-colour tint) made so far ([`Scene::add_instance`]).
     tints: BTreeMap<Tint, usize>,
+    /// How each light is baked and into which layer ([`mixed`]): all lights fully into the
+    /// one lightmap unless the bake's rules say otherwise.
+    pub mixed: mixed::Mixed,
 }
 
 impl Default for Scene {
@@ -358,6 +365,7 @@ impl Default for Scene {
             warnings: Vec::new(),
             images: Arc::default(),
             tints: BTreeMap::new(),
+            mixed: mixed::Mixed::default(),
         }
     }
 }

@@ -49,6 +49,18 @@ pub struct LightmapImage {
     pub encoding: Encoding,
     /// The ambient occlusion (`--ao`), same pages.
     pub ao: Option<AoImage>,
+    /// The light groups' layers ([`crate::scene::mixed`]), same pages and encoding.
+    pub layers: Vec<LayerImage>,
+}
+
+/// One light group's layer as it goes into the file.
+pub struct LayerImage {
+    /// The group's name.
+    pub name: String,
+    /// PNG bytes as [`LightmapImage::pngs`], one per page.
+    pub(crate) pngs: Vec<Vec<u8>>,
+    /// Irradiance H (W/m²) of a full-scale texel of this layer.
+    pub intensity: f64,
 }
 
 /// The ambient occlusion as it goes into the file.
@@ -226,6 +238,46 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
         let texture_index = textures.len() - 1;
         moz_of_page
             .push(json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity}));
+    }
+    // The light groups' layers: one texture per group and page, named in the page's
+    // `MOZ_lightmap.extras.penumbra.layers`.
+    for layer in &image.layers {
+        for (page, png) in layer.pngs.iter().enumerate() {
+            let name = format!("penumbra lightmap layer {} {page}", layer.name);
+            let png_view = push_view(&mut root, &mut bin, png, None, None);
+            let images = array_mut(&mut root, "images");
+            images.push(json!({"name": name, "bufferView": png_view, "mimeType": "image/png"}));
+            let image_index = images.len() - 1;
+            let textures = array_mut(&mut root, "textures");
+            textures.push(json!({
+                "name": name,
+                "sampler": sampler_index,
+                "source": image_index,
+                "extras": {"penumbra": {
+                    "quantity": "irradiance",
+                    "layer": layer.name,
+                    "units": "W/m^2",
+                    "encoding": image.encoding.name(),
+                    "scale": layer.intensity,
+                    "page": page,
+                }},
+            }));
+            let entry = json!({
+                "group": layer.name,
+                "index": textures.len() - 1,
+                "texCoord": 1,
+                "intensity": layer.intensity,
+            });
+            if let Some(moz) = moz_of_page.get_mut(page) {
+                let list = &mut moz["extras"]["penumbra"]["layers"];
+                if !list.is_array() {
+                    *list = json!([]);
+                }
+                if let Some(list) = list.as_array_mut() {
+                    list.push(entry);
+                }
+            }
+        }
     }
     // The ambient occlusion (`--ao`): one texture per page, bound below as `occlusionTexture`.
     let mut ao_of_page = Vec::new();

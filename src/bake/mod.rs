@@ -18,6 +18,7 @@ use crate::solve::{self, Solution, SolveOptions};
 use crate::stats::{Stats, stage};
 use crate::visibility::Visibility;
 use crate::write::{self, LightmapImage};
+use glam::DVec3;
 use std::path::{Path, PathBuf};
 
 /// Everything a bake can be told.
@@ -51,6 +52,9 @@ pub struct BakeOptions {
     pub double_sided: DoubleSided,
     /// Ambient occlusion (`--ao`): written as the lightmapped materials' `occlusionTexture`.
     pub ao: Option<lightmap::ao::AoOptions>,
+    /// How lights are baked and into which layers (`--light-bake`, `--light-group`), after the
+    /// rules in the file's extras ([`scene::mixed`]).
+    pub lights: Vec<scene::mixed::CliRule>,
     /// Resource limits, and the folders besides the input's own that its URIs may name files
     /// in ([`load::uri`]).
     pub load: load::LoadOptions,
@@ -107,6 +111,7 @@ impl Default for BakeOptions {
             seams: Seams::Stitch,
             double_sided: DoubleSided::Separate,
             ao: None,
+            lights: Vec::new(),
             load: load::LoadOptions::default(),
         }
     }
@@ -123,6 +128,9 @@ pub struct Bake {
     pub lightmap: Lightmap,
     /// The ambient occlusion, in the lightmap's layout (`--ao`).
     pub ao: Option<Lightmap>,
+    /// Per light group, its name and its lights' part of `lightmap`, in the same layout
+    /// ([`scene::mixed`]).
+    pub layers: Vec<(String, Lightmap)>,
     pub stats: Stats,
 }
 
@@ -237,9 +245,19 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     let (segments, meshes, solution) = solved.expect("the atlas estimates before it succeeds")?;
     let t = &mut stats.timings_s;
     let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
-        lightmap_stage(&scene, &vis, &meshes, &solution, &atlas, options)
+        lightmap_stage(&scene, &vis, &meshes, &solution.irradiance, &atlas, options)
     });
     stats.seams = seams;
+    let layers = stage(&mut t.lightmap, "light groups", progress, || {
+        solution
+            .layers
+            .iter()
+            .map(|(name, values)| {
+                let (map, _) = lightmap_stage(&scene, &vis, &meshes, values, &atlas, options);
+                (name.clone(), map)
+            })
+            .collect()
+    });
     let ao = options.ao.map(|ao| {
         let (map, ao_stats) = stage(
             &mut stats.timings_s.lightmap,
@@ -271,6 +289,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         atlas,
         lightmap,
         ao,
+        layers,
         stats,
     })
 }
@@ -425,7 +444,7 @@ fn lightmap_stage(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],
-    solution: &Solution,
+    irradiance: &[Vec<DVec3>],
     atlas: &Atlas,
     options: &BakeOptions,
 ) -> (Lightmap, lightmap::seams::SeamStats) {
@@ -433,7 +452,7 @@ fn lightmap_stage(
         scene,
         vis,
         meshes,
-        &solution.irradiance,
+        irradiance,
         &mesh_of_polygon(scene, meshes),
         atlas,
         options.supersample,
@@ -488,6 +507,8 @@ fn check_light_is_finite(gltf: &Gltf, solution: &Solution) -> Result<()> {
 /// options with that density filled in.
 fn scene_for(gltf: &Gltf, options: &BakeOptions) -> Result<(Scene, scene::cut::Cut, BakeOptions)> {
     let mut scene = load::scene_limited(gltf, &options.load.limits)?;
+    scene::mixed::apply(gltf, &mut scene, &options.lights)?;
+    check_mixed(gltf, &scene, options)?;
     let mut options = options.clone();
     if options.texels_per_unit.is_none() && options.resolution.is_none() {
         options.texels_per_unit = Some(default_texels_per_unit(&scene));
@@ -551,6 +572,39 @@ pub(crate) fn default_texels_per_unit(scene: &Scene) -> f32 {
     } else {
         1.0
     }
+}
+
+/// Refuses light rules the solver cannot honour: light groups need the hierarchical solver
+/// (it solves each group's bounces with the links of the whole bake), and the hemicube carries
+/// area emitters inside the patch solve, so their direct light cannot be left out.
+fn check_mixed(gltf: &Gltf, scene: &Scene, options: &BakeOptions) -> Result<()> {
+    let refuse = |reason: String| {
+        Err(Error::BadItem {
+            path: gltf.path.clone(),
+            item: "light rules".into(),
+            reason,
+        })
+    };
+    let groups = scene.mixed.groups();
+    if !groups.is_empty() && options.solve.solver != solve::Solver::Hierarchical {
+        return refuse(format!(
+            "light groups ({}) need --solver hierarchical (the default)",
+            groups.join(", ")
+        ));
+    }
+    let hemicube = options.solve.form_factors == solve::FormFactors::Hemicube
+        && options.solve.solver != solve::Solver::Hierarchical;
+    let indirect_emitter = scene
+        .emitters()
+        .any(|p| scene.mixed.polygon(scene, p).bake == scene::mixed::BakeMode::Indirect);
+    if hemicube && indirect_emitter {
+        return refuse(
+            "an emissive surface with bake \"indirect\" needs other form factors than the \
+             hemicube, which carries the emitters' direct light in the patch solve"
+                .into(),
+        );
+    }
+    Ok(())
 }
 
 /// Most pieces [`scene_for`] cuts long triangles into before it refuses the page size.
@@ -935,11 +989,28 @@ pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake, encoding: Encoding) -> Result<Vec
         }),
         _ => None,
     };
+    let layers = bake
+        .layers
+        .iter()
+        .map(|(name, map)| {
+            let (rgb, intensity) = map.to_rgb8(encoding);
+            let pngs = rgb
+                .chunks(page_bytes.max(1))
+                .map(|page| write::png_bytes(page, map.width, map.height))
+                .collect::<Result<Vec<_>>>()?;
+            Ok(write::LayerImage {
+                name: name.clone(),
+                pngs,
+                intensity,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
     let image = LightmapImage {
         pngs,
         intensity,
         encoding,
         ao,
+        layers,
     };
     write::build(gltf, &bake.scene, &bake.atlas, &image)
 }

@@ -112,6 +112,9 @@ pub struct Direct<'a> {
     tree: LightTree,
     /// The sky (`--sky`), if any.
     pub sky: Option<Sky>,
+    /// The punctual lights it counts (indices into [`Scene::lights`]): all of them unless
+    /// [`Direct::only`] kept fewer.
+    lights: Vec<usize>,
     /// [`SolveOptions::light_error`].
     light_error: f64,
     bounded: AtomicU64,
@@ -169,6 +172,7 @@ impl<'a> Direct<'a> {
             occluders,
             tree,
             sky: Sky::new(scene, options.sky, options.sky_samples),
+            lights: (0..scene.lights.len()).collect(),
             light_error: options.light_error,
             bounded: AtomicU64::new(0),
             evaluations: AtomicU64::new(0),
@@ -186,6 +190,29 @@ impl<'a> Direct<'a> {
         self.emitters.clear();
         self.per_emitter.clear();
         self.tree = LightTree::default();
+    }
+
+    /// Keeps only the area emitters on the polygons `emitter` takes and the punctual lights
+    /// `light` takes (indices into [`Scene::lights`]); the sky only when `sky`. The light of a
+    /// group of lights alone ([`crate::scene::mixed`]).
+    pub(crate) fn only(
+        &mut self,
+        emitter: impl Fn(usize) -> bool,
+        light: impl Fn(usize) -> bool,
+        sky: bool,
+    ) {
+        let keep: Vec<bool> = self.emitters.iter().map(|e| emitter(e.polygon)).collect();
+        let mut k = keep.iter();
+        self.emitters.retain(|_| *k.next().unwrap_or(&false));
+        let mut k = keep.iter();
+        self.per_emitter.retain(|_| *k.next().unwrap_or(&false));
+        if self.method == DirectMethod::Exact {
+            self.tree = LightTree::new(&self.emitters);
+        }
+        self.lights.retain(|&l| light(l));
+        if !sky {
+            self.sky = None;
+        }
     }
 
     /// Irradiance H (W/m²) at a receiving point.
@@ -214,7 +241,7 @@ impl<'a> Direct<'a> {
         points: &[SurfacePoint],
     ) -> Vec<DVec3> {
         let mut h = self.evaluate(points, false);
-        let rays = punctual_over_fans(self.scene, self.vis, mesh, points, &mut h);
+        let rays = punctual_over_fans(self.scene, self.vis, &self.lights, mesh, points, &mut h);
         self.rays.fetch_add(rays, Ordering::Relaxed);
         h
     }
@@ -308,7 +335,7 @@ impl<'a> Direct<'a> {
                 .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
         }
         for (pt, h) in points.iter().zip(&mut h).filter(|_| punctual) {
-            for light in &self.scene.lights {
+            for light in self.lights.iter().map(|&l| &self.scene.lights[l]) {
                 let (value, r) = punctual_irradiance(light, self.vis, pt);
                 *h += value;
                 tally.rays += r;
@@ -527,7 +554,10 @@ impl<'a> Direct<'a> {
             rays += r;
             h += e.radiance * (visible * (PI * f));
         }
-        for light in self.scene.lights.iter().filter(|_| punctual) {
+        for light in self.lights.iter().map(|&l| &self.scene.lights[l]) {
+            if !punctual {
+                break;
+            }
             let (value, r) = punctual_irradiance(light, self.vis, at);
             h += value;
             rays += r;
@@ -767,6 +797,7 @@ const FAN_SAMPLES: [[f64; 3]; 4] = [
 fn punctual_over_fans(
     scene: &Scene,
     vis: &Visibility,
+    lights: &[usize],
     mesh: &ReceiverMesh,
     points: &[SurfacePoint],
     h: &mut [DVec3],
@@ -784,7 +815,7 @@ fn punctual_over_fans(
     let mut rays = 0;
     // Per vertex: the lit weight (per channel) and all the weight.
     let mut weights = vec![(DVec3::ZERO, 0.0f64); points.len()];
-    for light in &scene.lights {
+    for light in lights.iter().map(|&l| &scene.lights[l]) {
         let unoccluded: Vec<Option<DVec3>> = points
             .iter()
             .map(|q| punctual_unoccluded(light, q.p, q.n))

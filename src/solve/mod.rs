@@ -61,6 +61,7 @@ pub use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint};
 
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
+use crate::scene::mixed::{BakeMode, LightRule};
 use crate::solve::backproject::Limits;
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
@@ -190,6 +191,9 @@ pub struct Solution {
     pub irradiance: Vec<Vec<DVec3>>,
     /// Direct part of `irradiance`, same layout.
     pub direct: Vec<Vec<DVec3>>,
+    /// Per light group ([`crate::scene::mixed`], sorted by name): the group's name and its
+    /// lights' part of `irradiance`, same layout. Empty without groups.
+    pub layers: Vec<(String, Vec<Vec<DVec3>>)>,
     pub stats: SolveStats,
 }
 
@@ -333,13 +337,40 @@ pub fn radiosity(
         direct.drop_area_emitters();
     }
 
-    // Direct light at the vertices.
+    // Direct light at the vertices: of every light at once, or of each set of lights with
+    // one rule ([`crate::scene::mixed`]) on its own.
     let start = Instant::now();
-    let mut direct_h = direct_light(scene, vis, &direct, meshes, progress);
-    stats.direct = direct.stats();
+    let parts = if scene.mixed.is_plain() {
+        let direct_h = direct_light(scene, vis, &direct, meshes, progress);
+        stats.direct = direct.stats();
+        vec![(LightRule::default(), direct_h)]
+    } else {
+        direct_by_rule(
+            scene,
+            vis,
+            meshes,
+            options,
+            emitters_in_solve,
+            &mut stats,
+            progress,
+        )
+    };
     stats.direct.seconds = start.elapsed().as_secs_f64();
+    let mut direct_h = match &parts[..] {
+        [(_, one)] => one.clone(),
+        _ => sum_of(parts.iter().map(|(_, d)| d), meshes),
+    };
+    let groups = scene.mixed.groups();
+    let layers_direct: Vec<Vec<Vec<DVec3>>> = groups
+        .iter()
+        .map(|g| {
+            let of_group = parts.iter().filter(|(r, _)| r.group.as_ref() == Some(g));
+            sum_of(of_group.map(|(_, d)| d), meshes)
+        })
+        .collect();
 
     let start = Instant::now();
+    let mut layers = layers_direct.clone();
     let irradiance = if options.bounces == Some(0) && !emitters_in_solve {
         direct_h.clone()
     } else {
@@ -355,12 +386,34 @@ pub fn radiosity(
                 progress,
             ),
             Solver::Hierarchical => {
-                hierarchical::indirect(scene, vis, meshes, &direct_h, options, &mut stats, progress)
+                let (h, l) = hierarchical::indirect_with_layers(
+                    scene,
+                    vis,
+                    meshes,
+                    &direct_h,
+                    &layers_direct,
+                    options,
+                    &mut stats,
+                    progress,
+                );
+                layers = l;
+                h
             }
         }
     };
+    // `bake: indirect`: the bounces of those lights stay, their direct light goes.
+    let mut irradiance = irradiance;
+    for (rule, d) in parts.iter().filter(|(r, _)| r.bake == BakeMode::Indirect) {
+        subtract(&mut irradiance, d);
+        subtract(&mut direct_h, d);
+        if let Some(k) = groups.iter().position(|g| rule.group.as_ref() == Some(g)) {
+            subtract(&mut layers[k], d);
+        }
+    }
     stats.rays += direct.rays.load(Ordering::Relaxed);
-    if let Some(sky) = &direct.sky {
+    if let Some(sky) = &direct.sky
+        && (stats.sky.is_none() || sky.rays() > 0)
+    {
         stats.rays += sky.rays();
         stats.sky = Some(sky.stats());
     }
@@ -369,6 +422,88 @@ pub fn radiosity(
     Solution {
         irradiance,
         direct: direct_h,
+        layers: groups.into_iter().zip(layers).collect(),
         stats,
+    }
+}
+
+/// The direct light at the vertices of each set of lights that share a rule
+/// ([`crate::scene::mixed`]), in the rules' order: the sky goes with the lights baked fully in
+/// no group (a set of its own when there are none). The counters of all of them into `stats`.
+fn direct_by_rule(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    options: &SolveOptions,
+    emitters_in_solve: bool,
+    stats: &mut SolveStats,
+    progress: &crate::progress::Progress<'_>,
+) -> Vec<(LightRule, Vec<Vec<DVec3>>)> {
+    let mixed = &scene.mixed;
+    let mut rules: Vec<LightRule> = (0..scene.lights.len()).map(|l| mixed.light(l)).collect();
+    if !emitters_in_solve {
+        rules.extend(scene.emitters().map(|p| mixed.polygon(scene, p)));
+    }
+    rules.push(LightRule::default());
+    rules.sort();
+    rules.dedup();
+    let mut rays = 0;
+    let parts = rules
+        .into_iter()
+        .map(|rule| {
+            let mut direct = Direct::with_options(scene, vis, options);
+            if emitters_in_solve {
+                direct.drop_area_emitters();
+            }
+            direct.only(
+                |p| mixed.polygon(scene, p) == rule,
+                |l| mixed.light(l) == rule,
+                rule == LightRule::default(),
+            );
+            let d = direct_light(scene, vis, &direct, meshes, progress);
+            let s = direct.stats();
+            stats.direct.evaluations += s.evaluations;
+            stats.direct.fallbacks += s.fallbacks;
+            stats.direct.candidates += s.candidates;
+            stats.direct.occluders += s.occluders;
+            stats.direct.bounded += s.bounded;
+            stats.direct.emitters.extend(s.emitters);
+            rays += direct.rays.load(Ordering::Relaxed);
+            if let Some(sky) = &direct.sky {
+                rays += sky.rays();
+                stats.sky = Some(sky.stats());
+            }
+            (rule, d)
+        })
+        .collect();
+    stats.rays += rays;
+    parts
+}
+
+/// The sum of per-vertex values over `parts` (zero where there are none).
+fn sum_of<'a>(
+    parts: impl Iterator<Item = &'a Vec<Vec<DVec3>>>,
+    meshes: &[ReceiverMesh],
+) -> Vec<Vec<DVec3>> {
+    let mut sum: Vec<Vec<DVec3>> = meshes
+        .iter()
+        .map(|m| vec![DVec3::ZERO; m.vertices.len()])
+        .collect();
+    for part in parts {
+        for (s, p) in sum.iter_mut().zip(part) {
+            for (s, p) in s.iter_mut().zip(p) {
+                *s += *p;
+            }
+        }
+    }
+    sum
+}
+
+/// `values -= part`, vertex by vertex.
+fn subtract(values: &mut [Vec<DVec3>], part: &[Vec<DVec3>]) {
+    for (v, p) in values.iter_mut().zip(part) {
+        for (v, p) in v.iter_mut().zip(p) {
+            *v -= *p;
+        }
     }
 }

@@ -14,6 +14,7 @@ mod hierarchical;
 mod known_answers;
 mod loading;
 mod matrix;
+mod mixed;
 mod mutation;
 mod osm_like;
 mod output;

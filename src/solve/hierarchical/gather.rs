@@ -34,6 +34,20 @@ impl Hierarchy {
     /// link's `toward` offset from the source's centre (kept within zero and twice the mean),
     /// not its mean.
     pub fn gather_linear(&self, links: &[Link], b: &[DVec3], g: &[Gradient]) -> Vec<DVec3> {
+        self.gather_clamped_as(links, b, g, None)
+    }
+
+    /// [`Hierarchy::gather_linear`] of one part of a radiosity whose whole is `whole` (its node
+    /// radiosities and gradients; `None`: `b` and `g` are the whole): each link's gradient
+    /// term is scaled, per channel, as the clamp scales the whole's, so that the parts' gathers
+    /// add up to the whole's exactly (the clamp alone is not linear).
+    pub(crate) fn gather_clamped_as(
+        &self,
+        links: &[Link],
+        b: &[DVec3],
+        g: &[Gradient],
+        whole: Option<(&[DVec3], &[Gradient])>,
+    ) -> Vec<DVec3> {
         let mut starts = Vec::new();
         for (i, l) in links.iter().enumerate() {
             if i == 0 || links[i - 1].receiver != l.receiver {
@@ -52,7 +66,20 @@ impl Hierarchy {
                         let b = match g.get(s) {
                             Some(g) if l.toward != [0.0; 3] => {
                                 let t = DVec3::from(l.toward.map(f64::from));
-                                (b[s] + along(g, t)).clamp(DVec3::ZERO, 2.0 * b[s])
+                                match whole {
+                                    None => (b[s] + along(g, t)).clamp(DVec3::ZERO, 2.0 * b[s]),
+                                    Some((bw, gw)) => {
+                                        let e = along(&gw[s], t);
+                                        let kept =
+                                            (bw[s] + e).clamp(DVec3::ZERO, 2.0 * bw[s]) - bw[s];
+                                        let scale = DVec3::select(
+                                            e.cmpeq(DVec3::ZERO),
+                                            DVec3::ONE,
+                                            kept / e,
+                                        );
+                                        b[s] + scale * along(g, t)
+                                    }
+                                }
                             }
                             _ => b[s],
                         };

@@ -254,7 +254,7 @@ use super::{DEFAULT_HR_TOLERANCE, SolveOptions, SolveStats};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
 use crate::visibility::Visibility;
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use std::time::Instant;
 use vertex::vertex_indirect;
@@ -366,6 +366,25 @@ pub fn indirect(
     stats: &mut SolveStats,
     progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
+    indirect_with_layers(scene, vis, meshes, direct_h, &[], options, stats, progress).0
+}
+
+/// [`indirect`], and the same for each of `layers` (direct irradiance at the vertices, as
+/// `direct_h`: the light of a group of lights alone, [`crate::scene::mixed`]) with the links
+/// refined for `direct_h`, so that the layers' light is linear in their direct light: layers
+/// whose direct light adds up to `direct_h` add up to its result, up to the iterations'
+/// tolerance and the clamp of the sources' gradients ([`Hierarchy::gather_linear`]).
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn indirect_with_layers(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    direct_h: &[Vec<DVec3>],
+    layers: &[Vec<Vec<DVec3>>],
+    options: &SolveOptions,
+    stats: &mut SolveStats,
+    progress: &crate::progress::Progress<'_>,
+) -> (Vec<Vec<DVec3>>, Vec<Vec<Vec<DVec3>>>) {
     let mut hs = HierStats {
         tolerance: options.hr_tolerance,
         ..Default::default()
@@ -373,7 +392,7 @@ pub fn indirect(
     let start = Instant::now();
     let Some(h) = Hierarchy::build(scene, vis, meshes, direct_h) else {
         stats.hierarchical = Some(hs);
-        return direct_h.to_vec();
+        return (direct_h.to_vec(), layers.to_vec());
     };
     hs.nodes = h.nodes.len();
     hs.elements = h.elements.len();
@@ -388,8 +407,10 @@ pub fn indirect(
     let lit = h.mean_direct();
     stats.direct_power = lit * total_area;
     let mut indirect = vec![DVec3::ZERO; els.len()];
-    let mut b_el = reflected_direct.clone();
+    let mut b_el = reflected_direct;
     let mut left = 0.0;
+    let mut last_links = Vec::new();
+    let mut last_iterations = 0;
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
         let mut previous: Option<Vec<Link>> = None;
@@ -449,52 +470,42 @@ pub fn indirect(
             hs.links = links.len();
             hs.link_seconds += t.elapsed().as_secs_f64();
             let t = Instant::now();
-            let mut iterations = 0usize;
             // Each pass restarts from the reflected direct light: the links changed.
-            b_el.clone_from(&reflected_direct);
-            loop {
-                let b_nodes = h.pull(&b_el);
-                let grads = h.gradients(&b_nodes, &moments);
-                let gathered = h.gather_linear(&links, &b_nodes, &grads);
-                indirect = h.push(&gathered);
-                let next: Vec<DVec3> = els
-                    .iter()
-                    .zip(&indirect)
-                    .map(|(e, hi)| e.rho * (e.direct + *hi))
-                    .collect();
-                left = els
-                    .iter()
-                    .zip(next.iter().zip(&b_el))
-                    .map(|(e, (n, o))| e.area * mean((*n - *o).abs()))
-                    .sum();
-                b_el = next;
-                iterations += 1;
-                // Each bounce carries at most rho (< 1) of the previous one, so the change
-                // shrinks; where it grows (surfaces counted twice, as with duplicated
-                // geometry) the solve diverges: stop, and `unshot_fraction` > 1 says so.
-                if left.is_nan() || left > 2.0 * initial {
-                    break;
-                }
-                match options.bounces {
-                    Some(n) if iterations >= n as usize => break,
-                    Some(_) => {}
-                    None if left <= options.tolerance * initial => break,
-                    None if iterations >= MAX_ITERATIONS => {
-                        stats.warnings.push(format!(
-                            "hierarchical radiosity: not converged after {MAX_ITERATIONS} \
-                             iterations (change {:e} of the reflected direct power)",
-                            left / initial
-                        ));
-                        break;
-                    }
-                    None => {}
-                }
-            }
+            let direct_el: Vec<DVec3> = els.iter().map(|e| e.direct).collect();
+            let (ind, b, l, iterations) = iterate(
+                &h,
+                &links,
+                &moments,
+                &direct_el,
+                initial,
+                options,
+                &mut stats.warnings,
+            );
+            last_iterations = iterations;
+            (indirect, b_el, left) = (ind, b, l);
             hs.iterations += iterations;
             hs.solve_seconds += t.elapsed().as_secs_f64();
             previous = Some(all);
+            last_links = links;
         }
     }
+    // The layers, with the last pass's links and as many iterations, in step with the whole:
+    // from zero, `n` Jacobi iterations are a linear map of the direct light (the gradients'
+    // clamp scaled as the whole's), so the layers add up to the whole.
+    let layer_indirect = if layers.is_empty() || initial <= 0.0 {
+        vec![vec![DVec3::ZERO; els.len()]; layers.len()]
+    } else {
+        let direct_el: Vec<DVec3> = els.iter().map(|e| e.direct).collect();
+        let parts: Vec<Vec<DVec3>> = layers.iter().map(|l| h.element_values(l)).collect();
+        iterate_parts(
+            &h,
+            &last_links,
+            &moments,
+            &direct_el,
+            &parts,
+            last_iterations,
+        )
+    };
     let t = Instant::now();
     stats.absorbed_power = els
         .iter()
@@ -502,12 +513,31 @@ pub fn indirect(
         .map(|(e, hi)| e.area * mean((DVec3::ONE - e.rho) * (e.direct + *hi)))
         .sum();
     stats.unshot_fraction = if initial > 0.0 { left / initial } else { 0.0 };
-    // Vertex values: a linear fit over the elements using each vertex copy.
+    let out = at_vertices(&h, meshes, direct_h, &indirect);
+    let layers = layers
+        .iter()
+        .zip(&layer_indirect)
+        .map(|(d, i)| at_vertices(&h, meshes, d, i))
+        .collect();
+    hs.vertex_seconds = t.elapsed().as_secs_f64();
+    stats.rays += hs.rays;
+    stats.hierarchical = Some(hs);
+    (out, layers)
+}
+
+/// The vertices' irradiance: `direct_h` plus the elements' `indirect`, by a linear fit over
+/// the elements using each vertex copy.
+fn at_vertices(
+    h: &Hierarchy,
+    meshes: &[ReceiverMesh],
+    direct_h: &[Vec<DVec3>],
+    indirect: &[DVec3],
+) -> Vec<Vec<DVec3>> {
     let mut per_mesh: Vec<Vec<(u32, f64, DVec3)>> = vec![Vec::new(); meshes.len()];
-    for (e, hi) in els.iter().zip(&indirect) {
+    for (e, hi) in h.elements.iter().zip(indirect) {
         per_mesh[e.mesh].push((e.triangle as u32, e.area, *hi));
     }
-    let out = meshes
+    meshes
         .par_iter()
         .zip(direct_h)
         .zip(&per_mesh)
@@ -518,11 +548,107 @@ pub fn indirect(
                 .map(|(&d, hi)| d + hi.unwrap_or(DVec3::ZERO))
                 .collect()
         })
-        .collect();
-    hs.vertex_seconds = t.elapsed().as_secs_f64();
-    stats.rays += hs.rays;
-    stats.hierarchical = Some(hs);
-    out
+        .collect()
+}
+
+/// `count` Jacobi iterations of the whole (`direct`, per element) and of each of `parts` (the
+/// direct light of parts of it) in step, each part's gather clamped as the whole's
+/// ([`Hierarchy::gather_clamped_as`]). Returns each part's indirect irradiance per element.
+fn iterate_parts(
+    h: &Hierarchy,
+    links: &[Link],
+    moments: &[DMat3],
+    direct: &[DVec3],
+    parts: &[Vec<DVec3>],
+    count: usize,
+) -> Vec<Vec<DVec3>> {
+    let els = &h.elements;
+    let reflect = |d: &[DVec3], hi: &[DVec3]| -> Vec<DVec3> {
+        els.iter()
+            .zip(d.iter().zip(hi))
+            .map(|(e, (d, hi))| e.rho * (*d + *hi))
+            .collect()
+    };
+    let zero = vec![DVec3::ZERO; els.len()];
+    let mut b = reflect(direct, &zero);
+    let mut bp: Vec<Vec<DVec3>> = parts.iter().map(|d| reflect(d, &zero)).collect();
+    let mut indirect = vec![zero; parts.len()];
+    for _ in 0..count {
+        let nodes = h.pull(&b);
+        let grads = h.gradients(&nodes, moments);
+        for ((bp, ind), d) in bp.iter_mut().zip(&mut indirect).zip(parts) {
+            let part_nodes = h.pull(bp);
+            let part_grads = h.gradients(&part_nodes, moments);
+            let whole = Some((&nodes[..], &grads[..]));
+            *ind = h.push(&h.gather_clamped_as(links, &part_nodes, &part_grads, whole));
+            *bp = reflect(d, ind);
+        }
+        b = reflect(direct, &h.push(&h.gather_linear(links, &nodes, &grads)));
+    }
+    indirect
+}
+
+/// Jacobi iterations of `B = rho (direct + K B)` over fixed `links`, from the elements' direct
+/// irradiance `direct` (W/m²): until the change in reflected power is at most
+/// `options.tolerance` of `initial` (W, the reflected direct power), `options.bounces` bounces, or [`MAX_ITERATIONS`]; or when the change grows past
+/// twice `initial` (diverging). Returns the elements' indirect irradiance, their radiosity,
+/// the last change (W) and the iterations.
+#[allow(clippy::too_many_arguments)]
+fn iterate(
+    h: &Hierarchy,
+    links: &[Link],
+    moments: &[DMat3],
+    direct: &[DVec3],
+    initial: f64,
+    options: &SolveOptions,
+    warnings: &mut Vec<String>,
+) -> (Vec<DVec3>, Vec<DVec3>, f64, usize) {
+    let mean = |c: DVec3| c.element_sum() / 3.0;
+    let els = &h.elements;
+    let mut b_el: Vec<DVec3> = els.iter().zip(direct).map(|(e, d)| e.rho * *d).collect();
+    let mut indirect = vec![DVec3::ZERO; els.len()];
+    let mut left: f64;
+    let mut iterations = 0usize;
+    loop {
+        let b_nodes = h.pull(&b_el);
+        let grads = h.gradients(&b_nodes, moments);
+        let gathered = h.gather_linear(links, &b_nodes, &grads);
+        indirect = h.push(&gathered);
+        let next: Vec<DVec3> = els
+            .iter()
+            .zip(&indirect)
+            .zip(direct)
+            .map(|((e, hi), d)| e.rho * (*d + *hi))
+            .collect();
+        left = els
+            .iter()
+            .zip(next.iter().zip(&b_el))
+            .map(|(e, (n, o))| e.area * mean((*n - *o).abs()))
+            .sum();
+        b_el = next;
+        iterations += 1;
+        // Each bounce carries at most rho (< 1) of the previous one, so the change
+        // shrinks; where it grows (surfaces counted twice, as with duplicated
+        // geometry) the solve diverges: stop, and `unshot_fraction` > 1 says so.
+        if left.is_nan() || left > 2.0 * initial {
+            break;
+        }
+        match options.bounces {
+            Some(n) if iterations >= n as usize => break,
+            Some(_) => {}
+            None if left <= options.tolerance * initial => break,
+            None if iterations >= MAX_ITERATIONS => {
+                warnings.push(format!(
+                    "hierarchical radiosity: not converged after {MAX_ITERATIONS} \
+                     iterations (change {:e} of the reflected direct power)",
+                    left / initial
+                ));
+                break;
+            }
+            None => {}
+        }
+    }
+    (indirect, b_el, left, iterations)
 }
 
 #[cfg(test)]

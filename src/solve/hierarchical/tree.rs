@@ -449,6 +449,21 @@ impl Hierarchy {
         })
     }
 
+    /// Per element, the mean of `at_vertices` (per mesh, per vertex, as the direct irradiance
+    /// [`Hierarchy::build`] took) at its three corners.
+    pub(crate) fn element_values(&self, at_vertices: &[Vec<DVec3>]) -> Vec<DVec3> {
+        self.elements
+            .iter()
+            .map(|e| {
+                let d = &at_vertices[e.mesh];
+                e.v.iter()
+                    .map(|&i| d.get(i as usize).copied().unwrap_or(DVec3::ZERO))
+                    .sum::<DVec3>()
+                    / 3.0
+            })
+            .collect()
+    }
+
     /// The elements' area-weighted mean direct irradiance (W/m², mean over RGB).
     pub fn mean_direct(&self) -> f64 {
         let (sum, area) = self.elements.iter().fold((0.0, 0.0), |(s, a), e| {
