@@ -300,6 +300,10 @@ struct RenderArgs {
     /// Bevy and Godot apply occlusion to baked light.
     #[arg(long, conflicts_with_all = ["irradiance", "lightmap_alone"])]
     occlusion: bool,
+    /// Scale a light group's layer (a bake's `--light-group`) by FACTOR, as a game does at run
+    /// time: NAME=FACTOR (repeatable; 0 switches the group off).
+    #[arg(long, value_name = "NAME=FACTOR", value_parser = parse_layer_scale, conflicts_with_all = ["irradiance", "lightmap_alone"])]
+    layer: Vec<(String, f64)>,
     #[command(flatten)]
     input_args: InputArgs,
 }
@@ -695,6 +699,19 @@ fn pool(threads: Option<usize>) -> anyhow::Result<rayon::ThreadPool> {
     pool.build().context("cannot start worker threads")
 }
 
+/// `NAME=FACTOR` of `render --layer`.
+fn parse_layer_scale(text: &str) -> Result<(String, f64), String> {
+    let (name, factor) = text
+        .rsplit_once('=')
+        .ok_or_else(|| format!("{text:?}: expected NAME=FACTOR"))?;
+    let factor: f64 = factor
+        .parse()
+        .ok()
+        .filter(|f: &f64| f.is_finite() && *f >= 0.0)
+        .ok_or_else(|| format!("{factor:?} is not a finite factor of at least 0"))?;
+    Ok((name.to_string(), factor))
+}
+
 fn render(args: RenderArgs) -> anyhow::Result<()> {
     let gltf = args.input_args.read(&args.input)?;
     use penumbra::render::Camera;
@@ -733,7 +750,10 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let shading = match &map {
         Some(map) => penumbra::render::Shading::Irradiance(map),
         None if args.lightmap_alone => penumbra::render::Shading::LightmapAlone,
-        None if args.occlusion => penumbra::render::Shading::LightmapOccluded,
+        None if args.occlusion || !args.layer.is_empty() => penumbra::render::Shading::Adjusted {
+            layers: &args.layer,
+            occlusion: args.occlusion,
+        },
         None => penumbra::render::Shading::Lightmap,
     };
     let img =

@@ -133,10 +133,16 @@ impl Camera {
 pub enum Shading<'a> {
     /// `albedo/pi x H` with H from the file's own lightmap texture (as a client shows it).
     Lightmap,
-    /// [`Shading::Lightmap`] with H times the material's `occlusionTexture` (its red channel,
-    /// linear, by its `strength`: `1 + strength (ao - 1)`), as three.js applies an `aoMap` to
-    /// a `lightMap` (and Bevy and Godot their occlusion to baked indirect light).
-    LightmapOccluded,
+    /// [`Shading::Lightmap`] as a game adjusts it at run time: each light group's layer
+    /// (`MOZ_lightmap.extras.penumbra.layers`) scaled by its factor in `layers` (group name,
+    /// factor; `H + (factor - 1) H_group`), and with `occlusion` H times the material's
+    /// `occlusionTexture` (its red channel, linear, by its `strength`: `1 + strength (ao -
+    /// 1)`), as three.js applies an `aoMap` to a `lightMap` (and Bevy and Godot their
+    /// occlusion to baked indirect light).
+    Adjusted {
+        layers: &'a [(String, f64)],
+        occlusion: bool,
+    },
     /// `H/pi` from the file's own lightmap texture: the lightmap alone, on white surfaces, no
     /// emission (what a lightmap holds, whatever the textures and colours).
     LightmapAlone,
@@ -216,61 +222,85 @@ pub fn render_radiance(
         item,
         reason: reason.into(),
     };
-    // Lightmap bindings per instance with their page, decoded textures per texture index.
+    // Decoded textures per texture index: lightmaps (and layers) by their encoding, occlusion
+    // textures as their red channel, linear.
     let mut textures: BTreeMap<usize, Lightmap> = BTreeMap::new();
+    let mut decode = |texture: usize, occlusion: bool| -> Result<()> {
+        if textures.contains_key(&texture) {
+            return Ok(());
+        }
+        let item = format!("texture {texture}");
+        let bytes = binding::texture_bytes(gltf, texture)?;
+        let encoding = binding::texture_encoding(gltf, texture)?;
+        let img = gltf
+            .decode_image(&bytes, &item)?
+            .map_err(|e| bad(item, &e))?
+            .to_rgb32f();
+        let texels = img
+            .pixels()
+            .map(|p| match occlusion {
+                true => DVec3::splat(f64::from(p.0[0])),
+                false => DVec3::from(p.0.map(|c| encoding.decode(f64::from(c)))),
+            })
+            .collect();
+        textures.insert(
+            texture,
+            Lightmap {
+                width: img.width(),
+                height: img.height(),
+                texels,
+                coverage: Vec::new(),
+            },
+        );
+        Ok(())
+    };
+    // Per instance: its lightmap binding with its page; with [`Shading::Adjusted`], the layer
+    // textures to add (texture, weight: intensity x (factor - 1)) and its occlusion binding.
     let mut bindings: Vec<Option<(Binding, usize)>> = Vec::new();
-    // With [`Shading::LightmapOccluded`]: the occlusion texture per instance, decoded per index.
-    let mut occlusion_maps: BTreeMap<usize, Lightmap> = BTreeMap::new();
+    let mut added: Vec<Vec<(usize, f64)>> = Vec::new();
     let mut occlusions: Vec<Option<Binding>> = Vec::new();
     for inst in &scene.instances {
         let b = binding::binding(gltf, inst)?;
-        if let Some(b) = &b
-            && let std::collections::btree_map::Entry::Vacant(e) = textures.entry(b.texture)
-        {
-            let item = format!("texture {}", b.texture);
-            let bytes = binding::texture_bytes(gltf, b.texture)?;
-            let encoding = binding::texture_encoding(gltf, b.texture)?;
-            let img = gltf
-                .decode_image(&bytes, &item)?
-                .map_err(|e| bad(item, &e))?
-                .to_rgb32f();
-            e.insert(Lightmap {
-                width: img.width(),
-                height: img.height(),
-                texels: img
-                    .pixels()
-                    .map(|p| DVec3::from(p.0.map(|c| encoding.decode(f64::from(c)))))
-                    .collect(),
-                coverage: Vec::new(),
-            });
+        let mut add = Vec::new();
+        if let Some(b) = &b {
+            decode(b.texture, false)?;
+            if let Shading::Adjusted { layers, .. } = shading {
+                for (group, factor) in layers {
+                    if let Some(&(texture, intensity)) = b.layers.get(group) {
+                        decode(texture, false)?;
+                        add.push((texture, intensity * (factor - 1.0)));
+                    }
+                }
+            }
         }
+        added.push(add);
+        let o = match shading {
+            Shading::Adjusted {
+                occlusion: true, ..
+            } => binding::occlusion(gltf, inst)?,
+            _ => None,
+        };
+        if let Some(o) = &o {
+            decode(o.texture, true)?;
+        }
+        occlusions.push(o);
         bindings.push(b.map(|b| {
             let page = binding::texture_page(gltf, b.texture);
             (b, page)
         }));
-        if matches!(shading, Shading::LightmapOccluded) {
-            let o = binding::occlusion(gltf, inst)?;
-            if let Some(o) = &o
-                && let std::collections::btree_map::Entry::Vacant(e) =
-                    occlusion_maps.entry(o.texture)
-            {
-                let item = format!("texture {}", o.texture);
-                let bytes = binding::texture_bytes(gltf, o.texture)?;
-                let img = gltf
-                    .decode_image(&bytes, &item)?
-                    .map_err(|e| bad(item, &e))?
-                    .to_rgb32f();
-                e.insert(Lightmap {
-                    width: img.width(),
-                    height: img.height(),
-                    texels: img
-                        .pixels()
-                        .map(|p| DVec3::splat(f64::from(p.0[0])))
-                        .collect(),
-                    coverage: Vec::new(),
-                });
-            }
-            occlusions.push(o);
+    }
+    if let Shading::Adjusted { layers, .. } = shading {
+        let known: std::collections::BTreeSet<&String> = bindings
+            .iter()
+            .flatten()
+            .flat_map(|(b, _)| b.layers.keys())
+            .collect();
+        if let Some((missing, _)) = layers.iter().find(|(g, _)| !known.contains(g)) {
+            return Err(Error::BadItem {
+                path: gltf.path.clone(),
+                item: format!("light group {missing:?}"),
+                reason: format!("no lightmap layer of that name (layers: {known:?})"),
+            });
         }
     }
     let aspect = width as f64 / height as f64;
@@ -312,11 +342,14 @@ pub fn render_radiance(
                     Shading::Irradiance(map) => sample_page(map, page, uv),
                     _ => sample_map(&textures[&b.texture], uv) * b.intensity,
                 };
-                if let Some(Some(o)) = occlusions.get(tri.instance) {
+                for &(texture, weight) in &added[tri.instance] {
+                    h += sample_map(&textures[&texture], uv) * weight;
+                }
+                if let Some(o) = &occlusions[tri.instance] {
                     let inst = &scene.instances[tri.instance];
                     let ids = &inst.indices[3 * tri.local_index..3 * tri.local_index + 3];
                     let uv: DVec2 = (0..3).map(|c| o.uv[ids[c] as usize] * bary[c]).sum();
-                    let ao = sample_map(&occlusion_maps[&o.texture], uv).x;
+                    let ao = sample_map(&textures[&o.texture], uv).x;
                     h *= 1.0 + o.intensity * (ao - 1.0);
                 }
                 let albedo = if alone {

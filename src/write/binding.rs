@@ -22,6 +22,9 @@ pub(crate) struct Binding {
     pub texture: usize,
     /// Irradiance H (W/m²) of a full-scale texel (`MOZ_lightmap.intensity`, 1 when absent).
     pub intensity: f64,
+    /// The light groups' layers of this page (`MOZ_lightmap.extras.penumbra.layers`): per
+    /// group, its texture and intensity.
+    pub layers: std::collections::BTreeMap<String, (usize, f64)>,
 }
 
 /// The lightmap binding of a scene instance's primitive: `None` when its material has no
@@ -34,11 +37,23 @@ pub(crate) fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
         return Ok(None);
     };
     let (tex_coord, uv) = uv_set(gltf, inst, moz, 1, "MOZ_lightmap")?;
+    let layers = moz
+        .get("extras")
+        .and_then(|e| e["penumbra"]["layers"].as_array())
+        .into_iter()
+        .flatten()
+        .filter_map(|l| {
+            let group = l["group"].as_str()?.to_string();
+            let texture = l["index"].as_u64()? as usize;
+            Some((group, (texture, l["intensity"].as_f64().unwrap_or(1.0))))
+        })
+        .collect();
     Ok(Some(Binding {
         tex_coord,
         uv,
         texture: moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
         intensity: moz.get("intensity").and_then(|v| v.as_f64()).unwrap_or(1.0),
+        layers,
     }))
 }
 
@@ -57,6 +72,7 @@ pub(crate) fn occlusion(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>>
         uv,
         texture: info.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
         intensity: info.get("strength").and_then(|v| v.as_f64()).unwrap_or(1.0),
+        layers: Default::default(),
     }))
 }
 

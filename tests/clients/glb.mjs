@@ -134,6 +134,10 @@ export const breakages = {
       if (json[key].length === 0) delete json[key];
     }
   },
+  /** No light-group layers listed in any `MOZ_lightmap`: a client cannot scale them. */
+  removeLayers(json) {
+    for (const m of json.materials ?? []) delete m.extensions?.MOZ_lightmap?.extras;
+  },
   /** No `occlusionTexture` on any material: the baked AO is not shown. */
   removeOcclusion(json) {
     for (const m of json.materials ?? []) delete m.occlusionTexture;

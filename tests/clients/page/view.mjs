@@ -74,13 +74,14 @@ function dispose(root) {
 /**
  * options: url (the glb), width, height, exposure (radiance shown as white, W/(m² sr)),
  * lightmapColorSpace ('file': as the texture's extras.penumbra.encoding says, through the
- * plugin; 'srgb' or 'none' to override it, e.g. to break it on purpose).
+ * plugin; 'srgb' or 'none' to override it, e.g. to break it on purpose), layerScales (light
+ * group name to factor: the plugin shows those groups' layers scaled).
  * Draws the glb, leaves the picture in the canvas, and returns what was loaded.
  */
-window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'file' }) {
+window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'file', layerScales = {} }) {
   const r = rendererOfSize(width, height);
   const loader = new GLTFLoader();
-  loader.register((parser) => new MozLightmapExtension(parser));
+  loader.register((parser) => new MozLightmapExtension(parser, layerScales));
   loader.setMeshoptDecoder(MeshoptDecoder);
   const gltf = await loader.loadAsync(url);
   const scene = gltf.scene;
