@@ -46,6 +46,9 @@ pub mod mesh;
 // exact visible emitter parts (`solve::backproject`).
 pub mod solve;
 
+// Light probes on a grid in space, from the solved meshes.
+pub mod probes;
+
 // Texels from the receiver meshes (buried sub-samples left out, dilation), and the
 // stitching of the seams between charts.
 pub mod lightmap;

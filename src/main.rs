@@ -431,6 +431,14 @@ struct BakeArgs {
     /// at run time: PATTERN=NAME (repeatable). Overrides `penumbra_group` in the extras.
     #[arg(long, value_name = "PATTERN=NAME", value_parser = penumbra::scene::mixed::CliRule::group)]
     light_group: Vec<penumbra::scene::mixed::CliRule>,
+    /// Also bake light probes for moving objects on a grid of SPACING (scene units) over the
+    /// scene's bounds: spherical harmonics for three.js and Bevy's irradiance volume, in the
+    /// root `extras.penumbra_probes`.
+    #[arg(long, value_name = "SPACING")]
+    probes: Option<f64>,
+    /// Rays per probe for its indirect light.
+    #[arg(long, value_name = "N", default_value_t = penumbra::probes::DEFAULT_RAYS)]
+    probe_rays: usize,
     /// Rays per texel of the ambient occlusion.
     #[arg(long, value_name = "N", default_value_t = penumbra::lightmap::ao::DEFAULT_SAMPLES)]
     ao_samples: usize,
@@ -797,6 +805,10 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         ao: args.ao.map(|distance| penumbra::lightmap::ao::AoOptions {
             distance,
             samples: args.ao_samples,
+        }),
+        probes: args.probes.map(|spacing| penumbra::probes::ProbeOptions {
+            spacing,
+            rays: args.probe_rays,
         }),
         lights: args
             .light_bake

@@ -25,6 +25,16 @@ pub struct Timings {
     pub total: f64,
 }
 
+/// `--stats`: `probes`.
+#[derive(Clone, Debug, Default, Serialize)]
+pub struct ProbeStats {
+    /// Probes baked, and of those the ones inside geometry.
+    pub probes: usize,
+    pub inside: usize,
+    /// Wall time, s.
+    pub seconds: f64,
+}
+
 /// Everything `--stats` reports.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Stats {
@@ -70,6 +80,9 @@ pub struct Stats {
     /// Ambient occlusion (`--ao`); its time is in `timings_s.lightmap`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ao: Option<crate::lightmap::ao::AoStats>,
+    /// Light probes (`--probes`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub probes: Option<ProbeStats>,
     pub timings_s: Timings,
     pub warnings: Vec<String>,
 }

@@ -52,6 +52,8 @@ pub struct BakeOptions {
     pub double_sided: DoubleSided,
     /// Ambient occlusion (`--ao`): written as the lightmapped materials' `occlusionTexture`.
     pub ao: Option<lightmap::ao::AoOptions>,
+    /// Light probes on a grid of this spacing (`--probes`), written in the root `extras`.
+    pub probes: Option<crate::probes::ProbeOptions>,
     /// How lights are baked and into which layers (`--light-bake`, `--light-group`), after the
     /// rules in the file's extras ([`scene::mixed`]).
     pub lights: Vec<scene::mixed::CliRule>,
@@ -111,6 +113,7 @@ impl Default for BakeOptions {
             seams: Seams::Stitch,
             double_sided: DoubleSided::Separate,
             ao: None,
+            probes: None,
             lights: Vec::new(),
             load: load::LoadOptions::default(),
         }
@@ -131,6 +134,8 @@ pub struct Bake {
     /// Per light group, its name and its lights' part of `lightmap`, in the same layout
     /// ([`scene::mixed`]).
     pub layers: Vec<(String, Lightmap)>,
+    /// The light probes (`--probes`).
+    pub probes: Option<crate::probes::Probes>,
     pub stats: Stats,
 }
 
@@ -207,6 +212,14 @@ impl BakeOptions {
         if !(0.0..=1.0).contains(&self.dm_threshold) {
             return bad("--dm-threshold", "must be between 0 and 1");
         }
+        if let Some(p) = &self.probes {
+            if !(p.spacing.is_finite() && p.spacing > 0.0) {
+                return bad("--probes", "must be a positive distance in scene units");
+            }
+            if !(1..=1_000_000).contains(&p.rays) {
+                return bad("--probe-rays", "must be between 1 and 1000000");
+            }
+        }
         if let Some(ao) = &self.ao {
             if !(ao.distance.is_finite() && ao.distance > 0.0) {
                 return bad("--ao", "must be a positive distance in scene units");
@@ -279,6 +292,32 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         stats.ao = Some(ao_stats);
         map
     });
+    let probes = match &options.probes {
+        Some(p) => {
+            let start = std::time::Instant::now();
+            progress("probes", 0, 1);
+            let probes = crate::probes::bake(
+                &scene,
+                &vis,
+                &meshes,
+                &solution.irradiance,
+                &options.solve,
+                p,
+            )
+            .map_err(|reason| Error::Option {
+                option: "--probes",
+                reason,
+            })?;
+            progress("probes", 1, 1);
+            stats.probes = Some(crate::stats::ProbeStats {
+                probes: probes.inside.len(),
+                inside: probes.inside.iter().filter(|&&i| i).count(),
+                seconds: start.elapsed().as_secs_f64(),
+            });
+            Some(probes)
+        }
+        None => None,
+    };
     stats.gather(&scene, &meshes, &solution, &atlas, &options.solve);
     check_light_is_finite(gltf, &solution)?;
     Ok(Bake {
@@ -290,6 +329,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         lightmap,
         ao,
         layers,
+        probes,
         stats,
     })
 }
@@ -1011,6 +1051,7 @@ pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake, encoding: Encoding) -> Result<Vec
         encoding,
         ao,
         layers,
+        probes: bake.probes.clone(),
     };
     write::build(gltf, &bake.scene, &bake.atlas, &image)
 }

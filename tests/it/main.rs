@@ -18,6 +18,7 @@ mod mixed;
 mod mutation;
 mod osm_like;
 mod output;
+mod probes;
 mod reference;
 mod seams;
 mod sky;
