@@ -160,3 +160,52 @@ fn a_probe_in_the_cornell_box_matches_the_path_tracer() {
         );
     }
 }
+
+#[test]
+fn the_probes_are_written_for_three_js_and_bevy() {
+    let options = BakeOptions {
+        probes: Some(ProbeOptions {
+            spacing: 0.3,
+            rays: 256,
+        }),
+        ..quick()
+    };
+    let input = fixtures::cornell_box();
+    let mut b = bake(&input, &options);
+    let probes = b.probes.clone().expect("probes");
+    let gltf = parse(&input, "cornell.glb");
+    let out = penumbra::bake::glb_bytes(&gltf, &mut b, penumbra::lightmap::Encoding::Srgb).unwrap();
+    let (json, bin) = crate::output::split_glb(&out);
+    let p = &json["extras"]["penumbra_probes"];
+    let [nx, ny, nz] = probes.counts;
+    assert_eq!(p["counts"], serde_json::json!([nx, ny, nz]));
+    assert_eq!(p["sh"].as_array().unwrap().len(), nx * ny * nz);
+    assert_eq!(p["sh"][0].as_array().unwrap().len(), 27);
+    // three.js's order: coefficient k's red, green, blue at 3k..3k+3.
+    let k = nx * ny * nz / 2;
+    let c4 = p["sh"][k][4 * 3 + 1].as_f64().unwrap();
+    assert!((c4 - probes.sh[k][4].y).abs() <= 1e-6 * c4.abs().max(1e-6));
+    // Bevy's texture: (nx, 2 ny, 3 nz), face +y of probe (x, y, z) at (x, y + ny, z + nz).
+    let volume = &p["irradiance_volume"];
+    assert_eq!(volume["size"], serde_json::json!([nx, 2 * ny, 3 * nz]));
+    let image = volume["image"].as_u64().unwrap() as usize;
+    let view = &json["bufferViews"][json["images"][image]["bufferView"].as_u64().unwrap() as usize];
+    let at = view["byteOffset"].as_u64().unwrap_or(0) as usize;
+    let png = &bin[at..at + view["byteLength"].as_u64().unwrap() as usize];
+    let img = image::load_from_memory(png).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (nx as u32, (2 * ny * 3 * nz) as u32));
+    let scale = volume["scale"].as_f64().unwrap();
+    let (x, y, z) = (k % nx, k / nx % ny, k / (nx * ny));
+    let (t, slice) = (y + ny, z + nz);
+    let texel = img.get_pixel(x as u32, (slice * 2 * ny + t) as u32);
+    let decode = |c: u8| penumbra::color::srgb_to_linear(c as f64 / 255.0) * scale;
+    let want = probes.cube[k][2];
+    for c in 0..3 {
+        assert!(
+            (decode(texel[c]) - want[c]).abs() <= 0.01 * scale,
+            "channel {c}: {} against {}",
+            decode(texel[c]),
+            want[c]
+        );
+    }
+}
