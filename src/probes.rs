@@ -114,23 +114,16 @@ pub fn sh_irradiance(sh: &[DVec3; 9], n: DVec3) -> DVec3 {
     (0..9).map(|i| sh[i] * (LOBE[i] * y[i])).sum()
 }
 
-/// Bakes the probes of `scene` from its solved `meshes` (`irradiance` at their vertices) on a
-/// grid of `options.spacing`; an error when the grid would have more than [`MAX_PROBES`].
-pub fn bake(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    irradiance: &[Vec<DVec3>],
-    solve: &SolveOptions,
-    options: &ProbeOptions,
-) -> Result<Probes, String> {
+/// The grid of probes of `scene` at `spacing` (scene units): its first probe and its counts
+/// along x, y and z; an error, which names the counts, when it has more than [`MAX_PROBES`].
+pub fn grid(scene: &Scene, spacing: f64) -> Result<(DVec3, [usize; 3]), String> {
     let extent = scene.bounds_max - scene.bounds_min;
-    let s = options.spacing;
+    let s = spacing;
     // Cells of side `s` over the bounds, a probe at each cell's centre (none on the bounds,
     // where the outer surfaces lie).
     let count = |e: f64| ((e / s).ceil() as usize).max(1);
     let counts = [count(extent.x), count(extent.y), count(extent.z)];
-    let total = counts
+    counts
         .iter()
         .try_fold(1usize, |a, &c| a.checked_mul(c))
         .filter(|&n| n <= MAX_PROBES)
@@ -147,7 +140,21 @@ pub fn bake(
         (counts[1] - 1) as f64,
         (counts[2] - 1) as f64,
     ) * s;
-    let origin = scene.bounds_min + (extent - used) * 0.5;
+    Ok((scene.bounds_min + (extent - used) * 0.5, counts))
+}
+
+/// Bakes the probes of `scene` from its solved `meshes` (`irradiance` at their vertices) on a
+/// grid of `options.spacing`; an error when the grid would have more than [`MAX_PROBES`].
+pub fn bake(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    irradiance: &[Vec<DVec3>],
+    solve: &SolveOptions,
+    options: &ProbeOptions,
+) -> Result<Probes, String> {
+    let (origin, counts) = grid(scene, options.spacing)?;
+    let (s, total) = (options.spacing, counts.iter().product::<usize>());
     let baker = ProbeBaker::new(scene, vis, meshes, irradiance, solve, options.rays);
     let at = |i: usize| {
         let (x, y, z) = (

@@ -549,6 +549,12 @@ fn scene_for(gltf: &Gltf, options: &BakeOptions) -> Result<(Scene, scene::cut::C
     let mut scene = load::scene_limited(gltf, &options.load.limits)?;
     scene::mixed::apply(gltf, &mut scene, &options.lights)?;
     check_mixed(gltf, &scene, options)?;
+    if let Some(p) = &options.probes {
+        crate::probes::grid(&scene, p.spacing).map_err(|reason| Error::Option {
+            option: "--probes",
+            reason,
+        })?;
+    }
     let mut options = options.clone();
     if options.texels_per_unit.is_none() && options.resolution.is_none() {
         options.texels_per_unit = Some(default_texels_per_unit(&scene));

@@ -209,3 +209,23 @@ fn the_probes_are_written_for_three_js_and_bevy() {
         );
     }
 }
+
+#[test]
+fn a_probe_grid_too_fine_is_refused_before_the_bake() {
+    let options = BakeOptions {
+        probes: Some(ProbeOptions {
+            spacing: 1e-4,
+            rays: 16,
+        }),
+        ..quick()
+    };
+    let e = penumbra::bake(
+        &parse(&fixtures::cornell_box(), "cornell.glb"),
+        &options,
+        crate::no_progress(),
+    )
+    .err()
+    .expect("refused")
+    .to_string();
+    assert!(e.contains("--probes") && e.contains("raise it"), "{e}");
+}
