@@ -30,6 +30,11 @@
 
 pub(crate) mod binding;
 mod expand;
+mod images;
+mod probes;
+
+pub use images::exr_bytes;
+pub(crate) use images::{grey_png_bytes, png_bytes};
 
 use crate::atlas::{Atlas, AtlasMesh};
 use crate::error::{Error, Result};
@@ -120,6 +125,25 @@ fn push_view(
     let views = array_mut(root, "bufferViews");
     views.push(view);
     views.len() - 1
+}
+
+/// Adds a PNG as an image in the binary chunk and a texture of it with `sampler` and `extras`;
+/// returns the texture's index.
+fn push_png_texture(
+    root: &mut Value,
+    bin: &mut Bin,
+    name: &str,
+    png: &[u8],
+    sampler: usize,
+    extras: Value,
+) -> usize {
+    let view = push_view(root, bin, png, None, None);
+    let images = array_mut(root, "images");
+    images.push(json!({"name": name, "bufferView": view, "mimeType": "image/png"}));
+    let image = images.len() - 1;
+    let textures = array_mut(root, "textures");
+    textures.push(json!({"name": name, "sampler": sampler, "source": image, "extras": extras}));
+    textures.len() - 1
 }
 
 fn push_accessor(root: &mut Value, accessor: Value) -> usize {
@@ -220,24 +244,15 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
             0 => "penumbra lightmap".to_string(),
             p => format!("penumbra lightmap {p}"),
         };
-        let png_view = push_view(&mut root, &mut bin, png, None, None);
-        let images = array_mut(&mut root, "images");
-        images.push(json!({"name": name, "bufferView": png_view, "mimeType": "image/png"}));
-        let image_index = images.len() - 1;
-        let textures = array_mut(&mut root, "textures");
-        textures.push(json!({
-            "name": name,
-            "sampler": sampler_index,
-            "source": image_index,
-            "extras": {"penumbra": {
-                "quantity": "irradiance",
-                "units": "W/m^2",
-                "encoding": image.encoding.name(),
-                "scale": image.intensity,
-                "page": page,
-            }},
-        }));
-        let texture_index = textures.len() - 1;
+        let extras = json!({"penumbra": {
+            "quantity": "irradiance",
+            "units": "W/m^2",
+            "encoding": image.encoding.name(),
+            "scale": image.intensity,
+            "page": page,
+        }});
+        let texture_index =
+            push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
         moz_of_page
             .push(json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity}));
     }
@@ -246,27 +261,18 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
     for layer in &image.layers {
         for (page, png) in layer.pngs.iter().enumerate() {
             let name = format!("penumbra lightmap layer {} {page}", layer.name);
-            let png_view = push_view(&mut root, &mut bin, png, None, None);
-            let images = array_mut(&mut root, "images");
-            images.push(json!({"name": name, "bufferView": png_view, "mimeType": "image/png"}));
-            let image_index = images.len() - 1;
-            let textures = array_mut(&mut root, "textures");
-            textures.push(json!({
-                "name": name,
-                "sampler": sampler_index,
-                "source": image_index,
-                "extras": {"penumbra": {
-                    "quantity": "irradiance",
-                    "layer": layer.name,
-                    "units": "W/m^2",
-                    "encoding": image.encoding.name(),
-                    "scale": layer.intensity,
-                    "page": page,
-                }},
-            }));
+            let extras = json!({"penumbra": {
+                "quantity": "irradiance",
+                "layer": layer.name,
+                "units": "W/m^2",
+                "encoding": image.encoding.name(),
+                "scale": layer.intensity,
+                "page": page,
+            }});
+            let texture = push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
             let entry = json!({
                 "group": layer.name,
-                "index": textures.len() - 1,
+                "index": texture,
                 "texCoord": 1,
                 "intensity": layer.intensity,
             });
@@ -289,28 +295,19 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                 0 => "penumbra ambient occlusion".to_string(),
                 p => format!("penumbra ambient occlusion {p}"),
             };
-            let png_view = push_view(&mut root, &mut bin, png, None, None);
-            let images = array_mut(&mut root, "images");
-            images.push(json!({"name": name, "bufferView": png_view, "mimeType": "image/png"}));
-            let image_index = images.len() - 1;
-            let textures = array_mut(&mut root, "textures");
-            textures.push(json!({
-                "name": name,
-                "sampler": sampler_index,
-                "source": image_index,
-                "extras": {"penumbra": {
-                    "quantity": "ambient occlusion",
-                    "distance": ao.distance,
-                    "encoding": "linear",
-                    "page": page,
-                }},
-            }));
-            ao_of_page.push(json!({"index": textures.len() - 1, "texCoord": 1}));
+            let extras = json!({"penumbra": {
+                "quantity": "ambient occlusion",
+                "distance": ao.distance,
+                "encoding": "linear",
+                "page": page,
+            }});
+            let texture = push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
+            ao_of_page.push(json!({"index": texture, "texCoord": 1}));
         }
     }
 
     if let Some(probes) = &image.probes {
-        write_probes(&mut root, &mut bin, probes)?;
+        probes::write(&mut root, &mut bin, probes)?;
     }
 
     // 4. Which nodes use each mesh, and which of those placements are lightmapped.
@@ -934,110 +931,6 @@ fn glb_length(json: usize, bin: usize) -> Result<u32> {
                  can hold (its header counts the length in 32 bits)"
             ),
         })
-}
-
-/// Encodes 8-bit RGB as PNG.
-pub(crate) fn png_bytes(rgb: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
-    encode_png(rgb, width, height, image::ExtendedColorType::Rgb8)
-}
-
-/// The light probes in the root's `extras.penumbra_probes` (see [`crate::probes`]): the grid,
-/// per probe its nine RGB radiance coefficients (three.js's `SphericalHarmonics3` order,
-/// W/(m² sr)) and its ambient cube (irradiance facing ±x, ±y, ±z, W/m²), the probes inside
-/// geometry; and the ambient cubes as Bevy's irradiance-volume texture, an image of the 3D
-/// texture's slices stacked top to bottom (8-bit sRGB, times `scale` for W/m²).
-fn write_probes(root: &mut Value, bin: &mut Bin, probes: &crate::probes::Probes) -> Result<()> {
-    let [nx, ny, nz] = probes.counts;
-    // Bevy's layout: (nx, 2 ny, 3 nz); texel (x, y + ny if the face is positive, z + nz x the
-    // axis) holds the face's irradiance.
-    let (w, h, d) = (nx, 2 * ny, 3 * nz);
-    let scale = probes
-        .cube
-        .iter()
-        .flatten()
-        .map(|e| e.max_element())
-        .fold(0.0, f64::max);
-    let scale = if scale > 0.0 { scale } else { 1.0 };
-    let mut rgb = vec![0u8; 3 * w * h * d];
-    for (i, cube) in probes.cube.iter().enumerate() {
-        let (x, y, z) = (i % nx, i / nx % ny, i / (nx * ny));
-        for (face, e) in cube.iter().enumerate() {
-            let (axis, positive) = (face / 2, face % 2 == 0);
-            let (t, p) = (y + if positive { ny } else { 0 }, z + axis * nz);
-            let at = 3 * ((p * h + t) * w + x);
-            for c in 0..3 {
-                let v = crate::color::linear_to_srgb((e[c] / scale).clamp(0.0, 1.0));
-                rgb[at + c] = (v * 255.0).round() as u8;
-            }
-        }
-    }
-    let png = png_bytes(&rgb, w as u32, (h * d) as u32)?;
-    let view = push_view(root, bin, &png, None, None);
-    let images = array_mut(root, "images");
-    images.push(json!({
-        "name": "penumbra irradiance volume",
-        "bufferView": view,
-        "mimeType": "image/png",
-    }));
-    let image = images.len() - 1;
-    let round = |v: f64| (v as f32) as f64;
-    let value = json!({
-        "origin": probes.origin.to_array(),
-        "spacing": probes.spacing,
-        "counts": probes.counts,
-        "order": "x fastest, then y, then z",
-        "sh": probes.sh.iter().map(|c| c.iter().flat_map(|v| v.to_array().map(round)).collect::<Vec<_>>()).collect::<Vec<_>>(),
-        "cube": probes.cube.iter().map(|c| c.iter().flat_map(|v| v.to_array().map(round)).collect::<Vec<_>>()).collect::<Vec<_>>(),
-        "inside": probes.inside.iter().enumerate().filter(|(_, i)| **i).map(|(k, _)| k).collect::<Vec<_>>(),
-        "irradiance_volume": {
-            "image": image,
-            "size": [w, h, d],
-            "encoding": "srgb",
-            "scale": scale,
-        },
-    });
-    let obj = root.as_object_mut().expect("glTF root is an object");
-    let extras = obj.entry("extras").or_insert_with(|| json!({}));
-    if !extras.is_object() {
-        return Err(Error::Output {
-            what: "glb",
-            reason: "the file's root `extras` is not an object, so the probes have no place in it"
-                .into(),
-        });
-    }
-    extras["penumbra_probes"] = value;
-    Ok(())
-}
-
-/// Encodes 8-bit grey texels (row-major, `width x height`) as PNG.
-pub(crate) fn grey_png_bytes(grey: &[u8], width: u32, height: u32) -> Result<Vec<u8>> {
-    encode_png(grey, width, height, image::ExtendedColorType::L8)
-}
-
-fn encode_png(
-    texels: &[u8],
-    width: u32,
-    height: u32,
-    kind: image::ExtendedColorType,
-) -> Result<Vec<u8>> {
-    use image::ImageEncoder;
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(texels, width, height, kind)
-        .map_err(|e| Error::Image(format!("PNG encoding failed: {e}")))?;
-    Ok(png)
-}
-
-/// Encodes float RGB texels (row-major, `width x height`) as OpenEXR.
-pub fn exr_bytes(texels: &[glam::DVec3], width: u32, height: u32) -> Result<Vec<u8>> {
-    let data: Vec<f32> = texels.iter().flat_map(|t| t.as_vec3().to_array()).collect();
-    let img = image::Rgb32FImage::from_raw(width, height, data)
-        .ok_or_else(|| Error::Image("EXR image size mismatch".into()))?;
-    let mut bytes = std::io::Cursor::new(Vec::new());
-    image::DynamicImage::ImageRgb32F(img)
-        .write_to(&mut bytes, image::ImageFormat::OpenExr)
-        .map_err(|e| Error::Image(format!("EXR encoding failed: {e}")))?;
-    Ok(bytes.into_inner())
 }
 
 #[cfg(test)]
