@@ -429,7 +429,7 @@ pub fn radiosity(
 
 /// The direct light at the vertices of each set of lights that share a rule
 /// ([`crate::scene::mixed`]), in the rules' order: the sky goes with the lights baked fully in
-/// no group (a set of its own when there are none). The counters of all of them into `stats`.
+/// no group (a set of its own when there are none). A rule no light has is left out. The counters of all of them into `stats`.
 fn direct_by_rule(
     scene: &Scene,
     vis: &Visibility,
@@ -444,7 +444,9 @@ fn direct_by_rule(
     if !emitters_in_solve {
         rules.extend(scene.emitters().map(|p| mixed.polygon(scene, p)));
     }
-    rules.push(LightRule::default());
+    if options.sky.max_element() > 0.0 {
+        rules.push(LightRule::default());
+    }
     rules.sort();
     rules.dedup();
     let mut rays = 0;
