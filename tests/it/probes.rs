@@ -229,3 +229,33 @@ fn a_probe_grid_too_fine_is_refused_before_the_bake() {
     .to_string();
     assert!(e.contains("--probes") && e.contains("raise it"), "{e}");
 }
+
+#[test]
+fn every_engine_output_together_gives_the_same_bytes_on_one_and_two_threads() {
+    let options = BakeOptions {
+        probes: Some(ProbeOptions {
+            spacing: 0.2,
+            rays: 64,
+        }),
+        ao: Some(penumbra::lightmap::ao::AoOptions {
+            distance: 0.2,
+            samples: 16,
+        }),
+        lights: vec![penumbra::scene::mixed::CliRule::group("light=ceiling").unwrap()],
+        ..quick()
+    };
+    let dir = crate::scratch("engine-outputs-threads");
+    let one = crate::output::bake_to_file_with(&fixtures::cornell_box(), &dir, 1, &options);
+    let two = crate::output::bake_to_file_with(&fixtures::cornell_box(), &dir, 2, &options);
+    assert!(one == two, "the bytes depend on the thread count");
+    let (json, _) = crate::output::split_glb(&one);
+    assert!(json["extras"]["penumbra_probes"].is_object());
+    assert!(json["materials"][0]["occlusionTexture"].is_object());
+    let layered = json["materials"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|m| m["extensions"]["MOZ_lightmap"]["extras"]["penumbra"]["layers"].is_array())
+        .count();
+    assert!(layered > 0, "no material lists the layer");
+}
