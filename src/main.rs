@@ -304,6 +304,10 @@ struct RenderArgs {
     /// time: NAME=FACTOR (repeatable; 0 switches the group off).
     #[arg(long, value_name = "NAME=FACTOR", value_parser = parse_layer_scale, conflicts_with_all = ["irradiance", "lightmap_alone"])]
     layer: Vec<(String, f64)>,
+    /// Add a white sphere at X,Y,Z of radius R lit by the file's light probes (a bake's
+    /// `--probes`), as a moving object is.
+    #[arg(long, value_name = "X,Y,Z,R", value_parser = parse_sphere, allow_hyphen_values = true, conflicts_with_all = ["irradiance", "lightmap_alone"])]
+    probe_sphere: Option<glam::DVec4>,
     #[command(flatten)]
     input_args: InputArgs,
 }
@@ -707,6 +711,21 @@ fn pool(threads: Option<usize>) -> anyhow::Result<rayon::ThreadPool> {
     pool.build().context("cannot start worker threads")
 }
 
+/// `X,Y,Z,R` of `render --probe-sphere`.
+fn parse_sphere(text: &str) -> Result<glam::DVec4, String> {
+    let v: Vec<f64> = text
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<Result<_, _>>()
+        .map_err(|e| format!("{text:?}: {e}"))?;
+    match v[..] {
+        [x, y, z, r] if v.iter().all(|c| c.is_finite()) && r > 0.0 => {
+            Ok(glam::DVec4::new(x, y, z, r))
+        }
+        _ => Err(format!("{text:?}: expected X,Y,Z,R with a positive radius")),
+    }
+}
+
 /// `NAME=FACTOR` of `render --layer`.
 fn parse_layer_scale(text: &str) -> Result<(String, f64), String> {
     let (name, factor) = text
@@ -758,10 +777,13 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let shading = match &map {
         Some(map) => penumbra::render::Shading::Irradiance(map),
         None if args.lightmap_alone => penumbra::render::Shading::LightmapAlone,
-        None if args.occlusion || !args.layer.is_empty() => penumbra::render::Shading::Adjusted {
-            layers: &args.layer,
-            occlusion: args.occlusion,
-        },
+        None if args.occlusion || !args.layer.is_empty() || args.probe_sphere.is_some() => {
+            penumbra::render::Shading::Adjusted {
+                layers: &args.layer,
+                occlusion: args.occlusion,
+                probe_sphere: args.probe_sphere.map(|s| (s.truncate(), s.w)),
+            }
+        }
         None => penumbra::render::Shading::Lightmap,
     };
     let img =

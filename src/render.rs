@@ -142,6 +142,11 @@ pub enum Shading<'a> {
     Adjusted {
         layers: &'a [(String, f64)],
         occlusion: bool,
+        /// A white sphere (centre, radius in scene units) lit by the file's light probes
+        /// (`extras.penumbra_probes`), as a moving object is: the probes' harmonics
+        /// interpolated trilinearly at its centre (probes inside geometry left out), shown as
+        /// `E(n) / pi`.
+        probe_sphere: Option<(DVec3, f64)>,
     },
     /// `H/pi` from the file's own lightmap texture: the lightmap alone, on white surfaces, no
     /// emission (what a lightmap holds, whatever the textures and colours).
@@ -305,6 +310,13 @@ pub fn render_radiance(
     }
     let aspect = width as f64 / height as f64;
     let tan = (camera.yfov * 0.5).tan();
+    let sphere = match shading {
+        Shading::Adjusted {
+            probe_sphere: Some((centre, radius)),
+            ..
+        } => Some((centre, radius, probe_light_at(gltf, centre)?)),
+        _ => None,
+    };
     let radiance: Vec<DVec3> = (0..width * height)
         .into_par_iter()
         .map(|i| {
@@ -312,7 +324,15 @@ pub fn render_radiance(
             let sx = (2.0 * x / width as f64 - 1.0) * tan * aspect;
             let sy = (1.0 - 2.0 * y / height as f64) * tan;
             let dir = (camera.forward + camera.right * sx + camera.up * sy).normalize();
-            let Some(hit) = vis.first_hit(camera.eye, dir, f64::MAX) else {
+            let hit = vis.first_hit(camera.eye, dir, f64::MAX);
+            if let Some((centre, radius, sh)) = &sphere
+                && let Some(t) = sphere_hit(camera.eye, dir, *centre, *radius)
+                && hit.is_none_or(|h| t < h.t)
+            {
+                let n = (camera.eye + dir * t - *centre) / *radius;
+                return crate::probes::sh_irradiance(sh, n) / std::f64::consts::PI;
+            }
+            let Some(hit) = hit else {
                 return DVec3::ZERO;
             };
             let tri = &scene.triangles[hit.triangle];
@@ -363,6 +383,79 @@ pub fn render_radiance(
         })
         .collect();
     Ok(radiance)
+}
+
+/// The nearest `t > 0` where the ray `eye + t dir` (unit `dir`) meets the sphere.
+fn sphere_hit(eye: DVec3, dir: DVec3, centre: DVec3, radius: f64) -> Option<f64> {
+    let oc = eye - centre;
+    let b = oc.dot(dir);
+    let disc = b * b - (oc.length_squared() - radius * radius);
+    if disc < 0.0 {
+        return None;
+    }
+    let root = disc.sqrt();
+    [-b - root, -b + root].into_iter().find(|&t| t > 0.0)
+}
+
+/// The probes' harmonics (`extras.penumbra_probes`) at `p`: trilinear over the eight probes
+/// around it (clamped to the grid), the probes inside geometry left out and the weights of the
+/// others renormalised. An error when the file has no probes.
+fn probe_light_at(gltf: &Gltf, p: DVec3) -> Result<[DVec3; 9]> {
+    let probes = &gltf.json["extras"]["penumbra_probes"];
+    let bad = |reason: &str| Error::BadItem {
+        path: gltf.path.clone(),
+        item: "extras.penumbra_probes".into(),
+        reason: reason.into(),
+    };
+    let num = |v: &serde_json::Value| v.as_f64().ok_or_else(|| bad("is not a probe grid"));
+    let origin = DVec3::new(
+        num(&probes["origin"][0])?,
+        num(&probes["origin"][1])?,
+        num(&probes["origin"][2])?,
+    );
+    let spacing = num(&probes["spacing"])?;
+    let counts: Vec<usize> = (0..3)
+        .map(|k| probes["counts"][k].as_u64().map(|c| c as usize))
+        .collect::<Option<_>>()
+        .filter(|c: &Vec<usize>| c.iter().all(|&c| c > 0))
+        .ok_or_else(|| bad("has no counts"))?;
+    let inside: std::collections::BTreeSet<u64> = probes["inside"]
+        .as_array()
+        .into_iter()
+        .flatten()
+        .filter_map(|v| v.as_u64())
+        .collect();
+    let g = (p - origin) / spacing;
+    let (mut sum, mut weights) = ([DVec3::ZERO; 9], 0.0);
+    for corner in 0..8 {
+        let mut index = 0;
+        let mut w = 1.0;
+        for (axis, stride) in [(0, 1), (1, counts[0]), (2, counts[0] * counts[1])] {
+            let c = g[axis].clamp(0.0, (counts[axis] - 1) as f64);
+            let lo = (c.floor() as usize).min(counts[axis] - 1);
+            let f = c - lo as f64;
+            let up = (corner >> axis) & 1 == 1;
+            let k = if up {
+                (lo + 1).min(counts[axis] - 1)
+            } else {
+                lo
+            };
+            w *= if up { f } else { 1.0 - f };
+            index += k * stride;
+        }
+        if w <= 0.0 || inside.contains(&(index as u64)) {
+            continue;
+        }
+        let c = &probes["sh"][index];
+        for (k, s) in sum.iter_mut().enumerate() {
+            *s += DVec3::new(num(&c[3 * k])?, num(&c[3 * k + 1])?, num(&c[3 * k + 2])?) * w;
+        }
+        weights += w;
+    }
+    if weights <= 0.0 {
+        return Err(bad("has no probe outside geometry around the sphere"));
+    }
+    Ok(sum.map(|s| s / weights))
 }
 
 /// The exposure of [`render`]'s automatic mode: the 97th percentile of the luminance of what

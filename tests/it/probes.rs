@@ -259,3 +259,85 @@ fn every_engine_output_together_gives_the_same_bytes_on_one_and_two_threads() {
         .count();
     assert!(layered > 0, "no material lists the layer");
 }
+
+#[test]
+fn render_lights_a_sphere_with_the_probes() {
+    // A small sphere on a probe of the Cornell box, above the blocks, seen from 0.1 m away:
+    // the pixel at its centre (an odd image size puts a pixel there) faces the camera and shows
+    // that probe's E(+z) / pi.
+    let options = BakeOptions {
+        probes: Some(ProbeOptions {
+            spacing: 0.1,
+            rays: 512,
+        }),
+        ..quick()
+    };
+    let input = fixtures::cornell_box();
+    let mut b = bake(&input, &options);
+    let probes = b.probes.clone().unwrap();
+    let [nx, ny, _] = probes.counts;
+    let position = |k: usize| {
+        let (x, y, z) = (k % nx, k / nx % ny, k / (nx * ny));
+        probes.origin + DVec3::new(x as f64, y as f64, z as f64) * probes.spacing
+    };
+    let middle = (b.scene.bounds_min + b.scene.bounds_max) * 0.5;
+    let target = middle + DVec3::new(0.0, 0.15, 0.0);
+    let k = (0..probes.inside.len())
+        .filter(|&k| !probes.inside[k])
+        .min_by(|&a, &c| {
+            position(a)
+                .distance(target)
+                .total_cmp(&position(c).distance(target))
+        })
+        .unwrap();
+    let centre = position(k);
+    let want = sh_irradiance(&probes.sh[k], DVec3::Z) / PI;
+    let out = penumbra::bake::glb_bytes(
+        &parse(&input, "cornell.glb"),
+        &mut b,
+        penumbra::lightmap::Encoding::Srgb,
+    )
+    .unwrap();
+    let baked = parse(&out, "baked.glb");
+    let camera = penumbra::render::Camera::look_at(
+        centre + DVec3::new(0.0, 0.0, 0.1),
+        centre,
+        40f64.to_radians(),
+    )
+    .unwrap();
+    let sphere = penumbra::render::Shading::Adjusted {
+        layers: &[],
+        occlusion: false,
+        probe_sphere: Some((centre, 0.02)),
+    };
+    let px = penumbra::render::render_radiance(&baked, Some(camera), 65, 65, sphere).unwrap();
+    let got = px[32 * 65 + 32];
+    // Measured: 4e-8, the file's coefficients being f32.
+    assert!(
+        ((got - want) / want).abs().max_element() < 1e-5,
+        "{got} against {want}"
+    );
+    // Without the sphere the pixel shows the wall behind, another value.
+    let wall = penumbra::render::render_radiance(
+        &baked,
+        Some(camera),
+        65,
+        65,
+        penumbra::render::Shading::Lightmap,
+    )
+    .unwrap()[32 * 65 + 32];
+    assert!(((wall - want) / want).abs().max_element() > 0.1, "{wall}");
+    // Without probes in the file, the sphere is refused by name.
+    let plain = penumbra::bake::glb_bytes(
+        &parse(&input, "cornell.glb"),
+        &mut bake(&input, &quick()),
+        penumbra::lightmap::Encoding::Srgb,
+    )
+    .unwrap();
+    let e =
+        penumbra::render::render_radiance(&parse(&plain, "plain.glb"), Some(camera), 8, 8, sphere)
+            .err()
+            .expect("refused")
+            .to_string();
+    assert!(e.contains("penumbra_probes"), "{e}");
+}
