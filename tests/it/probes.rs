@@ -336,8 +336,7 @@ fn render_lights_a_sphere_with_the_probes() {
     .unwrap();
     let e =
         penumbra::render::render_radiance(&parse(&plain, "plain.glb"), Some(camera), 8, 8, sphere)
-            .err()
-            .expect("refused")
+            .expect_err("refused")
             .to_string();
     assert!(e.contains("penumbra_probes"), "{e}");
 }
