@@ -429,7 +429,8 @@ pub fn radiosity(
 
 /// The direct light at the vertices of each set of lights that share a rule
 /// ([`crate::scene::mixed`]), in the rules' order: the sky goes with the lights baked fully in
-/// no group (a set of its own when there are none). A rule no light has is left out. The counters of all of them into `stats`.
+/// no group (a set of its own when there are none). A rule no light has is left out. The
+/// counters of all of them go into `stats`.
 fn direct_by_rule(
     scene: &Scene,
     vis: &Visibility,
