@@ -13,8 +13,10 @@
 //     of the unbroken file; MOZ_lightmap removed:
 //     the "lightmap applied" check fails; the default (sRGB-encoded) lightmap decoded as linear,
 //     or a `--encoding linear` lightmap decoded as sRGB: the comparison fails).
-//  Besides the fixtures as they are, six variants go through 2-3: cornell-box baked with
-//  `--encoding linear`, box-on-floor baked onto several small pages (`--texels-per-unit`,
+//  Besides the fixtures as they are, seven variants go through 2-3: cornell-box baked with
+//  `--encoding linear`, cornell-box with light probes (`--probes 0.1`: a sphere lit by a
+//  three.js LightProbe with the file's harmonics must look as `penumbra render --probe-sphere`
+//  draws it; self-test: the coefficients in another order must be caught), box-on-floor baked onto several small pages (`--texels-per-unit`,
 //  `--page-size`), box-on-floor with ambient occlusion (`--ao 2`: three.js applies the
 //  occlusionTexture to the lightmap as `penumbra render --occlusion` does; self-test: the
 //  texture removed must be caught), box-on-floor with its light in a light group under a dim
@@ -59,6 +61,10 @@ const AO_BAKE = 'box-on-floor-ao';
 const LAYERS_BAKE = 'box-on-floor-layers';
 /** How the layer checks scale the group. */
 const LAYER_SCALES = { lamp: 0.25 };
+/** The bake with light probes (cornell-box, `--probes 0.1`), and the probe-lit sphere drawn in
+ * it: above the tall block, in front of the light (cornell-box's own camera). */
+const PROBES_BAKE = 'cornell-box-probes';
+const PROBE_SPHERE = { centre: [0.278, 0.4, 0.2], radius: 0.07 };
 /** The fixture generator (built by `run` next to the penumbra binary). */
 const MAKE_FIXTURES = process.env.MAKE_FIXTURES_BIN
   ?? path.join(TARGET, 'release', 'examples', 'make_fixtures');
@@ -326,12 +332,12 @@ class Browser {
   }
 
   /** Draws `glb` (a path under OUT) and saves the screenshot to `png`. Returns the page's report. */
-  async render(glb, png, { exposure, lightmapColorSpace, layerScales }) {
+  async render(glb, png, { exposure, lightmapColorSpace, layerScales, probeSphere }) {
     this.messages.length = 0;
     const url = `${this.base}/out/${path.relative(OUT, glb).split(path.sep).join('/')}`;
     const info = await withTimeout(60_000, `three.js drawing ${path.basename(glb)}`, this.page.evaluate(
       (o) => window.renderGlb(o),
-      { url, width: SIZE, height: SIZE, exposure, lightmapColorSpace, layerScales },
+      { url, width: SIZE, height: SIZE, exposure, lightmapColorSpace, layerScales, probeSphere },
     ));
     await this.page.locator('canvas').screenshot({ path: png });
     info.messages = [...this.messages];
@@ -386,6 +392,40 @@ async function compare(browser, glb, tag, { lightmapColorSpace = 'file', occlusi
 }
 
 const fmt = (x) => x.toFixed(4);
+
+/**
+ * The probe-lit sphere `sphere` in `glb`: three.js (a LightProbe with the probes' harmonics at
+ * the sphere's centre) against `penumbra render --probe-sphere`, over the sphere's pixels only
+ * (those where penumbra's pictures with and without the sphere differ), since three.js's
+ * LightProbe lights the rest of the scene too.
+ */
+async function probeSphereCheck(browser, glb, tag, sphere) {
+  const exposure = exposureOf(readGlb(glb).json);
+  const common = ['--width', String(SIZE), '--height', String(SIZE), '--camera', 'gltf', '--exposure', String(exposure)];
+  const withSphere = path.join(OUT, `${tag}-sphere-penumbra.png`);
+  const without = path.join(OUT, `${tag}-nosphere-penumbra.png`);
+  penumbra(['render', glb, '--out', withSphere, ...common, '--probe-sphere', [...sphere.centre, sphere.radius].join(',')]);
+  penumbra(['render', glb, '--out', without, ...common]);
+  const shot = path.join(OUT, `${tag}-sphere-threejs.png`);
+  await browser.render(glb, shot, { exposure, probeSphere: sphere });
+  const [a, b, c] = [readPng(shot), readPng(withSphere), readPng(without)];
+  const lin = (v) => { const x = v / 255; return x <= 0.04045 ? x / 12.92 : ((x + 0.055) / 1.055) ** 2.4; };
+  let [sum, meanA, meanB, pixels] = [0, 0, 0, 0];
+  for (let i = 0; i < b.data.length; i += 4) {
+    // A sphere pixel, away from its silhouette (both neighbours across it covered too).
+    const sphereAt = (j) => j >= 0 && j < b.data.length && [0, 1, 2].some((k) => b.data[j + k] !== c.data[j + k]);
+    if (!sphereAt(i) || !sphereAt(i - 4) || !sphereAt(i + 4) || !sphereAt(i - 4 * SIZE) || !sphereAt(i + 4 * SIZE)) continue;
+    for (let k = 0; k < 3; k++) {
+      const [x, y] = [lin(a.data[i + k]), lin(b.data[i + k])];
+      sum += Math.abs(x - y);
+      meanA += x;
+      meanB += y;
+    }
+    pixels++;
+  }
+  const n = Math.max(3 * pixels, 1);
+  return { mad: sum / n, meanThree: meanA / n, meanPenumbra: meanB / n, pixels };
+}
 
 /**
  * 5. The JS toolchain on a baked file (issue 37; docs/engines.md). The baked cornell-box (with its
@@ -610,7 +650,12 @@ async function main() {
   // [name, fixture, extra bake options]
   const bakes = fixtures.map((n) => [n, path.join(ROOT, 'fixtures', `${n}.glb`), []]);
   const fixture = (n) => path.join(ROOT, 'fixtures', `${n}.glb`);
-  if (fixtures.includes('cornell-box')) bakes.push(['cornell-box-linear', fixture('cornell-box'), ['--encoding', 'linear']]);
+  if (fixtures.includes('cornell-box')) {
+    bakes.push(['cornell-box-linear', fixture('cornell-box'), ['--encoding', 'linear']]);
+    // Light probes every 10 cm: three.js's LightProbe lights a sphere as `penumbra render
+    // --probe-sphere` does.
+    bakes.push([PROBES_BAKE, fixture('cornell-box'), ['--probes', '0.1']]);
+  }
   if (fixtures.includes('box-on-floor')) {
     bakes.push(['box-on-floor-pages', fixture('box-on-floor'), ['--texels-per-unit', '24', '--page-size', '128']]);
     // Ambient occlusion (`--ao`): three.js applies the occlusionTexture to the lightmap as
@@ -701,6 +746,15 @@ async function main() {
       if (pages[name] > 1) {
         check(`three.js ${name} decodes every page`, r.info.lightmapImages === pages[name],
           `${r.info.lightmapImages} lightmap images decoded of ${pages[name]} pages`);
+      }
+      if (name === PROBES_BAKE) {
+        const p = await probeSphereCheck(browser, view, name, PROBE_SPHERE);
+        check(`three.js ${name}: a LightProbe lights the sphere as penumbra render --probe-sphere does`, p.mad < MAD_TOLERANCE,
+          `mean |diff| ${fmt(p.mad)} over the sphere's ${p.pixels} pixels (tolerance ${MAD_TOLERANCE}), mean ${fmt(p.meanThree)} vs ${fmt(p.meanPenumbra)}`);
+        // Self-test: the coefficients in another order (x and z swapped in bands 1 and 2).
+        const broken = await probeSphereCheck(browser, view, `${name}-broken`, { ...PROBE_SPHERE, order: [0, 1, 3, 2, 4, 7, 6, 5, 8] });
+        check('self-test: three.js checks catch probe coefficients in the wrong order', broken.mad >= MAD_TOLERANCE,
+          `mean |diff| ${fmt(broken.mad)} vs tolerance ${MAD_TOLERANCE}`);
       }
       if (name === LAYERS_BAKE) {
         const scaled = await compare(browser, view, `${name}-scaled`, { layerScales: LAYER_SCALES });

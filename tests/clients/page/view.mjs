@@ -78,7 +78,37 @@ function dispose(root) {
  * group name to factor: the plugin shows those groups' layers scaled).
  * Draws the glb, leaves the picture in the canvas, and returns what was loaded.
  */
-window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'file', layerScales = {} }) {
+/**
+ * The probes' spherical harmonics (`extras.penumbra_probes`) at `centre`, as `penumbra render
+ * --probe-sphere` takes them: trilinear over the eight probes around it (clamped to the grid),
+ * the probes inside geometry left out. `order` permutes the coefficients (a self-test breaks it).
+ */
+function probeHarmonics(probes, centre, order) {
+  const { origin, spacing, counts, sh } = probes;
+  const inside = new Set(probes.inside ?? []);
+  const sum = new Array(27).fill(0);
+  let weights = 0;
+  for (let corner = 0; corner < 8; corner++) {
+    let index = 0;
+    let w = 1;
+    for (const [axis, stride] of [[0, 1], [1, counts[0]], [2, counts[0] * counts[1]]]) {
+      const c = Math.min(Math.max((centre[axis] - origin[axis]) / spacing, 0), counts[axis] - 1);
+      const lo = Math.min(Math.floor(c), counts[axis] - 1);
+      const f = c - lo;
+      const up = (corner >> axis) & 1;
+      index += (up ? Math.min(lo + 1, counts[axis] - 1) : lo) * stride;
+      w *= up ? f : 1 - f;
+    }
+    if (w <= 0 || inside.has(index)) continue;
+    for (let k = 0; k < 27; k++) sum[k] += sh[index][k] * w;
+    weights += w;
+  }
+  const out = new Array(27);
+  for (let k = 0; k < 9; k++) for (let c = 0; c < 3; c++) out[3 * k + c] = sum[3 * order[k] + c] / weights;
+  return out;
+}
+
+window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'file', layerScales = {}, probeSphere = null }) {
   const r = rendererOfSize(width, height);
   const loader = new GLTFLoader();
   loader.register((parser) => new MozLightmapExtension(parser, layerScales));
@@ -103,6 +133,25 @@ window.renderGlb = async function renderGlb({ url, width, height, exposure, ligh
         m.lightMap.needsUpdate = true;
       }
     }
+  }
+
+  // A white sphere lit by the file's light probes: one LightProbe with the harmonics at its
+  // centre (three.js adds a LightProbe's light to every lit material; the check compares the
+  // sphere's pixels only).
+  if (probeSphere) {
+    const probes = gltf.parser.json.extras?.penumbra_probes;
+    if (!probes) throw new Error(`${url}: no extras.penumbra_probes`);
+    const order = probeSphere.order ?? [0, 1, 2, 3, 4, 5, 6, 7, 8];
+    const probe = new THREE.LightProbe();
+    probe.sh.fromArray(probeHarmonics(probes, probeSphere.centre, order));
+    probe.intensity = 1 / exposure;
+    scene.add(probe);
+    const ball = new THREE.Mesh(
+      new THREE.SphereGeometry(probeSphere.radius, 256, 128),
+      new THREE.MeshLambertMaterial({ color: 0xffffff }),
+    );
+    ball.position.fromArray(probeSphere.centre);
+    scene.add(ball);
   }
 
   const camera = gltf.cameras[0];
