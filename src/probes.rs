@@ -24,7 +24,9 @@
 //!   receiver mesh). Emitters' own emission and the sky are direct light, not counted again.
 //!
 //! A probe whose rays meet the back of a surface more often than not is inside geometry: it is
-//! flagged, and its values are what it saw there (dark), so a client can skip or replace it.
+//! flagged, and takes the mean of its neighbours outside (ring by ring, as the lightmap's
+//! padding is dilated), so that a client interpolating between probes near a wall does not
+//! blend in the dark inside it.
 
 use crate::light::{NO_POLYGON, SurfacePoint, radical_inverse2};
 use crate::lightmap::Locator;
@@ -164,10 +166,11 @@ pub fn bake(
         );
         origin + DVec3::new(x as f64, y as f64, z as f64) * s
     };
-    let probes: Vec<Probe> = (0..total)
+    let mut probes: Vec<Probe> = (0..total)
         .into_par_iter()
         .map(|i| baker.probe(at(i), i as u64))
         .collect();
+    fill_inside(&mut probes, counts);
     Ok(Probes {
         origin,
         spacing: s,
@@ -176,6 +179,63 @@ pub fn bake(
         sh: probes.iter().map(|p| p.sh).collect(),
         inside: probes.iter().map(|p| p.inside).collect(),
     })
+}
+
+/// Gives each probe inside geometry the mean of its neighbours (the 26 around it) that are not,
+/// ring by ring outward, so that a client interpolating between probes near a wall does not
+/// blend in the dark inside it; a probe with no such neighbour after as many rings as the grid
+/// is wide keeps what it saw. The `inside` flags stay.
+fn fill_inside(probes: &mut [Probe], counts: [usize; 3]) {
+    let mut filled: Vec<bool> = probes.iter().map(|p| !p.inside).collect();
+    if filled.iter().all(|&f| f) || !filled.iter().any(|&f| f) {
+        return;
+    }
+    let index = |x: usize, y: usize, z: usize| x + counts[0] * (y + counts[1] * z);
+    for _ in 0..counts.iter().copied().max().unwrap_or(1) {
+        let mut next = Vec::new();
+        for z in 0..counts[2] {
+            for y in 0..counts[1] {
+                for x in 0..counts[0] {
+                    let i = index(x, y, z);
+                    if filled[i] {
+                        continue;
+                    }
+                    let (mut cube, mut sh, mut n) = ([DVec3::ZERO; 6], [DVec3::ZERO; 9], 0.0);
+                    for dz in -1i64..=1 {
+                        for dy in -1i64..=1 {
+                            for dx in -1i64..=1 {
+                                let (nx, ny, nz) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
+                                let inside_grid = (0..counts[0] as i64).contains(&nx)
+                                    && (0..counts[1] as i64).contains(&ny)
+                                    && (0..counts[2] as i64).contains(&nz);
+                                if !inside_grid {
+                                    continue;
+                                }
+                                let j = index(nx as usize, ny as usize, nz as usize);
+                                if j != i && filled[j] {
+                                    let p = &probes[j];
+                                    cube.iter_mut().zip(&p.cube).for_each(|(a, b)| *a += *b);
+                                    sh.iter_mut().zip(&p.sh).for_each(|(a, b)| *a += *b);
+                                    n += 1.0;
+                                }
+                            }
+                        }
+                    }
+                    if n > 0.0 {
+                        next.push((i, cube.map(|c| c / n), sh.map(|c| c / n)));
+                    }
+                }
+            }
+        }
+        if next.is_empty() {
+            break;
+        }
+        for (i, cube, sh) in next {
+            probes[i].cube = cube;
+            probes[i].sh = sh;
+            filled[i] = true;
+        }
+    }
 }
 
 /// One probe's light (see [`Probes`] for the fields).
@@ -383,6 +443,35 @@ mod tests {
             let got: f64 = row.iter().zip(&e).map(|(a, b)| a * b).sum();
             assert!((got - w).abs() < 1e-9, "{got} {w}");
         }
+    }
+
+    #[test]
+    fn probes_inside_take_their_neighbours_mean() {
+        let probe = |v: f64, inside: bool| Probe {
+            cube: [DVec3::splat(v); 6],
+            sh: [DVec3::splat(v); 9],
+            inside,
+        };
+        // A row of four: the second and third inside. The second takes the first's value in
+        // the first ring (its only neighbour outside), the third the fourth's; the flags stay.
+        let mut row = vec![
+            probe(1.0, false),
+            probe(0.0, true),
+            probe(0.0, true),
+            probe(5.0, false),
+        ];
+        fill_inside(&mut row, [4, 1, 1]);
+        assert_eq!(row[1].cube[0], DVec3::splat(1.0));
+        assert_eq!(row[2].sh[3], DVec3::splat(5.0));
+        assert!(row[1].inside && row[2].inside);
+        // Further from the outside: a second ring.
+        let mut row = vec![probe(2.0, false), probe(0.0, true), probe(0.0, true)];
+        fill_inside(&mut row, [3, 1, 1]);
+        assert_eq!((row[1].cube[0].x, row[2].cube[0].x), (2.0, 2.0));
+        // All inside: nothing to take.
+        let mut all = vec![probe(0.5, true); 3];
+        fill_inside(&mut all, [3, 1, 1]);
+        assert_eq!(all[0].cube[0].x, 0.5);
     }
 
     #[test]
