@@ -91,8 +91,9 @@ pub(crate) fn ambient_occlusion(
             let polygon = meshes[at.mesh].polygon;
             let n = scene.polygons[polygon].frame.n;
             let point = SurfacePoint::new(at.p, n, polygon, vis);
-            rays.fetch_add(rays_of.len() as u64, Ordering::Relaxed);
-            DVec3::splat(open_fraction(vis, &rays_of, &point, options.distance))
+            let (open, cast) = open_fraction(scene, vis, &rays_of, &point, options.distance);
+            rays.fetch_add(cast, Ordering::Relaxed);
+            DVec3::splat(open)
         },
     );
     seams::stitch_seams(&mut map, scene, vis, atlas, stitch);
@@ -115,21 +116,33 @@ pub(crate) fn ambient_occlusion(
 
 /// The open fraction of `at`'s hemisphere within `distance` (0..1): the mean over `rays` of
 /// what reaches `distance` along each ray (1 unblocked, 0 blocked by an opaque surface, a
-/// see-through one's transmittance).
+/// see-through one's transmittance); exactly 1, with no ray, when no other surface is that
+/// near. And the rays cast.
 pub(crate) fn open_fraction(
+    scene: &Scene,
     vis: &Visibility,
     rays: &CosineRays,
     at: &SurfacePoint,
     distance: f64,
-) -> f64 {
+) -> (f64, u64) {
     let o = at.ray_origin;
+    // Nothing but the point's own polygon within `distance` of the rays' origin: every ray
+    // is open, and none is cast (the box holds every point a ray reaches).
+    let mut near = Vec::new();
+    vis.triangles_overlapping(o - distance, o + distance, &mut near);
+    if near
+        .iter()
+        .all(|&t| scene.triangles[t].polygon == Some(at.polygon))
+    {
+        return (1.0, 0);
+    }
     let open: f64 = rays
         .directions(at)
         .map(|d| {
             channel_mean(vis.transmitted_skipping(o, o + d * distance, [at.polygon, usize::MAX]))
         })
         .sum();
-    open / rays.len() as f64
+    (open / rays.len() as f64, rays.len() as u64)
 }
 
 /// The closed form of a point on a floor at distance `d` from an infinite wall (see the module
@@ -191,7 +204,7 @@ mod tests {
                 .map(|k| {
                     let p = DVec3::new(d, 0.0, -3.0 + k as f64 * 0.77);
                     let at = SurfacePoint::new(p, DVec3::Y, floor, &vis);
-                    open_fraction(&vis, &rays, &at, distance)
+                    open_fraction(&scene, &vis, &rays, &at, distance).0
                 })
                 .sum::<f64>()
                 / 8.0;
