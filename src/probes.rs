@@ -270,10 +270,6 @@ impl<'a> ProbeBaker<'a> {
         solve: &SolveOptions,
         rays: usize,
     ) -> ProbeBaker<'a> {
-        let mut mesh_of_polygon = vec![usize::MAX; scene.polygons.len()];
-        for (i, m) in meshes.iter().enumerate() {
-            mesh_of_polygon[m.polygon] = i;
-        }
         let normals = fit_normals();
         let rays = rays.max(1);
         ProbeBaker {
@@ -285,7 +281,7 @@ impl<'a> ProbeBaker<'a> {
                 .zip(irradiance)
                 .map(|(m, v)| Locator::new(m, v))
                 .collect(),
-            mesh_of_polygon,
+            mesh_of_polygon: crate::mesh::mesh_of_polygon(scene, meshes),
             fit: least_squares_fit(&normals),
             normals,
             sphere: (0..rays)

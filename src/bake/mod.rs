@@ -256,9 +256,18 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     // solve is done (the solve is not interrupted).
     let atlas = atlas?;
     let (segments, meshes, solution) = solved.expect("the atlas estimates before it succeeds")?;
+    let of = mesh::mesh_of_polygon(&scene, &meshes);
     let t = &mut stats.timings_s;
     let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
-        lightmap_stage(&scene, &vis, &meshes, &solution.irradiance, &atlas, options)
+        lightmap_stage(
+            &scene,
+            &vis,
+            &meshes,
+            &of,
+            &solution.irradiance,
+            &atlas,
+            options,
+        )
     });
     stats.seams = seams;
     let layers = stage(&mut t.lightmap, "light groups", progress, || {
@@ -266,7 +275,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             .layers
             .iter()
             .map(|(name, values)| {
-                let (map, _) = lightmap_stage(&scene, &vis, &meshes, values, &atlas, options);
+                let (map, _) = lightmap_stage(&scene, &vis, &meshes, &of, values, &atlas, options);
                 (name.clone(), map)
             })
             .collect()
@@ -281,7 +290,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
                     &scene,
                     &vis,
                     &meshes,
-                    &mesh_of_polygon(&scene, &meshes),
+                    &of,
                     &atlas,
                     options.supersample,
                     options.seams == Seams::Stitch,
@@ -480,10 +489,12 @@ fn mesh_and_solve(
 
 /// The lightmap stage: the meshes' irradiance rasterized into the atlas, the seams stitched
 /// (or only measured, with `--seams off`).
+#[allow(clippy::too_many_arguments)]
 fn lightmap_stage(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],
+    mesh_of_polygon: &[usize],
     irradiance: &[Vec<DVec3>],
     atlas: &Atlas,
     options: &BakeOptions,
@@ -493,22 +504,13 @@ fn lightmap_stage(
         vis,
         meshes,
         irradiance,
-        &mesh_of_polygon(scene, meshes),
+        mesh_of_polygon,
         atlas,
         options.supersample,
     );
     let on = options.seams == Seams::Stitch;
     let seams = lightmap::seams::stitch_seams(&mut map, scene, vis, atlas, on);
     (map, seams)
-}
-
-/// The receiver mesh of each polygon (an index into `meshes`; `usize::MAX` for none).
-fn mesh_of_polygon(scene: &Scene, meshes: &[ReceiverMesh]) -> Vec<usize> {
-    let mut of = vec![usize::MAX; scene.polygons.len()];
-    for (i, m) in meshes.iter().enumerate() {
-        of[m.polygon] = i;
-    }
-    of
 }
 
 /// Refuses a solution whose light is not finite or diverged (its unshot power grew).

@@ -133,6 +133,16 @@ pub(crate) const MISSED_AREA: f64 = 0.5;
 /// The direct light (W/m², linear RGB) at every vertex of a set of meshes.
 pub(crate) type Evaluate<'a> = dyn Fn(&[ReceiverMesh]) -> Vec<Vec<glam::DVec3>> + 'a;
 
+/// The receiver mesh of each of the scene's polygons: an index into `meshes`, `usize::MAX` for
+/// a polygon without one.
+pub(crate) fn mesh_of_polygon(scene: &Scene, meshes: &[ReceiverMesh]) -> Vec<usize> {
+    let mut of = vec![usize::MAX; scene.polygons.len()];
+    for (i, m) in meshes.iter().enumerate() {
+        of[m.polygon] = i;
+    }
+    of
+}
+
 /// The uniform mesher: every polygon refined to one area cap, about `budget` triangles in all.
 pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
     to_budget(scene, budget, with_slack(budget), |i, area, cap| {

@@ -36,6 +36,12 @@ fn corner() -> Vec<u8> {
         &quad([[0.0, 0.0, 0.0], [s, 0.0, 0.0], [s, s, 0.0], [0.0, s, 0.0]]),
         grey,
     );
+    add_sun(&mut b);
+    b.to_glb()
+}
+
+/// A sun of 3 lux from above, slanting.
+fn add_sun(b: &mut GlbBuilder) {
     let sun = b.add_light(Light::directional("sun", 3.0));
     b.add_node(
         Node::new("sun")
@@ -46,7 +52,6 @@ fn corner() -> Vec<u8> {
             ))
             .with_light(sun),
     );
-    b.to_glb()
 }
 
 /// The blocked area of the unit disk beyond `x = h` (a segment; `h` in 0..1).
@@ -225,16 +230,7 @@ fn a_materials_own_occlusion_texture_is_kept() {
         own,
     );
     let texture = b.add_texture(2, 2, &[128; 16], 10497);
-    let sun = b.add_light(Light::directional("sun", 3.0));
-    b.add_node(
-        Node::new("sun")
-            .with_transform(Transform::look_to(
-                [5.0, 5.0, 5.0],
-                [-0.3, -1.0, -0.4],
-                [0.0, 1.0, 0.0],
-            ))
-            .with_light(sun),
-    );
+    add_sun(&mut b);
     let (mut json, bin) = split_glb(&b.to_glb());
     json["materials"][own]["occlusionTexture"] = serde_json::json!({"index": texture});
     let input = penumbra::write::to_glb(&json, bin).unwrap();

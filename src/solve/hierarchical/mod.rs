@@ -409,8 +409,8 @@ pub(crate) fn indirect_with_layers(
     let mut indirect = vec![DVec3::ZERO; els.len()];
     let mut b_el = reflected_direct;
     let mut left = 0.0;
-    let mut last_links = Vec::new();
-    let mut last_iterations = 0;
+    let parts_direct: Vec<Vec<DVec3>> = layers.iter().map(|l| h.element_values(l)).collect();
+    let mut layer_indirect = vec![vec![DVec3::ZERO; els.len()]; layers.len()];
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
         let mut previous: Option<Vec<Link>> = None;
@@ -472,40 +472,27 @@ pub(crate) fn indirect_with_layers(
             let t = Instant::now();
             // Each pass restarts from the reflected direct light: the links changed.
             let direct_el: Vec<DVec3> = els.iter().map(|e| e.direct).collect();
-            let (ind, b, l, iterations) = iterate(
+            // The layers only in the last pass, with its links.
+            let parts = if last { &parts_direct[..] } else { &[] };
+            let it = iterate(
                 &h,
                 &links,
                 &moments,
                 &direct_el,
                 initial,
                 options,
+                parts,
                 &mut stats.warnings,
             );
-            last_iterations = iterations;
-            (indirect, b_el, left) = (ind, b, l);
-            hs.iterations += iterations;
+            (indirect, b_el, left) = (it.indirect, it.b, it.left);
+            if last {
+                layer_indirect = it.parts;
+            }
+            hs.iterations += it.iterations;
             hs.solve_seconds += t.elapsed().as_secs_f64();
             previous = Some(all);
-            last_links = links;
         }
     }
-    // The layers, with the last pass's links and as many iterations, in step with the whole:
-    // from zero, `n` Jacobi iterations are a linear map of the direct light (the gradients'
-    // clamp scaled as the whole's), so the layers add up to the whole.
-    let layer_indirect = if layers.is_empty() || initial <= 0.0 {
-        vec![vec![DVec3::ZERO; els.len()]; layers.len()]
-    } else {
-        let direct_el: Vec<DVec3> = els.iter().map(|e| e.direct).collect();
-        let parts: Vec<Vec<DVec3>> = layers.iter().map(|l| h.element_values(l)).collect();
-        iterate_parts(
-            &h,
-            &last_links,
-            &moments,
-            &direct_el,
-            &parts,
-            last_iterations,
-        )
-    };
     let t = Instant::now();
     stats.absorbed_power = els
         .iter()
@@ -551,48 +538,15 @@ fn at_vertices(
         .collect()
 }
 
-/// `count` Jacobi iterations of the whole (`direct`, per element) and of each of `parts` (the
-/// direct light of parts of it) in step, each part's gather clamped as the whole's
-/// ([`Hierarchy::gather_clamped_as`]). Returns each part's indirect irradiance per element.
-fn iterate_parts(
-    h: &Hierarchy,
-    links: &[Link],
-    moments: &[DMat3],
-    direct: &[DVec3],
-    parts: &[Vec<DVec3>],
-    count: usize,
-) -> Vec<Vec<DVec3>> {
-    let els = &h.elements;
-    let reflect = |d: &[DVec3], hi: &[DVec3]| -> Vec<DVec3> {
-        els.iter()
-            .zip(d.iter().zip(hi))
-            .map(|(e, (d, hi))| e.rho * (*d + *hi))
-            .collect()
-    };
-    let zero = vec![DVec3::ZERO; els.len()];
-    let mut b = reflect(direct, &zero);
-    let mut bp: Vec<Vec<DVec3>> = parts.iter().map(|d| reflect(d, &zero)).collect();
-    let mut indirect = vec![zero; parts.len()];
-    for _ in 0..count {
-        let nodes = h.pull(&b);
-        let grads = h.gradients(&nodes, moments);
-        for ((bp, ind), d) in bp.iter_mut().zip(&mut indirect).zip(parts) {
-            let part_nodes = h.pull(bp);
-            let part_grads = h.gradients(&part_nodes, moments);
-            let whole = Some((&nodes[..], &grads[..]));
-            *ind = h.push(&h.gather_clamped_as(links, &part_nodes, &part_grads, whole));
-            *bp = reflect(d, ind);
-        }
-        b = reflect(direct, &h.push(&h.gather_linear(links, &nodes, &grads)));
-    }
-    indirect
-}
-
 /// Jacobi iterations of `B = rho (direct + K B)` over fixed `links`, from the elements' direct
 /// irradiance `direct` (W/m²): until the change in reflected power is at most
-/// `options.tolerance` of `initial` (W, the reflected direct power), `options.bounces` bounces, or [`MAX_ITERATIONS`]; or when the change grows past
-/// twice `initial` (diverging). Returns the elements' indirect irradiance, their radiosity,
-/// the last change (W) and the iterations.
+/// `options.tolerance` of `initial` (W, the reflected direct power), `options.bounces` bounces,
+/// or [`MAX_ITERATIONS`]; or when the change grows past twice `initial` (diverging). Each of
+/// `parts` (the elements' direct light of a part of the light, [`crate::scene::mixed`]) is
+/// iterated in step: from zero, the same iterations are a linear map of the direct light, each
+/// link's gradient term clamped as the whole's ([`Hierarchy::gather_clamped_as`]), so the parts
+/// add up to the whole. Returns the elements' indirect irradiance, their radiosity, the last
+/// change (W), the iterations, and each part's indirect irradiance.
 #[allow(clippy::too_many_arguments)]
 fn iterate(
     h: &Hierarchy,
@@ -601,25 +555,37 @@ fn iterate(
     direct: &[DVec3],
     initial: f64,
     options: &SolveOptions,
+    parts: &[Vec<DVec3>],
     warnings: &mut Vec<String>,
-) -> (Vec<DVec3>, Vec<DVec3>, f64, usize) {
+) -> Iterated {
     let mean = |c: DVec3| c.element_sum() / 3.0;
     let els = &h.elements;
-    let mut b_el: Vec<DVec3> = els.iter().zip(direct).map(|(e, d)| e.rho * *d).collect();
-    let mut indirect = vec![DVec3::ZERO; els.len()];
+    let reflect = |d: &[DVec3], hi: &[DVec3]| -> Vec<DVec3> {
+        els.iter()
+            .zip(d.iter().zip(hi))
+            .map(|(e, (d, hi))| e.rho * (*d + *hi))
+            .collect()
+    };
+    let zero = vec![DVec3::ZERO; els.len()];
+    let mut b_el = reflect(direct, &zero);
+    let mut b_parts: Vec<Vec<DVec3>> = parts.iter().map(|d| reflect(d, &zero)).collect();
+    let mut parts_indirect = vec![zero; parts.len()];
+    let mut indirect: Vec<DVec3>;
     let mut left: f64;
     let mut iterations = 0usize;
     loop {
         let b_nodes = h.pull(&b_el);
         let grads = h.gradients(&b_nodes, moments);
+        let whole = Some((&b_nodes[..], &grads[..]));
+        for ((b, ind), d) in b_parts.iter_mut().zip(&mut parts_indirect).zip(parts) {
+            let nodes = h.pull(b);
+            let g = h.gradients(&nodes, moments);
+            *ind = h.push(&h.gather_clamped_as(links, &nodes, &g, whole));
+            *b = reflect(d, ind);
+        }
         let gathered = h.gather_linear(links, &b_nodes, &grads);
         indirect = h.push(&gathered);
-        let next: Vec<DVec3> = els
-            .iter()
-            .zip(&indirect)
-            .zip(direct)
-            .map(|((e, hi), d)| e.rho * (*d + *hi))
-            .collect();
+        let next = reflect(direct, &indirect);
         left = els
             .iter()
             .zip(next.iter().zip(&b_el))
@@ -648,7 +614,22 @@ fn iterate(
             None => {}
         }
     }
-    (indirect, b_el, left, iterations)
+    Iterated {
+        indirect,
+        b: b_el,
+        left,
+        iterations,
+        parts: parts_indirect,
+    }
+}
+
+/// What [`iterate`] returns.
+struct Iterated {
+    indirect: Vec<DVec3>,
+    b: Vec<DVec3>,
+    left: f64,
+    iterations: usize,
+    parts: Vec<Vec<DVec3>>,
 }
 
 #[cfg(test)]
