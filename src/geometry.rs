@@ -37,6 +37,33 @@ pub fn point_polygon_form_factor(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
     }
 }
 
+/// `∫ ω dω` over the solid angle of the part of polygon `poly` above the horizon of `(p, n)`
+/// (steradians, a vector): the vector form of Lambert's contour formula, `1/2 sum_i gamma_i
+/// unit(r_i x r_(i+1))` (Arvo, "Applications of irradiance tensors to the simulation of
+/// non-Lambertian phenomena", SIGGRAPH 1995), signed so that its component along `n` is
+/// `pi F` ([`point_polygon_form_factor`]). Either winding; zero when nothing is above the
+/// horizon.
+pub fn polygon_light_vector(p: DVec3, n: DVec3, poly: &[DVec3]) -> DVec3 {
+    let clipped = clip_to_horizon(poly, p, n);
+    if clipped.len() < 3 {
+        return DVec3::ZERO;
+    }
+    let v: DVec3 = (0..clipped.len())
+        .map(|i| {
+            let (a, b) = (clipped[i] - p, clipped[(i + 1) % clipped.len()] - p);
+            let c = a.cross(b);
+            let cl = c.length();
+            if cl <= 0.0 {
+                DVec3::ZERO
+            } else {
+                c * (angle(cl, a.dot(b)) / cl)
+            }
+        })
+        .sum::<DVec3>()
+        * 0.5;
+    if n.dot(v) < 0.0 { -v } else { v }
+}
+
 /// [`point_polygon_form_factor`] of a polygon already clipped to the horizon of `p`.
 fn contour_form_factor(p: DVec3, n: DVec3, clipped: &[DVec3]) -> f64 {
     if clipped.len() < 3 {

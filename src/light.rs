@@ -4,7 +4,9 @@
 //! Depends on [`crate::geometry`] and the plain data types of [`crate::scene`] only. Radiance
 //! in W/(m² sr), irradiance in W/m², per linear RGB channel; lengths in scene units.
 
-use crate::geometry::{convex_hull, convex_pieces, point_polygon_form_factor, signed_area};
+use crate::geometry::{
+    convex_hull, convex_pieces, point_polygon_form_factor, polygon_light_vector, signed_area,
+};
 use crate::scene::{Frame, LightKind, PunctualLight, Scene};
 use glam::{DVec2, DVec3};
 
@@ -77,6 +79,37 @@ impl SurfacePoint {
             polygon,
         }
     }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Light vectors (directional lightmaps)
+
+/// The first moment of the incident radiance at a surface point, `Q = ∫ L ω dω` over the
+/// point's hemisphere (Gershun's light vector), per linear RGB channel: `Q[axis]` holds the
+/// world axis `x`, `y` or `z` component of every channel, W/m². Its component along the
+/// surface normal is the irradiance H; the part along the surface is what a normal map
+/// turns towards or away from. Half of it is the L1 band of the irradiance's spherical
+/// harmonics (Ramamoorthi, Hanrahan, "An efficient representation for irradiance environment
+/// maps", SIGGRAPH 2001), which [`crate::lightmap::directional`] writes.
+pub type LightVector = [DVec3; 3];
+
+/// The smallest cosine to the normal that [`slant`] divides by: light arriving more grazing
+/// than about 84° counts as arriving at 84°, so a sliver of light along the horizon cannot
+/// blow the light vector up (its irradiance is small, its `ω / cos` is not).
+pub(crate) const SLANT_MIN_COS: f64 = 0.1;
+
+/// `ω / (n · ω)`: the light vector per unit irradiance of light arriving from unit direction
+/// `w` at a surface of unit normal `n` (its normal component is 1; the cosine kept at least
+/// [`SLANT_MIN_COS`]).
+pub(crate) fn slant(w: DVec3, n: DVec3) -> DVec3 {
+    w / n.dot(w).max(SLANT_MIN_COS)
+}
+
+/// `q += e ⊗ u`: irradiance `e` (W/m², per channel) arriving with slant `u` ([`slant`]).
+pub(crate) fn add_light(q: &mut LightVector, e: DVec3, u: DVec3) {
+    q[0] += e * u.x;
+    q[1] += e * u.y;
+    q[2] += e * u.z;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -161,6 +194,29 @@ impl EmitterShape {
             .iter()
             .map(|q| self.frame.world_from_plane(*q))
             .collect()
+    }
+
+    /// The slant ([`slant`]) of the emitter's unoccluded light at `(p, n)`: the light vector
+    /// of its part above the horizon of `p` (`∫ ω dω` over its solid angle, by the vector form
+    /// of Lambert's contour formula, [`polygon_light_vector`]) over that part's `π F`. `None`
+    /// behind the emitter or below the horizon.
+    pub(crate) fn slant(&self, p: DVec3, n: DVec3) -> Option<DVec3> {
+        if self.frame.n.dot(p - self.frame.origin) <= 0.0 {
+            return None;
+        }
+        let v: DVec3 = self
+            .pieces_world
+            .iter()
+            .map(|piece| polygon_light_vector(p, n, piece))
+            .sum();
+        let normal = n.dot(v);
+        (normal > 0.0).then(|| {
+            let u = v / normal;
+            // At most as slanted as [`slant`] lets a single direction be.
+            let t = u - n;
+            let limit = (1.0 - SLANT_MIN_COS * SLANT_MIN_COS).sqrt() / SLANT_MIN_COS;
+            n + t * (limit / t.length().max(limit))
+        })
     }
 
     /// Unoccluded form factor from `(p, n)` to the emitter's front face (Lambert's contour

@@ -425,6 +425,11 @@ struct BakeArgs {
     /// `occlusionTexture` on the lightmap's UVs (a material's own occlusion texture is kept).
     #[arg(long, value_name = "DISTANCE")]
     ao: Option<f64>,
+    /// Also write a directional lightmap: per texel, the L1 spherical harmonics of the
+    /// irradiance (Godot's layout), three more pages per page, so normal maps shade baked
+    /// light. Needs the default solver.
+    #[arg(long)]
+    directional: bool,
     /// How matching lights are baked: PATTERN=all|indirect|none (repeatable; later ones win).
     /// PATTERN matches a light's name, its node's or its emissive material's (`*`: any
     /// characters). `indirect`: only its bounces (the engine draws its direct light in real
@@ -814,6 +819,7 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             matrix_memory_mib: args.matrix_memory,
             sky: sky_radiance(args.sky.as_deref())?,
             sky_samples: args.sky_samples,
+            directional: args.directional,
             ..SolveOptions::default()
         },
         texels_per_unit: args.texels_per_unit,

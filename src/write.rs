@@ -44,6 +44,11 @@ use crate::scene::{Scene, Side};
 use serde_json::{Value, json};
 use std::collections::BTreeMap;
 
+/// How a directional lightmap's ratio pages decode, as written into their textures' extras
+/// ([`crate::lightmap::directional`]).
+pub const DIRECTIONAL_DECODE: &str = "r = code / 255 * 2 - 1 per channel and axis; \
+     H(n) = H * (0.5 + 2 * (r_x n_x + r_y n_y + r_z n_z)) for a unit world-space normal n";
+
 /// The lightmap as it goes into the file.
 pub struct LightmapImage {
     /// PNG bytes (8-bit RGB in `encoding`), one per atlas page, in page order.
@@ -58,6 +63,9 @@ pub struct LightmapImage {
     pub layers: Vec<LayerImage>,
     /// The light probes (`--probes`), written in the root's `extras`.
     pub probes: Option<crate::probes::Probes>,
+    /// The directional lightmap's ratio pages (`--directional`): per axis `x`, `y`, `z`, PNG
+    /// bytes ([`crate::lightmap::directional::to_rgb8`]) per page.
+    pub directional: Option<[Vec<Vec<u8>>; 3]>,
 }
 
 /// One light group's layer as it goes into the file.
@@ -283,6 +291,31 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
                 }
                 if let Some(list) = list.as_array_mut() {
                     list.push(entry);
+                }
+            }
+        }
+    }
+    // The directional lightmap (`--directional`): three textures per page, named in the page's
+    // `MOZ_lightmap.extras.penumbra.directional`.
+    if let Some(axes) = &image.directional {
+        for (axis, pngs) in ["x", "y", "z"].iter().zip(axes) {
+            for (page, png) in pngs.iter().enumerate() {
+                let name = match page {
+                    0 => format!("penumbra lightmap L1 {axis}"),
+                    p => format!("penumbra lightmap L1 {axis} {p}"),
+                };
+                let extras = json!({"penumbra": {
+                    "quantity": "irradiance L1 ratio",
+                    "axis": axis,
+                    "encoding": "linear",
+                    "decode": DIRECTIONAL_DECODE,
+                    "page": page,
+                }});
+                let texture =
+                    push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
+                if let Some(moz) = moz_of_page.get_mut(page) {
+                    moz["extras"]["penumbra"]["directional"][*axis] =
+                        json!({"index": texture, "texCoord": 1});
                 }
             }
         }

@@ -136,6 +136,9 @@ pub struct Bake {
     pub layers: Vec<(String, Lightmap)>,
     /// The light probes (`--probes`).
     pub probes: Option<crate::probes::Probes>,
+    /// The directional lightmap's ratio pages `r` (`x`, `y`, `z`), in the lightmap's layout
+    /// (`--directional`, [`lightmap::directional`]).
+    pub directional: Option<[Lightmap; 3]>,
     pub stats: Stats,
 }
 
@@ -220,6 +223,13 @@ impl BakeOptions {
                 return bad("--probe-rays", "must be between 1 and 1000000");
             }
         }
+        if self.solve.directional && self.solve.solver != solve::Solver::Hierarchical {
+            return bad(
+                "--directional",
+                "needs the default solver (hierarchical): the light's directions come from its \
+                 links",
+            );
+        }
         if let Some(ao) = &self.ao {
             if !(ao.distance.is_finite() && ao.distance > 0.0) {
                 return bad("--ao", "must be a positive distance in scene units");
@@ -280,6 +290,19 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             })
             .collect()
     });
+    let directional = (!solution.light.is_empty()).then(|| {
+        stage(&mut stats.timings_s.lightmap, "directional", progress, || {
+            let light = [0, 1, 2].map(|axis| {
+                let values: Vec<Vec<DVec3>> = solution
+                    .light
+                    .iter()
+                    .map(|m| m.iter().map(|q| q[axis]).collect())
+                    .collect();
+                lightmap_stage(&scene, &vis, &meshes, &of, &values, &atlas, options).0
+            });
+            lightmap::directional::ratios(&lightmap, &light)
+        })
+    });
     let ao = options.ao.map(|ao| {
         let (map, ao_stats) = stage(
             &mut stats.timings_s.lightmap,
@@ -339,6 +362,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         ao,
         layers,
         probes,
+        directional,
         stats,
     })
 }

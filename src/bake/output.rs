@@ -143,6 +143,10 @@ pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake, encoding: Encoding) -> Result<Vec
             })
         })
         .collect::<Result<Vec<_>>>()?;
+    let directional = match &bake.directional {
+        Some([x, y, z]) => Some([ratio_pngs(x)?, ratio_pngs(y)?, ratio_pngs(z)?]),
+        None => None,
+    };
     let image = LightmapImage {
         pngs,
         intensity,
@@ -150,6 +154,7 @@ pub fn glb_bytes(gltf: &Gltf, bake: &mut Bake, encoding: Encoding) -> Result<Vec
         ao,
         layers,
         probes: bake.probes.clone(),
+        directional,
     };
     write::build(gltf, &bake.scene, &bake.atlas, &image)
 }
@@ -164,6 +169,16 @@ fn page_pngs(map: &Lightmap, encoding: Encoding) -> Result<(Vec<Vec<u8>>, f64)> 
         .map(|page| write::png_bytes(page, map.width, map.height))
         .collect::<Result<Vec<_>>>()?;
     Ok((pngs, intensity))
+}
+
+/// One 8-bit RGB PNG per page of a directional lightmap's ratio map
+/// ([`crate::lightmap::directional::to_rgb8`]).
+fn ratio_pngs(map: &Lightmap) -> Result<Vec<Vec<u8>>> {
+    let rgb = crate::lightmap::directional::to_rgb8(map);
+    let page_bytes = 3 * map.width as usize * map.height as usize;
+    rgb.chunks(page_bytes.max(1))
+        .map(|page| write::png_bytes(page, map.width, map.height))
+        .collect()
 }
 
 /// One linear 8-bit grey PNG per page of `map`, whose values are in 0..1 (the red channel's).

@@ -16,6 +16,7 @@ use glam::{DVec2, DVec3};
 use rayon::prelude::*;
 
 pub mod ao;
+pub mod directional;
 pub mod seams;
 
 /// Float RGB images of irradiance H (W/m², linear, without albedo): one or more pages of

@@ -12,7 +12,9 @@
 use super::lightcuts::LightTree;
 use super::sky::Sky;
 use super::{DirectMethod, SolveOptions, evaluation_points};
-use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint, punctual_unoccluded};
+use crate::light::{
+    AreaEmitter, LightVector, NO_POLYGON, SurfacePoint, add_light, punctual_unoccluded, slant,
+};
 use crate::mesh::ReceiverMesh;
 use crate::scene::{LightKind, PunctualLight, Scene};
 use crate::solve::backproject::{EmitterShape, Limits, Occluders, Scratch, Shaft};
@@ -218,7 +220,7 @@ impl<'a> Direct<'a> {
     /// Irradiance H (W/m²) at a receiving point.
     pub fn irradiance(&self, at: &SurfacePoint) -> DVec3 {
         match self.method {
-            DirectMethod::Sampled => self.irradiance_sampled(at, true),
+            DirectMethod::Sampled => self.irradiance_sampled(at, true, None),
             DirectMethod::Exact => self.irradiance_points(std::slice::from_ref(at))[0],
         }
     }
@@ -228,7 +230,7 @@ impl<'a> Direct<'a> {
     /// neighbouring points. The result of each point does not depend on the others, up to
     /// rounding in rare near-degenerate cases; it is deterministic for given `points`.
     pub fn irradiance_points(&self, points: &[SurfacePoint]) -> Vec<DVec3> {
-        self.evaluate(points, true)
+        self.evaluate(points, true, None)
     }
 
     /// Irradiance H (W/m²) at the vertices of `mesh`, evaluated at `points` (one per vertex,
@@ -239,19 +241,40 @@ impl<'a> Direct<'a> {
         &self,
         mesh: &ReceiverMesh,
         points: &[SurfacePoint],
+        mut light: Option<&mut [LightVector]>,
     ) -> Vec<DVec3> {
-        let mut h = self.evaluate(points, false);
-        let rays = punctual_over_fans(self.scene, self.vis, &self.lights, mesh, points, &mut h);
+        let mut h = self.evaluate(points, false, light.as_deref_mut());
+        let rays = punctual_over_fans(
+            self.scene,
+            self.vis,
+            &self.lights,
+            mesh,
+            points,
+            &mut h,
+            light,
+        );
         self.rays.fetch_add(rays, Ordering::Relaxed);
         h
     }
 
-    /// [`Direct::irradiance_points`], with the punctual lights at the points or left out.
-    fn evaluate(&self, points: &[SurfacePoint], punctual: bool) -> Vec<DVec3> {
+    /// [`Direct::irradiance_points`], with the punctual lights at the points or left out; with
+    /// `light`, each point's light vector ([`LightVector`]) is added to it: an area emitter's
+    /// light takes the slant of its unoccluded part above the horizon
+    /// ([`EmitterShape::slant`]), a punctual light's and a sky ray's their direction.
+    fn evaluate(
+        &self,
+        points: &[SurfacePoint],
+        punctual: bool,
+        mut light: Option<&mut [LightVector]>,
+    ) -> Vec<DVec3> {
         if self.method == DirectMethod::Sampled {
             return points
                 .iter()
-                .map(|p| self.irradiance_sampled(p, punctual))
+                .enumerate()
+                .map(|(i, p)| {
+                    let q = light.as_deref_mut().map(|l| &mut l[i]);
+                    self.irradiance_sampled(p, punctual, q)
+                })
                 .collect();
         }
         let mut h = vec![DVec3::ZERO; points.len()];
@@ -266,6 +289,11 @@ impl<'a> Direct<'a> {
         for (i, q) in points.iter().enumerate() {
             let cut = self.tree.cut(&self.emitters, self.vis, q, self.light_error);
             h[i] += cut.bounded;
+            if let Some(light) = light.as_deref_mut() {
+                for (a, b) in light[i].iter_mut().zip(cut.bounded_light) {
+                    *a += b;
+                }
+            }
             tally.rays += cut.rays;
             bounded += cut.bounded_nodes;
             for e in cut.exact {
@@ -322,6 +350,11 @@ impl<'a> Direct<'a> {
             for (i, h) in h.iter_mut().enumerate() {
                 if f_un[i] > 0.0 {
                     *h += e.radiance * scale[i];
+                    if let Some(light) = light.as_deref_mut()
+                        && let Some(u) = e.shape.slant(points[i].p, points[i].n)
+                    {
+                        add_light(&mut light[i], e.radiance * scale[i], u);
+                    }
                 }
             }
             let c = &self.per_emitter[ei];
@@ -334,15 +367,21 @@ impl<'a> Direct<'a> {
             c.nanos
                 .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
         }
-        for (pt, h) in points.iter().zip(&mut h).filter(|_| punctual) {
-            for light in self.lights.iter().map(|&l| &self.scene.lights[l]) {
-                let (value, r) = punctual_irradiance(light, self.vis, pt);
+        for (i, (pt, h)) in points.iter().zip(&mut h).enumerate() {
+            if !punctual {
+                break;
+            }
+            for l in self.lights.iter().map(|&l| &self.scene.lights[l]) {
+                let (value, r) = punctual_irradiance(l, self.vis, pt);
                 *h += value;
                 tally.rays += r;
+                if let Some(light) = light.as_deref_mut() {
+                    add_light(&mut light[i], value, slant(towards(l, pt.p), pt.n));
+                }
             }
         }
         if let Some(sky) = &self.sky {
-            sky.add_irradiance(self.vis, points, &mut h);
+            sky.add_light(self.vis, points, &mut h, light);
         }
         self.rays.fetch_add(tally.rays, Ordering::Relaxed);
         self.evaluations
@@ -529,7 +568,12 @@ impl<'a> Direct<'a> {
     /// Sampled direct light at one point: exact unoccluded form factor x visibility fraction
     /// from shadow rays, spent in proportion to each emitter's contribution (at least one per
     /// visible emitter), so scenes with many small emitters stay cheap.
-    fn irradiance_sampled(&self, at: &SurfacePoint, punctual: bool) -> DVec3 {
+    fn irradiance_sampled(
+        &self,
+        at: &SurfacePoint,
+        punctual: bool,
+        mut light: Option<&mut LightVector>,
+    ) -> DVec3 {
         let mut h = DVec3::ZERO;
         let mut rays = 0u64;
         let (p, n) = (at.p, at.n);
@@ -553,20 +597,29 @@ impl<'a> Direct<'a> {
                 .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
             rays += r;
             h += e.radiance * (visible * (PI * f));
+            if let Some(light) = light.as_deref_mut()
+                && let Some(u) = e.shape.slant(p, n)
+            {
+                add_light(light, e.radiance * (visible * (PI * f)), u);
+            }
         }
-        for light in self.lights.iter().map(|&l| &self.scene.lights[l]) {
+        for l in self.lights.iter().map(|&l| &self.scene.lights[l]) {
             if !punctual {
                 break;
             }
-            let (value, r) = punctual_irradiance(light, self.vis, at);
+            let (value, r) = punctual_irradiance(l, self.vis, at);
             h += value;
             rays += r;
+            if let Some(light) = light.as_deref_mut() {
+                add_light(light, value, slant(towards(l, p), n));
+            }
         }
         if let Some(sky) = &self.sky {
-            sky.add_irradiance(
+            sky.add_light(
                 self.vis,
                 std::slice::from_ref(at),
                 std::slice::from_mut(&mut h),
+                light.map(std::slice::from_mut),
             );
         }
         self.evaluations.fetch_add(evaluations, Ordering::Relaxed);
@@ -757,6 +810,15 @@ pub fn punctual_irradiance(
     (e * punctual_transmitted(light, vis, at), 1)
 }
 
+/// The unit direction from `p` towards a punctual light (a directional light: against its
+/// direction).
+fn towards(light: &PunctualLight, p: DVec3) -> DVec3 {
+    match light.kind {
+        LightKind::Directional => -light.direction,
+        LightKind::Point | LightKind::Spot { .. } => (light.position - p).normalize_or_zero(),
+    }
+}
+
 /// What of a punctual light one shadow ray from `at` lets through, per channel (it starts on
 /// the line through the point, [`SurfacePoint::ray_origin_towards`]): 1 or 0, or less than 1
 /// through see-through surfaces ([`Visibility::transmitted_skipping`]).
@@ -801,6 +863,7 @@ fn punctual_over_fans(
     mesh: &ReceiverMesh,
     points: &[SurfacePoint],
     h: &mut [DVec3],
+    mut light_vectors: Option<&mut [LightVector]>,
 ) -> u64 {
     let frame = &scene.polygons[mesh.polygon].frame;
     // Every triangle's samples in world space, once for all the lights.
@@ -873,12 +936,17 @@ fn punctual_over_fans(
         for (i, e) in unoccluded.iter().enumerate() {
             let Some(e) = e else { continue };
             let (lit, all) = weights[i];
-            if all > 0.0 {
-                h[i] += *e * (lit / all);
+            let value = if all > 0.0 {
+                *e * (lit / all)
             } else {
                 let (value, r) = punctual_irradiance(light, vis, &points[i]);
-                h[i] += value;
                 rays += r;
+                value
+            };
+            h[i] += value;
+            if let Some(q) = light_vectors.as_deref_mut() {
+                let at = &points[i];
+                add_light(&mut q[i], value, slant(towards(light, at.p), at.n));
             }
         }
     }
@@ -894,16 +962,31 @@ pub fn direct_light(
     meshes: &[ReceiverMesh],
     progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
+    direct_light_at(scene, vis, direct, meshes, false, progress).0
+}
+
+/// [`direct_light`], and with `directional` the light vector at every vertex too
+/// ([`LightVector`]; empty without).
+pub(crate) fn direct_light_at(
+    scene: &Scene,
+    vis: &Visibility,
+    direct: &Direct<'_>,
+    meshes: &[ReceiverMesh],
+    directional: bool,
+    progress: &crate::progress::Progress<'_>,
+) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>) {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let done = AtomicU64::new(0);
-    meshes
+    let (h, light): (Vec<_>, Vec<_>) = meshes
         .par_iter()
         .map(|m| {
             let pts = evaluation_points(scene, vis, m);
-            let out = direct.irradiance_vertices(m, &pts);
+            let mut light = vec![LightVector::default(); if directional { pts.len() } else { 0 }];
+            let out = direct.irradiance_vertices(m, &pts, directional.then_some(&mut light[..]));
             let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
             progress("direct light", d + m.vertices.len() as u64, total_vertices);
-            out
+            (out, light)
         })
-        .collect()
+        .unzip();
+    (h, if directional { light } else { Vec::new() })
 }

@@ -94,6 +94,9 @@ pub struct Cut {
     pub exact: Vec<u32>,
     /// The bounded nodes' contribution, W/m² per channel (with their shadow rays).
     pub bounded: DVec3,
+    /// Its light vector ([`crate::light::LightVector`]), each node's light taken to come from
+    /// its representative emitter's centre.
+    pub bounded_light: crate::light::LightVector,
     /// Bounded nodes.
     pub(crate) bounded_nodes: u64,
     /// Shadow rays of the bounded nodes.
@@ -350,7 +353,10 @@ impl LightTree {
             out.rays += 1;
             let target = emitters[node.emitter as usize].center;
             if !vis.occluded(at.ray_origin, target) {
-                out.bounded += node.power * (e.estimate / node.scalar);
+                let h = node.power * (e.estimate / node.scalar);
+                out.bounded += h;
+                let u = crate::light::slant((target - p).normalize_or_zero(), n);
+                crate::light::add_light(&mut out.bounded_light, h, u);
             }
         }
         out.exact.sort_unstable();

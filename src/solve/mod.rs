@@ -57,7 +57,7 @@ pub use patches::{Patch, patches};
 pub use progressive::progressive;
 // The receiving point and the area emitter are shared physics; re-exported for the solver's
 // users.
-pub use crate::light::{AreaEmitter, NO_POLYGON, SurfacePoint};
+pub use crate::light::{AreaEmitter, LightVector, NO_POLYGON, SurfacePoint};
 
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
@@ -154,6 +154,10 @@ pub struct SolveOptions {
     pub sky: DVec3,
     /// Shadow rays per receiving point for the sky's visible fraction (`--sky-samples`).
     pub sky_samples: usize,
+    /// Also the light vector at every vertex ([`Solution::light`], `--directional`): the
+    /// direct light's from each light's direction, the indirect light's from the directions
+    /// of the hierarchical solver's links (the patch solvers leave it out).
+    pub directional: bool,
 }
 
 /// Default of [`SolveOptions::hr_tolerance`]: at 3e-5 the 20x20 box grid's indirect solve
@@ -179,6 +183,7 @@ impl Default for SolveOptions {
             matrix_memory_mib: matrix::DEFAULT_MEMORY_MIB,
             sky: DVec3::ZERO,
             sky_samples: sky::DEFAULT_SAMPLES,
+            directional: false,
         }
     }
 }
@@ -194,6 +199,9 @@ pub struct Solution {
     /// Per light group ([`crate::scene::mixed`], sorted by name): the group's name and its
     /// lights' part of `irradiance`, same layout. Empty without groups.
     pub layers: Vec<(String, Vec<Vec<DVec3>>)>,
+    /// With [`SolveOptions::directional`], the light vector ([`LightVector`]) of `irradiance`
+    /// at every vertex, same layout; empty without.
+    pub light: Vec<Vec<LightVector>>,
     pub stats: SolveStats,
 }
 
@@ -341,9 +349,10 @@ pub fn radiosity(
     // one rule ([`crate::scene::mixed`]) on its own.
     let start = Instant::now();
     let parts = if scene.mixed.is_plain() {
-        let direct_h = direct_light(scene, vis, &direct, meshes, progress);
+        let (direct_h, light) =
+            direct::direct_light_at(scene, vis, &direct, meshes, options.directional, progress);
         stats.direct = direct.stats();
-        vec![(LightRule::default(), direct_h)]
+        vec![(LightRule::default(), direct_h, light)]
     } else {
         direct_by_rule(
             scene,
@@ -357,15 +366,20 @@ pub fn radiosity(
     };
     stats.direct.seconds = start.elapsed().as_secs_f64();
     let mut direct_h = match &parts[..] {
-        [(_, one)] => one.clone(),
-        _ => sum_of(parts.iter().map(|(_, d)| d), meshes),
+        [(_, one, _)] => one.clone(),
+        _ => sum_of(parts.iter().map(|(_, d, _)| d), meshes),
+    };
+    let mut light = match &parts[..] {
+        [(_, _, one)] => one.clone(),
+        _ if options.directional => sum_of(parts.iter().map(|(_, _, l)| l), meshes),
+        _ => Vec::new(),
     };
     let groups = scene.mixed.groups();
     let layers_direct: Vec<Vec<Vec<DVec3>>> = groups
         .iter()
         .map(|g| {
-            let of_group = parts.iter().filter(|(r, _)| r.group.as_ref() == Some(g));
-            sum_of(of_group.map(|(_, d)| d), meshes)
+            let of_group = parts.iter().filter(|(r, _, _)| r.group.as_ref() == Some(g));
+            sum_of(of_group.map(|(_, d, _)| d), meshes)
         })
         .collect();
 
@@ -386,7 +400,7 @@ pub fn radiosity(
                 progress,
             ),
             Solver::Hierarchical => {
-                let (h, l) = hierarchical::indirect_with_layers(
+                let ind = hierarchical::indirect_with_layers(
                     scene,
                     vis,
                     meshes,
@@ -396,16 +410,18 @@ pub fn radiosity(
                     &mut stats,
                     progress,
                 );
-                layers = l;
-                h
+                layers = ind.layers;
+                add(&mut light, &ind.light);
+                ind.irradiance
             }
         }
     };
     // `bake: indirect`: the bounces of those lights stay, their direct light goes.
     let mut irradiance = irradiance;
-    for (rule, d) in parts.iter().filter(|(r, _)| r.bake == BakeMode::Indirect) {
+    for (rule, d, l) in parts.iter().filter(|(r, _, _)| r.bake == BakeMode::Indirect) {
         subtract(&mut irradiance, d);
         subtract(&mut direct_h, d);
+        subtract(&mut light, l);
         if let Some(k) = groups.iter().position(|g| rule.group.as_ref() == Some(g)) {
             subtract(&mut layers[k], d);
         }
@@ -423,6 +439,7 @@ pub fn radiosity(
         irradiance,
         direct: direct_h,
         layers: groups.into_iter().zip(layers).collect(),
+        light,
         stats,
     }
 }
@@ -439,7 +456,7 @@ fn direct_by_rule(
     emitters_in_solve: bool,
     stats: &mut SolveStats,
     progress: &crate::progress::Progress<'_>,
-) -> Vec<(LightRule, Vec<Vec<DVec3>>)> {
+) -> Vec<(LightRule, Vec<Vec<DVec3>>, Vec<Vec<LightVector>>)> {
     let mixed = &scene.mixed;
     let mut rules: Vec<LightRule> = (0..scene.lights.len()).map(|l| mixed.light(l)).collect();
     if !emitters_in_solve {
@@ -463,7 +480,14 @@ fn direct_by_rule(
                 |l| mixed.light(l) == rule,
                 rule == LightRule::default(),
             );
-            let d = direct_light(scene, vis, &direct, meshes, progress);
+            let (d, l) = direct::direct_light_at(
+                scene,
+                vis,
+                &direct,
+                meshes,
+                options.directional,
+                progress,
+            );
             let s = direct.stats();
             stats.direct.evaluations += s.evaluations;
             stats.direct.fallbacks += s.fallbacks;
@@ -476,37 +500,65 @@ fn direct_by_rule(
                 rays += sky.rays();
                 stats.sky = Some(sky.stats());
             }
-            (rule, d)
+            (rule, d, l)
         })
         .collect();
     stats.rays += rays;
     parts
 }
 
+/// A per-vertex value that sums and subtracts: an irradiance or a light vector.
+trait VertexValue: Copy + Default {
+    fn add(&mut self, other: &Self, sign: f64);
+}
+
+impl VertexValue for DVec3 {
+    fn add(&mut self, other: &Self, sign: f64) {
+        if sign > 0.0 {
+            *self += *other;
+        } else {
+            *self -= *other;
+        }
+    }
+}
+
+impl VertexValue for LightVector {
+    fn add(&mut self, other: &Self, sign: f64) {
+        for (a, b) in self.iter_mut().zip(other) {
+            a.add(b, sign);
+        }
+    }
+}
+
 /// The sum of per-vertex values over `parts` (zero where there are none).
-fn sum_of<'a>(
-    parts: impl Iterator<Item = &'a Vec<Vec<DVec3>>>,
+fn sum_of<'a, T: VertexValue + 'a>(
+    parts: impl Iterator<Item = &'a Vec<Vec<T>>>,
     meshes: &[ReceiverMesh],
-) -> Vec<Vec<DVec3>> {
-    let mut sum: Vec<Vec<DVec3>> = meshes
+) -> Vec<Vec<T>> {
+    let mut sum: Vec<Vec<T>> = meshes
         .iter()
-        .map(|m| vec![DVec3::ZERO; m.vertices.len()])
+        .map(|m| vec![T::default(); m.vertices.len()])
         .collect();
     for part in parts {
-        for (s, p) in sum.iter_mut().zip(part) {
-            for (s, p) in s.iter_mut().zip(p) {
-                *s += *p;
-            }
-        }
+        add(&mut sum, part);
     }
     sum
 }
 
-/// `values -= part`, vertex by vertex.
-fn subtract(values: &mut [Vec<DVec3>], part: &[Vec<DVec3>]) {
+/// `values += part`, vertex by vertex.
+fn add<T: VertexValue>(values: &mut [Vec<T>], part: &[Vec<T>]) {
     for (v, p) in values.iter_mut().zip(part) {
         for (v, p) in v.iter_mut().zip(p) {
-            *v -= *p;
+            v.add(p, 1.0);
+        }
+    }
+}
+
+/// `values -= part`, vertex by vertex.
+fn subtract<T: VertexValue>(values: &mut [Vec<T>], part: &[Vec<T>]) {
+    for (v, p) in values.iter_mut().zip(part) {
+        for (v, p) in v.iter_mut().zip(p) {
+            v.add(p, -1.0);
         }
     }
 }

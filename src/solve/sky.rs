@@ -129,6 +129,29 @@ impl Sky {
         (free / n as f64, n as u64)
     }
 
+    /// [`Sky::transmitted_fraction`], adding the sky's light vector at `at` to `light`.
+    fn transmitted_with_slant(
+        &self,
+        vis: &Visibility,
+        at: &SurfacePoint,
+        light: &mut crate::light::LightVector,
+    ) -> (DVec3, u64) {
+        let o = at.ray_origin;
+        if self.corners.iter().all(|c| at.n.dot(*c - o) <= 0.0) {
+            crate::light::add_light(light, self.radiance * PI, at.n);
+            return (DVec3::ONE, 0);
+        }
+        let n = self.rays_of.len() as f64;
+        let mut free = DVec3::ZERO;
+        for d in self.directions(at) {
+            let t = vis.transmitted_towards(o, d, at.polygon);
+            free += t;
+            let u = crate::light::slant(d, at.n);
+            crate::light::add_light(light, self.radiance * (t * (PI / n)), u);
+        }
+        (free / n, n as u64)
+    }
+
     /// The rays of `at` ([`CosineRays::directions`]).
     pub fn directions<'s>(&'s self, at: &SurfacePoint) -> impl Iterator<Item = DVec3> + 's {
         self.rays_of.directions(at)
@@ -154,19 +177,32 @@ impl Sky {
         hits as f64 / self.rays_of.len() as f64
     }
 
-    /// Adds the sky's irradiance `pi L_sky V` (W/m²) of each of `points` to `h`; counts the
-    /// points, rays and time.
-    pub(crate) fn add_irradiance(
+    /// Adds the sky's irradiance `pi L_sky V` (W/m²) of each of `points` to `h`, and with
+    /// `light` its light vector ([`crate::light::LightVector`]): `pi L_sky` times the mean over
+    /// the rays of what each lets through times its [`crate::light::slant`] (an open point:
+    /// `pi L_sky n`). Counts the points, rays and time.
+    pub(crate) fn add_light(
         &self,
         vis: &Visibility,
         points: &[SurfacePoint],
         h: &mut [DVec3],
+        mut light: Option<&mut [crate::light::LightVector]>,
     ) {
         let start = Instant::now();
         let (mut open, mut rays) = (0, 0);
-        for (at, h) in points.iter().zip(h) {
-            let (v, r) = self.transmitted_fraction(vis, at);
-            *h += self.radiance * (v * PI);
+        for (i, (at, h)) in points.iter().zip(h).enumerate() {
+            let r = match light.as_deref_mut() {
+                None => {
+                    let (v, r) = self.transmitted_fraction(vis, at);
+                    *h += self.radiance * (v * PI);
+                    r
+                }
+                Some(light) => {
+                    let (v, r) = self.transmitted_with_slant(vis, at, &mut light[i]);
+                    *h += self.radiance * (v * PI);
+                    r
+                }
+            };
             rays += r;
             open += u64::from(r == 0);
         }

@@ -1,6 +1,7 @@
 //! Integration tests: one binary, one module per concern.
 
 mod ao;
+mod directional;
 mod bad_input;
 mod compare;
 mod direct;

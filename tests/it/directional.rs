@@ -1,0 +1,214 @@
+//! Directional lightmaps (`--directional`): the ratio pages `r = Q / (4 H)` as a client reads
+//! them from the file, against closed forms: light from one small source (an emitter, a
+//! point light) gives `r` along its direction, `ω / (4 ω · n)`; a uniform sky over an open
+//! plane and the furnace give `n / 4`, nothing along the surface; a wall lit only by the
+//! floor's bounce gets `r` towards the floor, as the floor's light vector integrated over it.
+
+use crate::output::{bake_to_file_with, split_glb};
+use crate::{parse, quick, scratch};
+use glam::DVec3;
+use penumbra::fixtures::{GlbBuilder, Light, Material, Node, Transform, horizontal_rect, quad};
+use penumbra::lightmap::directional::decode;
+use penumbra::reference;
+use penumbra::visibility::Visibility;
+use penumbra::BakeOptions;
+use serde_json::Value;
+
+fn with_directional() -> BakeOptions {
+    let mut o = quick();
+    o.solve.directional = true;
+    o
+}
+
+/// A fully covered texel of a baked file: the mean of its sub-samples' points, its normal,
+/// and its ratios `r` per axis (`x`, `y`, `z`; per channel) decoded from the file.
+struct Texel {
+    p: DVec3,
+    n: DVec3,
+    r: [DVec3; 3],
+}
+
+/// The decoded RGB texels of texture `t` of a baked file.
+fn texture(json: &Value, bin: &[u8], t: usize) -> image::RgbImage {
+    let source = json["textures"][t]["source"].as_u64().unwrap() as usize;
+    let view =
+        &json["bufferViews"][json["images"][source]["bufferView"].as_u64().unwrap() as usize];
+    let at = view["byteOffset"].as_u64().unwrap_or(0) as usize;
+    let bytes = &bin[at..at + view["byteLength"].as_u64().unwrap() as usize];
+    image::load_from_memory(bytes).unwrap().to_rgb8()
+}
+
+/// Every fully covered texel of the baked file `out` with its ratios.
+fn covered(out: &[u8]) -> Vec<Texel> {
+    let (json, bin) = split_glb(out);
+    let moz = &json["materials"][0]["extensions"]["MOZ_lightmap"];
+    let pages = ["x", "y", "z"].map(|axis| {
+        let entry = &moz["extras"]["penumbra"]["directional"][axis];
+        assert_eq!(entry["texCoord"], 1, "{moz}");
+        let t = entry["index"].as_u64().unwrap() as usize;
+        let extras = &json["textures"][t]["extras"]["penumbra"];
+        assert_eq!(extras["quantity"], "irradiance L1 ratio");
+        assert_eq!(extras["axis"], axis);
+        texture(&json, &bin, t)
+    });
+    let gltf = parse(out, "out.glb");
+    let scene = penumbra::load::scene(&gltf).unwrap();
+    let vis = Visibility::new(&scene);
+    let layout = reference::texel_layout(&gltf, &scene, &vis, 4).unwrap();
+    assert_eq!((layout.width, layout.height), pages[0].dimensions());
+    layout
+        .samples
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| layout.coverage(*i) == 1.0)
+        .map(|(i, s)| {
+            let (x, y) = (i as u32 % layout.width, i as u32 / layout.width);
+            let r = pages.each_ref().map(|img| {
+                let px = img.get_pixel(x, y).0;
+                DVec3::new(decode(px[0]), decode(px[1]), decode(px[2]))
+            });
+            Texel {
+                p: s.iter().map(|s| s.p).sum::<DVec3>() / s.len() as f64,
+                n: s[0].n,
+                r,
+            }
+        })
+        .collect()
+}
+
+/// `r` of one channel: its three axes.
+fn channel(r: &[DVec3; 3], c: usize) -> DVec3 {
+    DVec3::new(r[0][c], r[1][c], r[2][c])
+}
+
+/// One 8-bit code of a ratio.
+const CODE: f64 = 2.0 / 255.0;
+
+/// A black floor `[-4, 4]²` facing up under one small light source above `(0, 2, 0)`.
+fn floor_under(add_light: impl FnOnce(&mut GlbBuilder)) -> Vec<u8> {
+    let mut b = GlbBuilder::new();
+    let black = b.add_material(Material::diffuse("floor", [0.0; 3]));
+    b.add_mesh_node(
+        "floor",
+        &horizontal_rect([-4.0, 4.0], [-4.0, 4.0], 0.0, true),
+        black,
+    );
+    add_light(&mut b);
+    b.to_glb()
+}
+
+/// Checks that every floor texel's `r` is `ω / (4 ω · n)` for the direction `ω` to `source`,
+/// each component within 1.5 codes where it is not clamped.
+fn points_at(out: &[u8], source: DVec3) {
+    let texels = covered(out);
+    let mut checked = 0;
+    for t in texels.iter().filter(|t| t.n.y > 0.99) {
+        let w = (source - t.p).normalize();
+        let want = w / (4.0 * w.y);
+        if want.abs().max_element() > 0.95 {
+            continue; // beyond 76° from the normal the pages clamp
+        }
+        for c in 0..3 {
+            let got = channel(&t.r, c);
+            assert!(
+                (got - want).abs().max_element() < 1.5 * CODE,
+                "texel at {}: r {got}, want {want}",
+                t.p
+            );
+        }
+        checked += 1;
+    }
+    assert!(checked > 2000, "{checked} texels checked");
+}
+
+#[test]
+fn a_small_emitter_and_a_point_light_give_their_direction() {
+    let dir = scratch("directional-small");
+    // A 10 cm emitter facing down 2 m above the floor's centre: at the edge of the floor
+    // (4.5 m off) its direction is within 0.3 mrad of its centre's.
+    let emitter = floor_under(|b| {
+        let lamp = b.add_material(Material::diffuse("lamp", [0.0; 3]).emitting([400.0; 3]));
+        b.add_mesh_node(
+            "lamp",
+            &horizontal_rect([-0.05, 0.05], [-0.05, 0.05], 2.0, false),
+            lamp,
+        );
+    });
+    let out = bake_to_file_with(&emitter, &dir, 2, &with_directional());
+    // The same bytes on one thread.
+    assert!(out == bake_to_file_with(&emitter, &dir, 1, &with_directional()));
+    points_at(&out, DVec3::new(0.0, 2.0, 0.0));
+    // A point light off the centre, through the punctual path.
+    let point = floor_under(|b| {
+        let l = b.add_light(Light::point("bulb", 50.0));
+        b.add_node(
+            Node::new("bulb")
+                .with_transform(Transform::translation([1.0, 1.5, -0.5]))
+                .with_light(l),
+        );
+    });
+    let out = bake_to_file_with(&point, &dir, 2, &with_directional());
+    points_at(&out, DVec3::new(1.0, 1.5, -0.5));
+    // Without the option, no directional pages.
+    let plain = bake_to_file_with(&point, &dir, 2, &quick());
+    let (json, _) = split_glb(&plain);
+    let moz = &json["materials"][0]["extensions"]["MOZ_lightmap"];
+    assert!(moz["extras"]["penumbra"]["directional"].is_null(), "{moz}");
+    assert_eq!(json["textures"].as_array().unwrap().len(), 1);
+}
+
+/// The largest component along the surface of any channel's `r` (per axis: 8-bit codes
+/// hold 0 as 1/255), over `texels`, and the largest distance of the normal component from
+/// 1/4.
+fn off_normal(texels: &[Texel]) -> (f64, f64) {
+    let mut along = 0.0f64;
+    let mut normal = 0.0f64;
+    for t in texels {
+        for c in 0..3 {
+            let r = channel(&t.r, c);
+            let rn = r.dot(t.n);
+            along = along.max((r - t.n * rn).abs().max_element());
+            normal = normal.max((rn - 0.25).abs());
+        }
+    }
+    (along, normal)
+}
+
+#[test]
+fn a_uniform_sky_over_an_open_plane_and_the_furnace_give_nothing_along_the_surface() {
+    let dir = scratch("directional-uniform");
+    let mut b = GlbBuilder::new();
+    let grey = b.add_material(Material::diffuse("ground", [0.5; 3]));
+    b.add_mesh_node(
+        "ground",
+        &horizontal_rect([-5.0, 5.0], [-5.0, 5.0], 0.0, true),
+        grey,
+    );
+    let mut options = with_directional();
+    options.solve.sky = DVec3::ONE;
+    let out = bake_to_file_with(&b.to_glb(), &dir, 2, &options);
+    let texels = covered(&out);
+    assert!(texels.len() > 5000);
+    // Exactly n / 4, to the code.
+    let (along, normal) = off_normal(&texels);
+    assert!(
+        along <= 0.5 * CODE + 1e-12 && normal <= 0.5 * CODE + 1e-12,
+        "{along} {normal}"
+    );
+
+    // The furnace: a closed box whose every wall emits and reflects, so the radiance is the
+    // same in every direction everywhere. Its direct light is exact (the walls' light vectors
+    // in closed form); its bounces take the directions of the solver's links, centre to
+    // centre, which is where the error is.
+    let furnace = std::fs::read(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/furnace-box.glb"),
+    )
+    .unwrap();
+    let out = bake_to_file_with(&furnace, &dir, 2, &with_directional());
+    let texels = covered(&out);
+    assert!(texels.len() > 5000);
+    let (along, normal) = off_normal(&texels);
+    // Measured: at most 0.0196 along the surface (2.5 codes, at the corners), 0.0029 off 1/4
+    // along the normal (the rounding of 0.25).
+    assert!(along < 0.03 && normal <= 0.5 * CODE + 1e-12, "{along} {normal}");
+}
