@@ -427,9 +427,12 @@ struct BakeArgs {
     ao: Option<f64>,
     /// Also write a directional lightmap: per texel, the L1 spherical harmonics of the
     /// irradiance (Godot's layout), three more pages per page, so normal maps shade baked
-    /// light. Needs the default solver.
+    /// light.
     #[arg(long)]
     directional: bool,
+    /// Rays per vertex for the directions of the indirect light (`--directional`).
+    #[arg(long, value_name = "N", default_value_t = penumbra::solve::light_vector::DEFAULT_RAYS)]
+    directional_rays: usize,
     /// How matching lights are baked: PATTERN=all|indirect|none (repeatable; later ones win).
     /// PATTERN matches a light's name, its node's or its emissive material's (`*`: any
     /// characters). `indirect`: only its bounces (the engine draws its direct light in real
@@ -820,6 +823,7 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
             sky: sky_radiance(args.sky.as_deref())?,
             sky_samples: args.sky_samples,
             directional: args.directional,
+            directional_rays: args.directional_rays,
             ..SolveOptions::default()
         },
         texels_per_unit: args.texels_per_unit,

@@ -223,12 +223,8 @@ impl BakeOptions {
                 return bad("--probe-rays", "must be between 1 and 1000000");
             }
         }
-        if self.solve.directional && self.solve.solver != solve::Solver::Hierarchical {
-            return bad(
-                "--directional",
-                "needs the default solver (hierarchical): the light's directions come from its \
-                 links",
-            );
+        if !(1..=65536).contains(&self.solve.directional_rays) {
+            return bad("--directional-rays", "must be between 1 and 65536");
         }
         if let Some(ao) = &self.ao {
             if !(ao.distance.is_finite() && ao.distance > 0.0) {
@@ -291,17 +287,22 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             .collect()
     });
     let directional = (!solution.light.is_empty()).then(|| {
-        stage(&mut stats.timings_s.lightmap, "directional", progress, || {
-            let light = [0, 1, 2].map(|axis| {
-                let values: Vec<Vec<DVec3>> = solution
-                    .light
-                    .iter()
-                    .map(|m| m.iter().map(|q| q[axis]).collect())
-                    .collect();
-                lightmap_stage(&scene, &vis, &meshes, &of, &values, &atlas, options).0
-            });
-            lightmap::directional::ratios(&lightmap, &light)
-        })
+        stage(
+            &mut stats.timings_s.lightmap,
+            "directional",
+            progress,
+            || {
+                let light = [0, 1, 2].map(|axis| {
+                    let values: Vec<Vec<DVec3>> = solution
+                        .light
+                        .iter()
+                        .map(|m| m.iter().map(|q| q[axis]).collect())
+                        .collect();
+                    lightmap_stage(&scene, &vis, &meshes, &of, &values, &atlas, options).0
+                });
+                lightmap::directional::ratios(&lightmap, &light)
+            },
+        )
     });
     let ao = options.ao.map(|ao| {
         let (map, ao_stats) = stage(

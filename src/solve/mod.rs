@@ -44,6 +44,7 @@ pub mod direct;
 pub mod form_factors;
 pub mod hemicube;
 pub mod hierarchical;
+pub mod light_vector;
 pub mod lightcuts;
 pub mod matrix;
 pub mod patches;
@@ -155,9 +156,11 @@ pub struct SolveOptions {
     /// Shadow rays per receiving point for the sky's visible fraction (`--sky-samples`).
     pub sky_samples: usize,
     /// Also the light vector at every vertex ([`Solution::light`], `--directional`): the
-    /// direct light's from each light's direction, the indirect light's from the directions
-    /// of the hierarchical solver's links (the patch solvers leave it out).
+    /// direct light's from each light's direction, the indirect light's from a gather of
+    /// rays ([`light_vector`]).
     pub directional: bool,
+    /// Rays per vertex of the indirect light's directions (`--directional-rays`).
+    pub directional_rays: usize,
 }
 
 /// Default of [`SolveOptions::hr_tolerance`]: at 3e-5 the 20x20 box grid's indirect solve
@@ -184,6 +187,7 @@ impl Default for SolveOptions {
             sky: DVec3::ZERO,
             sky_samples: sky::DEFAULT_SAMPLES,
             directional: false,
+            directional_rays: light_vector::DEFAULT_RAYS,
         }
     }
 }
@@ -219,6 +223,9 @@ pub struct SolveStats {
     pub(crate) indirect_seconds: f64,
     /// Wall time of the patch solve alone (progressive refinement or the matrix), seconds.
     pub(crate) patch_solve_seconds: f64,
+    /// Wall time of the indirect light's directions (`--directional`), seconds.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub(crate) directional_seconds: f64,
     pub rays: u64,
     /// Unshot power left at the end, relative to the power first received.
     pub unshot_fraction: f64,
@@ -400,7 +407,7 @@ pub fn radiosity(
                 progress,
             ),
             Solver::Hierarchical => {
-                let ind = hierarchical::indirect_with_layers(
+                let (h, l) = hierarchical::indirect_with_layers(
                     scene,
                     vis,
                     meshes,
@@ -410,15 +417,27 @@ pub fn radiosity(
                     &mut stats,
                     progress,
                 );
-                layers = ind.layers;
-                add(&mut light, &ind.light);
-                ind.irradiance
+                layers = l;
+                h
             }
         }
     };
+    if options.directional {
+        let start = Instant::now();
+        progress("directions", 0, 1);
+        let (indirect, rays) =
+            light_vector::indirect(scene, vis, meshes, &irradiance, &direct_h, options);
+        add(&mut light, &indirect);
+        stats.rays += rays;
+        stats.directional_seconds = start.elapsed().as_secs_f64();
+        progress("directions", 1, 1);
+    }
     // `bake: indirect`: the bounces of those lights stay, their direct light goes.
     let mut irradiance = irradiance;
-    for (rule, d, l) in parts.iter().filter(|(r, _, _)| r.bake == BakeMode::Indirect) {
+    for (rule, d, l) in parts
+        .iter()
+        .filter(|(r, _, _)| r.bake == BakeMode::Indirect)
+    {
         subtract(&mut irradiance, d);
         subtract(&mut direct_h, d);
         subtract(&mut light, l);
@@ -433,7 +452,7 @@ pub fn radiosity(
         stats.rays += sky.rays();
         stats.sky = Some(sky.stats());
     }
-    stats.indirect_seconds = start.elapsed().as_secs_f64();
+    stats.indirect_seconds = start.elapsed().as_secs_f64() - stats.directional_seconds;
     stats.emitted_power = emitted_power;
     Solution {
         irradiance,
@@ -443,6 +462,10 @@ pub fn radiosity(
         stats,
     }
 }
+
+/// The direct light of a set of lights that share a rule: the rule, the irradiance at the
+/// vertices, and their light vectors (empty without [`SolveOptions::directional`]).
+type DirectPart = (LightRule, Vec<Vec<DVec3>>, Vec<Vec<LightVector>>);
 
 /// The direct light at the vertices of each set of lights that share a rule
 /// ([`crate::scene::mixed`]), in the rules' order: the sky goes with the lights baked fully in
@@ -456,7 +479,7 @@ fn direct_by_rule(
     emitters_in_solve: bool,
     stats: &mut SolveStats,
     progress: &crate::progress::Progress<'_>,
-) -> Vec<(LightRule, Vec<Vec<DVec3>>, Vec<Vec<LightVector>>)> {
+) -> Vec<DirectPart> {
     let mixed = &scene.mixed;
     let mut rules: Vec<LightRule> = (0..scene.lights.len()).map(|l| mixed.light(l)).collect();
     if !emitters_in_solve {
@@ -480,14 +503,8 @@ fn direct_by_rule(
                 |l| mixed.light(l) == rule,
                 rule == LightRule::default(),
             );
-            let (d, l) = direct::direct_light_at(
-                scene,
-                vis,
-                &direct,
-                meshes,
-                options.directional,
-                progress,
-            );
+            let (d, l) =
+                direct::direct_light_at(scene, vis, &direct, meshes, options.directional, progress);
             let s = direct.stats();
             stats.direct.evaluations += s.evaluations;
             stats.direct.fallbacks += s.fallbacks;
@@ -505,6 +522,10 @@ fn direct_by_rule(
         .collect();
     stats.rays += rays;
     parts
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 /// A per-vertex value that sums and subtracts: an irradiance or a light vector.

@@ -254,6 +254,23 @@ impl CosineRays {
         }
     }
 
+    /// The same shifted point set lifted to the hemisphere about `at.n` with equal solid
+    /// angle per direction (`cos θ` uniform in [0, 1)): unit directions, uniformly distributed.
+    pub(crate) fn uniform_directions<'s>(
+        &'s self,
+        at: &SurfacePoint,
+    ) -> impl Iterator<Item = DVec3> + 's {
+        let shift = point_shift(at.p);
+        let (t, b) = at.n.any_orthonormal_pair();
+        let n = at.n;
+        self.square.iter().map(move |q| {
+            let s = (*q + shift).fract();
+            let r = (1.0 - s.x * s.x).max(0.0).sqrt();
+            let phi = 2.0 * std::f64::consts::PI * s.y;
+            t * (r * phi.cos()) + b * (r * phi.sin()) + n * s.x
+        })
+    }
+
     /// Directions per point.
     pub(crate) fn len(&self) -> usize {
         self.square.len()

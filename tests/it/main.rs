@@ -1,10 +1,10 @@
 //! Integration tests: one binary, one module per concern.
 
 mod ao;
-mod directional;
 mod bad_input;
 mod compare;
 mod direct;
+mod directional;
 mod discontinuity;
 mod double_sided;
 mod failure_scenes;

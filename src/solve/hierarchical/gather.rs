@@ -5,7 +5,7 @@ use super::REGULARIZATION;
 use super::refine::Link;
 use super::transfer::{WHITE, tinted};
 use super::tree::Hierarchy;
-use crate::light::{LightVector, NO_POLYGON, add_light};
+use crate::light::NO_POLYGON;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 
@@ -22,37 +22,6 @@ fn along(g: &Gradient, d: DVec3) -> DVec3 {
 fn outer(a: DVec3, b: DVec3) -> DMat3 {
     DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
-/// The irradiance link `l` brings its receiver from the node radiosities `b` and gradients `g`
-/// (see [`Hierarchy::gather_clamped_as`] for `whole`).
-fn link_irradiance(
-    l: &Link,
-    b: &[DVec3],
-    g: &[Gradient],
-    whole: Option<(&[DVec3], &[Gradient])>,
-) -> DVec3 {
-    let s = l.source as usize;
-    let b = match g.get(s) {
-        Some(g) if l.toward != [0.0; 3] => {
-            let t = DVec3::from(l.toward.map(f64::from));
-            match whole {
-                None => (b[s] + along(g, t)).clamp(DVec3::ZERO, 2.0 * b[s]),
-                Some((bw, gw)) => {
-                    let e = along(&gw[s], t);
-                    let kept = (bw[s] + e).clamp(DVec3::ZERO, 2.0 * bw[s]) - bw[s];
-                    let scale = DVec3::select(e.cmpeq(DVec3::ZERO), DVec3::ONE, kept / e);
-                    b[s] + scale * along(g, t)
-                }
-            }
-        }
-        _ => b[s],
-    };
-    if l.tint == WHITE {
-        b * l.k
-    } else {
-        b * l.k * tinted(l.tint)
-    }
-}
-
 impl Hierarchy {
     /// Irradiance gathered by every node along `links` (sorted by receiver) from the node
     /// radiosities `b` (W/m²), each source taken as uniform.
@@ -79,36 +48,6 @@ impl Hierarchy {
         g: &[Gradient],
         whole: Option<(&[DVec3], &[Gradient])>,
     ) -> Vec<DVec3> {
-        self.gather_by_receiver(links, DVec3::ZERO, |sum, l| {
-            *sum += link_irradiance(l, b, g, whole)
-        })
-    }
-
-    /// Per node, the irradiance it gathers along `links` (as [`Hierarchy::gather_linear`])
-    /// times the unit direction of each link's source from its receiver (centre to centre):
-    /// a light vector ([`LightVector`]) whose direction, not its size, the elements use
-    /// ([`super::element_light`]).
-    pub(crate) fn gather_directions(
-        &self,
-        links: &[Link],
-        b: &[DVec3],
-        g: &[Gradient],
-    ) -> Vec<LightVector> {
-        self.gather_by_receiver(links, LightVector::default(), |sum, l| {
-            let (r, s) = (&self.nodes[l.receiver as usize], &self.nodes[l.source as usize]);
-            let w = (s.center - r.center).normalize_or_zero();
-            add_light(sum, link_irradiance(l, b, g, None), w);
-        })
-    }
-
-    /// Per node, `add` folded over its links (`links` sorted by receiver), from `zero`; in
-    /// parallel over the receivers.
-    fn gather_by_receiver<T: Copy + Send + Sync>(
-        &self,
-        links: &[Link],
-        zero: T,
-        add: impl Fn(&mut T, &Link) + Sync,
-    ) -> Vec<T> {
         let mut starts = Vec::new();
         for (i, l) in links.iter().enumerate() {
             if i == 0 || links[i - 1].receiver != l.receiver {
@@ -116,18 +55,45 @@ impl Hierarchy {
             }
         }
         starts.push(links.len());
-        let sums: Vec<(u32, T)> = starts
+        let sums: Vec<(u32, DVec3)> = starts
             .par_windows(2)
             .map(|w| {
                 let group = &links[w[0]..w[1]];
-                let mut sum = zero;
-                for l in group {
-                    add(&mut sum, l);
-                }
-                (group[0].receiver, sum)
+                let h = group
+                    .iter()
+                    .map(|l| {
+                        let s = l.source as usize;
+                        let b = match g.get(s) {
+                            Some(g) if l.toward != [0.0; 3] => {
+                                let t = DVec3::from(l.toward.map(f64::from));
+                                match whole {
+                                    None => (b[s] + along(g, t)).clamp(DVec3::ZERO, 2.0 * b[s]),
+                                    Some((bw, gw)) => {
+                                        let e = along(&gw[s], t);
+                                        let kept =
+                                            (bw[s] + e).clamp(DVec3::ZERO, 2.0 * bw[s]) - bw[s];
+                                        let scale = DVec3::select(
+                                            e.cmpeq(DVec3::ZERO),
+                                            DVec3::ONE,
+                                            kept / e,
+                                        );
+                                        b[s] + scale * along(g, t)
+                                    }
+                                }
+                            }
+                            _ => b[s],
+                        };
+                        if l.tint == WHITE {
+                            b * l.k
+                        } else {
+                            b * l.k * tinted(l.tint)
+                        }
+                    })
+                    .sum::<DVec3>();
+                (group[0].receiver, h)
             })
             .collect();
-        let mut h = vec![zero; self.nodes.len()];
+        let mut h = vec![DVec3::ZERO; self.nodes.len()];
         for (r, v) in sums {
             h[r as usize] = v;
         }
@@ -136,17 +102,12 @@ impl Hierarchy {
 
     /// Push: every element's irradiance is what its leaf and all its ancestors gathered.
     pub fn push(&self, gathered: &[DVec3]) -> Vec<DVec3> {
-        self.push_with(gathered, |a, b| *a += b)
-    }
-
-    /// [`Hierarchy::push`] of any quantity that `add` sums.
-    pub(crate) fn push_with<T: Copy>(&self, gathered: &[T], add: impl Fn(&mut T, T)) -> Vec<T> {
         let mut acc = gathered.to_vec();
         for i in (0..self.nodes.len()).rev() {
             if let Some(kids) = self.nodes[i].kids {
                 let v = acc[i];
                 for k in kids {
-                    add(&mut acc[k as usize], v);
+                    acc[k as usize] += v;
                 }
             }
         }

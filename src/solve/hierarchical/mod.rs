@@ -257,8 +257,7 @@ use crate::visibility::Visibility;
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use std::time::Instant;
-use crate::light::{LightVector, SLANT_MIN_COS};
-use vertex::{vertex_indirect, vertex_values};
+use vertex::vertex_indirect;
 
 /// Refinement passes: the first with the reflected direct light as the sources' radiosity, the
 /// next ones with the previous pass's solution.
@@ -367,18 +366,7 @@ pub fn indirect(
     stats: &mut SolveStats,
     progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
-    indirect_with_layers(scene, vis, meshes, direct_h, &[], options, stats, progress).irradiance
-}
-
-/// What [`indirect_with_layers`] returns.
-pub(crate) struct Indirect {
-    /// Direct plus indirect irradiance at the vertices.
-    pub irradiance: Vec<Vec<DVec3>>,
-    /// The same of each layer.
-    pub layers: Vec<Vec<Vec<DVec3>>>,
-    /// With [`SolveOptions::directional`], the indirect light's light vector at the vertices
-    /// ([`element_light`]); empty without.
-    pub light: Vec<Vec<LightVector>>,
+    indirect_with_layers(scene, vis, meshes, direct_h, &[], options, stats, progress).0
 }
 
 /// [`indirect`], and the same for each of `layers` (direct irradiance at the vertices, as
@@ -396,17 +384,7 @@ pub(crate) fn indirect_with_layers(
     options: &SolveOptions,
     stats: &mut SolveStats,
     progress: &crate::progress::Progress<'_>,
-) -> Indirect {
-    let no_light = || {
-        if options.directional {
-            meshes
-                .iter()
-                .map(|m| vec![LightVector::default(); m.vertices.len()])
-                .collect()
-        } else {
-            Vec::new()
-        }
-    };
+) -> (Vec<Vec<DVec3>>, Vec<Vec<Vec<DVec3>>>) {
     let mut hs = HierStats {
         tolerance: options.hr_tolerance,
         ..Default::default()
@@ -414,11 +392,7 @@ pub(crate) fn indirect_with_layers(
     let start = Instant::now();
     let Some(h) = Hierarchy::build(scene, vis, meshes, direct_h) else {
         stats.hierarchical = Some(hs);
-        return Indirect {
-            irradiance: direct_h.to_vec(),
-            layers: layers.to_vec(),
-            light: no_light(),
-        };
+        return (direct_h.to_vec(), layers.to_vec());
     };
     hs.nodes = h.nodes.len();
     hs.elements = h.elements.len();
@@ -437,8 +411,6 @@ pub(crate) fn indirect_with_layers(
     let mut left = 0.0;
     let parts_direct: Vec<Vec<DVec3>> = layers.iter().map(|l| h.element_values(l)).collect();
     let mut layer_indirect = vec![vec![DVec3::ZERO; els.len()]; layers.len()];
-    // The elements' gathered directions ([`Hierarchy::gather_directions`]), last pass only.
-    let mut directions = Vec::new();
     if initial > 0.0 {
         let mut tolerance = options.hr_tolerance;
         let mut previous: Option<Vec<Link>> = None;
@@ -515,16 +487,6 @@ pub(crate) fn indirect_with_layers(
             (indirect, b_el, left) = (it.indirect, it.b, it.left);
             if last {
                 layer_indirect = it.parts;
-                if options.directional {
-                    let nodes = h.pull(&b_el);
-                    let grads = h.gradients(&nodes, &moments);
-                    let g = h.gather_directions(&links, &nodes, &grads);
-                    directions = h.push_with(&g, |a, b| {
-                        for (a, b) in a.iter_mut().zip(b) {
-                            *a += b;
-                        }
-                    });
-                }
             }
             hs.iterations += it.iterations;
             hs.solve_seconds += t.elapsed().as_secs_f64();
@@ -544,76 +506,10 @@ pub(crate) fn indirect_with_layers(
         .zip(&layer_indirect)
         .map(|(d, i)| at_vertices(&h, meshes, d, i))
         .collect();
-    let light = if directions.is_empty() {
-        no_light()
-    } else {
-        light_at_vertices(&h, meshes, &element_light(&h, &indirect, &directions))
-    };
     hs.vertex_seconds = t.elapsed().as_secs_f64();
     stats.rays += hs.rays;
     stats.hierarchical = Some(hs);
-    Indirect {
-        irradiance: out,
-        layers,
-        light,
-    }
-}
-
-/// Every element's indirect light vector ([`LightVector`]) from its indirect irradiance
-/// `indirect` and the directions it gathered (`directions`, [`Hierarchy::gather_directions`]),
-/// per channel: the irradiance times the slant ([`crate::light::slant`]) of the gathered
-/// direction `G`, `n + (G - (G·n) n) / (G·n)`, the cosine kept at least
-/// [`crate::light::SLANT_MIN_COS`] of `|G|`. Exact for light from one direction; for light from
-/// several it takes their mean direction's slant (a cluster's links reach elements facing
-/// different ways, so the links' own slants are not known per element).
-fn element_light(h: &Hierarchy, indirect: &[DVec3], directions: &[LightVector]) -> Vec<LightVector> {
-    h.elements
-        .iter()
-        .zip(indirect.iter().zip(directions))
-        .map(|(e, (hi, g))| {
-            let n = e.normal;
-            let mut q = LightVector::default();
-            for c in 0..3 {
-                let gc = DVec3::new(g[0][c], g[1][c], g[2][c]);
-                let normal = gc.dot(n);
-                let along = gc - n * normal;
-                let u = n + along / normal.max(SLANT_MIN_COS * gc.length()).max(f64::MIN_POSITIVE);
-                for (axis, q) in q.iter_mut().enumerate() {
-                    q[c] = hi[c] * u[axis];
-                }
-            }
-            q
-        })
-        .collect()
-}
-
-/// The elements' light vectors `light` at the vertices, component by component, by the fit of
-/// [`vertex_indirect`] without its floor at zero (a component may be negative): [`vertex_values`].
-fn light_at_vertices(
-    h: &Hierarchy,
-    meshes: &[ReceiverMesh],
-    light: &[LightVector],
-) -> Vec<Vec<LightVector>> {
-    let mut per_mesh: Vec<Vec<(u32, f64, LightVector)>> = vec![Vec::new(); meshes.len()];
-    for (e, q) in h.elements.iter().zip(light) {
-        per_mesh[e.mesh].push((e.triangle as u32, e.area, *q));
-    }
-    meshes
-        .par_iter()
-        .zip(&per_mesh)
-        .map(|(m, items)| {
-            let axes: Vec<Vec<Option<DVec3>>> = (0..3)
-                .map(|axis| {
-                    let of_axis: Vec<(u32, f64, DVec3)> =
-                        items.iter().map(|&(t, a, q)| (t, a, q[axis])).collect();
-                    vertex_values(m, &of_axis, false)
-                })
-                .collect();
-            (0..m.vertices.len())
-                .map(|v| [0, 1, 2].map(|axis| axes[axis][v].unwrap_or(DVec3::ZERO)))
-                .collect()
-        })
-        .collect()
+    (out, layers)
 }
 
 /// The vertices' irradiance: `direct_h` plus the elements' `indirect`, by a linear fit over

@@ -13,17 +13,6 @@ use glam::{DVec2, DVec3};
 /// (two triangles at a polygon's corner or edge, whose centroids lie along the edge), those
 /// that share a vertex with them. See the `hierarchical` module doc.
 pub(super) fn vertex_indirect(m: &ReceiverMesh, items: &[(u32, f64, DVec3)]) -> Vec<Option<DVec3>> {
-    vertex_values(m, items, true)
-}
-
-/// [`vertex_indirect`] of any per-element quantity: with `floor`, kept at least zero (an
-/// irradiance), without it signed (a light vector's component).
-pub(super) fn vertex_values(
-    m: &ReceiverMesh,
-    items: &[(u32, f64, DVec3)],
-    floor: bool,
-) -> Vec<Option<DVec3>> {
-    let floored = |v: DVec3| if floor { v.max(DVec3::ZERO) } else { v };
     let nv = m.vertices.len();
     // Vertex -> its elements (indices into `items`), compressed rows.
     let mut start = vec![0u32; nv + 1];
@@ -96,7 +85,10 @@ pub(super) fn vertex_values(
         let value =
             mean + (bx * syy - by * sxy) * (d.x / det) + (by * sxx - bx * sxy) * (d.y / det);
         let spread = hi - lo;
-        (floored(value.clamp(lo - spread, hi + spread)), isotropy)
+        (
+            value.clamp(lo - spread, hi + spread).max(DVec3::ZERO),
+            isotropy,
+        )
     };
     let mut stamp = vec![u32::MAX; items.len()];
     let mut wide = Vec::new();
@@ -141,7 +133,7 @@ pub(super) fn vertex_values(
                 let a = items[i as usize].1;
                 (s + residual[i as usize] * a, w + a)
             });
-            values[v as usize].map(|x| floored(x + s / w))
+            values[v as usize].map(|x| (x + s / w).max(DVec3::ZERO))
         })
         .collect()
 }
