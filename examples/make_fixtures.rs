@@ -8,6 +8,7 @@
 //! cargo run --release --example make_fixtures -- --tiled-box TILES FILE
 //! cargo run --example make_fixtures -- --box-on-ground FILE
 //! cargo run --example make_fixtures -- --textured DIR
+//! cargo run --example make_fixtures -- --normal-wall FILE
 //! ```
 //!
 //! `OUTPUT_DIR` defaults to `fixtures` (relative to the current directory, so run it from the
@@ -28,6 +29,8 @@
 //! an alpha-tested plate and its geometric twin, a half-lit emissive texture, textured floors,
 //! a glass pane, a glass pane before a wall)
 //! and the failure sweep's `cutout_lattice` to `DIR/<name>.glb`.
+//! `--normal-wall FILE` writes the normal-mapped wall of the directional lightmap's client
+//! check (`penumbra::fixtures::textured::normal_mapped_wall`).
 
 use std::path::PathBuf;
 
@@ -39,7 +42,8 @@ fn main() -> std::io::Result<()> {
              | make_fixtures --town TRIANGLES FILE | make_fixtures --sill-town TRIANGLES FILE \
              | make_fixtures --interior ROOMS FILE \
              | make_fixtures --tiled-box TILES FILE \
-             | make_fixtures --box-on-ground FILE | make_fixtures --textured DIR"
+             | make_fixtures --box-on-ground FILE | make_fixtures --textured DIR \
+             | make_fixtures --normal-wall FILE"
         );
         std::process::exit(2);
     };
@@ -78,6 +82,10 @@ fn main() -> std::io::Result<()> {
         std::fs::write(file, &glb)?;
         println!("{} ({} bytes)", PathBuf::from(file).display(), glb.len());
         return Ok(());
+    }
+    if args.first().is_some_and(|a| a == "--normal-wall") {
+        let [_, file] = args.as_slice() else { usage() };
+        return std::fs::write(file, penumbra::fixtures::textured::normal_mapped_wall());
     }
     if args.first().is_some_and(|a| a == "--textured") {
         use penumbra::fixtures::textured::{self, Floor};

@@ -308,6 +308,17 @@ struct RenderArgs {
     /// `--probes`), as a moving object is.
     #[arg(long, value_name = "X,Y,Z,R", value_parser = parse_sphere, allow_hyphen_values = true, conflicts_with_all = ["irradiance", "lightmap_alone"])]
     probe_sphere: Option<glam::DVec4>,
+    /// Shade normal-mapped surfaces with the directional lightmap (a bake's `--directional`)
+    /// and the materials' `normalTexture`.
+    #[arg(long, conflicts_with_all = ["irradiance", "lightmap_alone"])]
+    directional: bool,
+    /// Draw the reference picture instead of the lightmap: the irradiance at each pixel's
+    /// surface point for its normal-mapped normal, path-traced with SPP paths (slow).
+    #[arg(long, value_name = "SPP", conflicts_with_all = ["irradiance", "lightmap_alone", "directional", "occlusion", "layer", "probe_sphere"])]
+    path_traced: Option<u32>,
+    /// The uniform sky of `--path-traced`, R,G,B in W/(m² sr) (as the bake's `--sky`).
+    #[arg(long, value_name = "R,G,B", requires = "path_traced")]
+    sky: Option<String>,
     #[command(flatten)]
     input_args: InputArgs,
 }
@@ -785,11 +796,20 @@ fn render(args: RenderArgs) -> anyhow::Result<()> {
     let shading = match &map {
         Some(map) => penumbra::render::Shading::Irradiance(map),
         None if args.lightmap_alone => penumbra::render::Shading::LightmapAlone,
-        None if args.occlusion || !args.layer.is_empty() || args.probe_sphere.is_some() => {
+        None if args.path_traced.is_some() => penumbra::render::Shading::PathTraced {
+            spp: args.path_traced.unwrap_or(1).clamp(1, 1 << 20),
+            sky: sky_radiance(args.sky.as_deref())?,
+        },
+        None if args.occlusion
+            || args.directional
+            || !args.layer.is_empty()
+            || args.probe_sphere.is_some() =>
+        {
             penumbra::render::Shading::Adjusted {
                 layers: &args.layer,
                 occlusion: args.occlusion,
                 probe_sphere: args.probe_sphere.map(|s| (s.truncate(), s.w)),
+                directional: args.directional,
             }
         }
         None => penumbra::render::Shading::Lightmap,

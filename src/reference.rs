@@ -406,7 +406,7 @@ impl Emitter {
 }
 
 /// The path tracer.
-struct Tracer<'a> {
+pub(crate) struct Tracer<'a> {
     scene: &'a Scene,
     vis: &'a Visibility,
     emitters: Vec<Emitter>,
@@ -418,7 +418,7 @@ struct Tracer<'a> {
 }
 
 impl<'a> Tracer<'a> {
-    fn new(
+    pub(crate) fn new(
         scene: &'a Scene,
         vis: &'a Visibility,
         bounces_max: Option<u32>,
@@ -521,6 +521,39 @@ impl<'a> Tracer<'a> {
             .sum()
     }
 
+    /// The irradiance (W/m²) at the surface point `at` for the unit shading normal `n` (a
+    /// normal map's), as `spp` paths see it: `at.n` is the surface's own normal, below whose
+    /// plane no light arrives (the surface is opaque), and `n` weighs the light by its cosine.
+    /// What `penumbra render` draws as the reference picture of a normal-mapped surface.
+    pub(crate) fn irradiance_facing(
+        &self,
+        at: &SurfacePoint,
+        n: DVec3,
+        spp: u32,
+        rng: &mut SplitMix64,
+    ) -> DVec3 {
+        let facing = SurfacePoint { n, ..*at };
+        let punctual: DVec3 = self
+            .scene
+            .lights
+            .iter()
+            .filter(|l| {
+                let w = match l.kind {
+                    crate::scene::LightKind::Directional => -l.direction,
+                    _ => l.position - at.p,
+                };
+                w.dot(at.n) > 0.0
+            })
+            .map(|l| solve::punctual_irradiance(l, self.vis, &facing).0)
+            .sum();
+        let mut probe = Probe::default();
+        let paths = spp.max(1);
+        let sum: DVec3 = (0..paths)
+            .map(|_| self.sample_facing(&facing, Some(at.n), rng, &mut probe))
+            .sum();
+        punctual + sum / paths as f64
+    }
+
     /// One next-event estimate of the irradiance from the area emitters at `at`, W/m²: one
     /// point per emitter, `L_e cos(theta_x) / (p_l + p_b)` when visible (`mis`: a hemisphere
     /// ray from `at` will also look for the emitters), else `L_e cos cos / r² · A`. `probe`
@@ -529,6 +562,7 @@ impl<'a> Tracer<'a> {
     fn area_direct(
         &self,
         at: &SurfacePoint,
+        geometric: Option<DVec3>,
         mis: bool,
         rng: &mut SplitMix64,
         mut probe: Option<&mut Probe>,
@@ -547,7 +581,7 @@ impl<'a> Tracer<'a> {
             let r = r2.sqrt();
             let cos_x = at.n.dot(d) / r;
             let cos_y = -e.normal.dot(d) / r;
-            if cos_x <= 0.0 || cos_y <= 0.0 {
+            if cos_x <= 0.0 || cos_y <= 0.0 || geometric.is_some_and(|g| g.dot(d) <= 0.0) {
                 continue;
             }
             let plain = luminance(radiance) * cos_x * cos_y / r2 * e.area();
@@ -573,9 +607,21 @@ impl<'a> Tracer<'a> {
     /// One sample of the irradiance at `at`, without its punctual direct part (the caller adds
     /// that once: it is exact). W/m². `probe` gathers what the first vertex saw.
     fn sample(&self, at: &SurfacePoint, rng: &mut SplitMix64, probe: &mut Probe) -> DVec3 {
+        self.sample_facing(at, None, rng, probe)
+    }
+
+    /// [`Tracer::sample`] for the shading normal `at.n` at a surface whose own normal is
+    /// `geometric` (`None`: the same): light from below the surface's plane does not arrive.
+    fn sample_facing(
+        &self,
+        at: &SurfacePoint,
+        geometric: Option<DVec3>,
+        rng: &mut SplitMix64,
+        probe: &mut Probe,
+    ) -> DVec3 {
         // Whether a hemisphere ray leaves the vertex at this depth.
         let traces = |depth: u32| self.bounces_max.is_none_or(|b| depth < b);
-        let mut total = self.area_direct(at, traces(0), rng, Some(&mut *probe));
+        let mut total = self.area_direct(at, geometric, traces(0), rng, Some(&mut *probe));
         if !traces(0) {
             total += self.sky_direct(at, rng);
         }
@@ -584,6 +630,9 @@ impl<'a> Tracer<'a> {
         let mut depth = 0u32;
         while traces(depth) {
             let dir = cosine_direction(at.n, rng);
+            if depth == 0 && geometric.is_some_and(|g| g.dot(dir) <= 0.0) {
+                break; // into the surface
+            }
             let (hit, through) = self.next_hit(at.ray_origin, dir, rng);
             throughput *= through;
             let Some(hit) = hit else {
@@ -622,7 +671,7 @@ impl<'a> Tracer<'a> {
             let p = p - frame.n * frame.n.dot(p - frame.origin);
             let next = SurfacePoint::new(p, frame.n, poly, self.vis);
             total += throughput
-                * (self.area_direct(&next, traces(depth), rng, None) + self.punctual(&next));
+                * (self.area_direct(&next, None, traces(depth), rng, None) + self.punctual(&next));
             if !traces(depth) {
                 total += throughput * self.sky_direct(&next, rng);
             }

@@ -147,7 +147,16 @@ pub enum Shading<'a> {
         /// interpolated trilinearly at its centre (probes inside geometry left out), shown as
         /// `E(n) / pi`.
         probe_sphere: Option<(DVec3, f64)>,
+        /// The directional lightmap's pages (a bake's `--directional`) with the materials'
+        /// `normalTexture`: H for the normal-mapped normal `n`, `H (1/2 + 2 r · n)`
+        /// ([`crate::lightmap::directional`]).
+        directional: bool,
     },
+    /// The reference picture: `albedo/pi x E` with E the irradiance at each pixel's surface
+    /// point for its normal-mapped normal (the materials' `normalTexture`), path-traced with
+    /// `spp` paths, under the uniform sky `sky` (W/(m² sr)); no lightmap is read. Slow: what a
+    /// directional lightmap is checked against.
+    PathTraced { spp: u32, sky: DVec3 },
     /// `H/pi` from the file's own lightmap texture: the lightmap alone, on white surfaces, no
     /// emission (what a lightmap holds, whatever the textures and colours).
     LightmapAlone,
@@ -260,10 +269,25 @@ pub fn render_radiance(
         Ok(())
     };
     // Per instance: its lightmap binding with its page; with [`Shading::Adjusted`], the layer
-    // textures to add (texture, weight: intensity x (factor - 1)) and its occlusion binding.
+    // textures to add (texture, weight: intensity x (factor - 1)) and its occlusion binding;
+    // with directional shading or the path tracer, its normal map.
+    let directional = matches!(
+        shading,
+        Shading::Adjusted {
+            directional: true,
+            ..
+        }
+    );
+    let traced = match shading {
+        Shading::PathTraced { sky, .. } => {
+            Some(crate::reference::Tracer::new(&scene, &vis, None, sky))
+        }
+        _ => None,
+    };
     let mut bindings: Vec<Option<(Binding, usize)>> = Vec::new();
     let mut added: Vec<Vec<(usize, f64)>> = Vec::new();
     let mut occlusions: Vec<Option<Binding>> = Vec::new();
+    let mut normal_maps: Vec<Option<Binding>> = Vec::new();
     for inst in &scene.instances {
         let b = binding::binding(gltf, inst)?;
         let mut add = Vec::new();
@@ -277,8 +301,27 @@ pub fn render_radiance(
                     }
                 }
             }
+            if directional {
+                let pages = b.directional.ok_or_else(|| {
+                    bad(
+                        format!("mesh {} primitive {}", inst.mesh, inst.primitive),
+                        "its lightmap has no directional pages (bake with --directional)",
+                    )
+                })?;
+                for t in pages {
+                    decode(t, false)?;
+                }
+            }
         }
         added.push(add);
+        let normal_map = match directional || traced.is_some() {
+            true => binding::normal_map(gltf, inst)?,
+            false => None,
+        };
+        if let Some(m) = &normal_map {
+            decode(m.texture, false)?;
+        }
+        normal_maps.push(normal_map);
         let o = match shading {
             Shading::Adjusted {
                 occlusion: true, ..
@@ -357,17 +400,41 @@ pub fn render_radiance(
             } else {
                 DVec3::ZERO
             };
+            let inst = &scene.instances[tri.instance];
+            let ids = &inst.indices[3 * tri.local_index..3 * tri.local_index + 3];
+            let shading_normal = || match &normal_maps[tri.instance] {
+                Some(m) => {
+                    let uv = [0, 1, 2].map(|c| m.uv[ids[c] as usize]);
+                    let at: DVec2 = (0..3).map(|c| uv[c] * bary[c]).sum();
+                    let t = sample_map(&textures[&m.texture], at) * 2.0 - DVec3::ONE;
+                    normal_mapped(&tri.p, &uv, tri.normal, t, m.intensity)
+                }
+                None => tri.normal,
+            };
+            if let (Some(tracer), Some(poly)) = (&traced, tri.polygon) {
+                let Shading::PathTraced { spp, .. } = shading else {
+                    unreachable!("a tracer only for the path-traced picture")
+                };
+                let frame = &scene.polygons[poly].frame;
+                let on = p - frame.n * frame.n.dot(p - frame.origin);
+                let at = crate::light::SurfacePoint::new(on, frame.n, poly, &vis);
+                let mut rng = crate::rng::SplitMix64(crate::rng::mix64(u64::from(i)));
+                let e = tracer.irradiance_facing(&at, shading_normal(), spp, &mut rng);
+                return l + scene.albedo_at(hit.triangle, bary) / std::f64::consts::PI * e;
+            }
             if let Some((b, page, uv)) = uv {
                 let mut h = match shading {
                     Shading::Irradiance(map) => sample_page(map, page, uv),
                     _ => sample_map(&textures[&b.texture], uv) * b.intensity,
                 };
+                if directional && let Some(pages) = b.directional {
+                    let r = pages.map(|t| sample_map(&textures[&t], uv) * 2.0 - DVec3::ONE);
+                    h = crate::lightmap::directional::shade(h, r, shading_normal());
+                }
                 for &(texture, weight) in &added[tri.instance] {
                     h += sample_map(&textures[&texture], uv) * weight;
                 }
                 if let Some(o) = &occlusions[tri.instance] {
-                    let inst = &scene.instances[tri.instance];
-                    let ids = &inst.indices[3 * tri.local_index..3 * tri.local_index + 3];
                     let uv: DVec2 = (0..3).map(|c| o.uv[ids[c] as usize] * bary[c]).sum();
                     let ao = sample_map(&textures[&o.texture], uv).x;
                     h *= 1.0 + o.intensity * (ao - 1.0);
@@ -383,6 +450,30 @@ pub fn render_radiance(
         })
         .collect();
     Ok(radiance)
+}
+
+/// The normal that a tangent-space normal map's value `t` (in [-1, 1]³) gives on the triangle
+/// with world corners `p`, normal-map UVs `uv` and unit normal `n`, its x and y scaled by
+/// `scale` (the `normalTexture.scale`): the tangent frame is the triangle's UV gradients
+/// (`x` along increasing u, `y` along decreasing v, the glTF convention; both scaled by the
+/// longer one's length), as three.js builds it for a mesh without `TANGENT`s.
+fn normal_mapped(p: &[DVec3; 3], uv: &[DVec2; 3], n: DVec3, t: DVec3, scale: f64) -> DVec3 {
+    let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
+    let (d1, d2) = (uv[1] - uv[0], uv[2] - uv[0]);
+    let area = n.dot(e1.cross(e2));
+    if area == 0.0 || !area.is_finite() {
+        return n;
+    }
+    // The in-plane gradients of u and v.
+    let (a, b) = (e2.cross(n), n.cross(e1));
+    let gu = (a * d1.x + b * d2.x) / area;
+    let gv = (a * d1.y + b * d2.y) / area;
+    let len = gu.length_squared().max(gv.length_squared()).sqrt();
+    if len == 0.0 || !len.is_finite() {
+        return n;
+    }
+    let m = (gu * t.x - gv * t.y) * (scale / len) + n * t.z;
+    m.try_normalize().unwrap_or(n)
 }
 
 /// The nearest `t > 0` where the ray `eye + t dir` (unit `dir`) meets the sphere.

@@ -25,6 +25,9 @@ pub(crate) struct Binding {
     /// The light groups' layers of this page (`MOZ_lightmap.extras.penumbra.layers`): per
     /// group, its texture and intensity.
     pub layers: std::collections::BTreeMap<String, (usize, f64)>,
+    /// The directional lightmap's ratio pages of this page
+    /// (`MOZ_lightmap.extras.penumbra.directional`): the textures of axes `x`, `y`, `z`.
+    pub directional: Option<[usize; 3]>,
 }
 
 /// The lightmap binding of a scene instance's primitive: `None` when its material has no
@@ -48,31 +51,50 @@ pub(crate) fn binding(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
             Some((group, (texture, l["intensity"].as_f64().unwrap_or(1.0))))
         })
         .collect();
+    let directional = moz.get("extras").and_then(|e| {
+        let d = &e["penumbra"]["directional"];
+        let axis = |a: &str| d[a]["index"].as_u64().map(|t| t as usize);
+        Some([axis("x")?, axis("y")?, axis("z")?])
+    });
     Ok(Some(Binding {
         tex_coord,
         uv,
         texture: moz.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
         intensity: moz.get("intensity").and_then(|v| v.as_f64()).unwrap_or(1.0),
         layers,
+        directional,
     }))
+}
+
+/// The material's `normalTexture` of a scene instance's primitive, as a [`Binding`] whose
+/// `intensity` is the texture's `scale` (1 when absent): `None` when its material has none.
+pub(crate) fn normal_map(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
+    texture_info(gltf, inst, "normalTexture", "scale")
 }
 
 /// The material's `occlusionTexture` of a scene instance's primitive, as a [`Binding`] whose
 /// `intensity` is the texture's `strength` (1 when absent): `None` when its material has none.
 pub(crate) fn occlusion(gltf: &Gltf, inst: &Instance) -> Result<Option<Binding>> {
+    texture_info(gltf, inst, "occlusionTexture", "strength")
+}
+
+/// The material's texture reference `what` (a core `textureInfo`) of a scene instance's
+/// primitive, as a [`Binding`] whose `intensity` is its `factor` property (1 when absent).
+fn texture_info(gltf: &Gltf, inst: &Instance, what: &str, factor: &str) -> Result<Option<Binding>> {
     let Some(info) = inst
         .gltf_material
-        .and_then(|m| gltf.json["materials"][m]["occlusionTexture"].as_object())
+        .and_then(|m| gltf.json["materials"][m][what].as_object())
     else {
         return Ok(None);
     };
-    let (tex_coord, uv) = uv_set(gltf, inst, info, 0, "occlusionTexture")?;
+    let (tex_coord, uv) = uv_set(gltf, inst, info, 0, what)?;
     Ok(Some(Binding {
         tex_coord,
         uv,
         texture: info.get("index").and_then(|v| v.as_u64()).unwrap_or(0) as usize,
-        intensity: info.get("strength").and_then(|v| v.as_f64()).unwrap_or(1.0),
+        intensity: info.get(factor).and_then(|v| v.as_f64()).unwrap_or(1.0),
         layers: Default::default(),
+        directional: None,
     }))
 }
 

@@ -309,6 +309,7 @@ fn render_lights_a_sphere_with_the_probes() {
         layers: &[],
         occlusion: false,
         probe_sphere: Some((centre, 0.02)),
+        directional: false,
     };
     let px = penumbra::render::render_radiance(&baked, Some(camera), 65, 65, sphere).unwrap();
     let got = px[32 * 65 + 32];
