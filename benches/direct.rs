@@ -125,6 +125,7 @@ fn sphere_lamp(rings: usize) -> Vec<u8> {
         positions,
         normals: None,
         texcoords: None,
+        tangents: None,
         indices,
     };
     b.add_mesh_node("lamp", &sphere, light);

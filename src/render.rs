@@ -454,25 +454,26 @@ pub fn render_radiance(
 
 /// The normal that a tangent-space normal map's value `t` (in [-1, 1]³) gives on the triangle
 /// with world corners `p`, normal-map UVs `uv` and unit normal `n`, its x and y scaled by
-/// `scale` (the `normalTexture.scale`): the tangent frame is the triangle's UV gradients
-/// (`x` along increasing u, `y` along decreasing v, the glTF convention; both scaled by the
-/// longer one's length), as three.js builds it for a mesh without `TANGENT`s.
+/// `scale` (the `normalTexture.scale`). The tangent frame is the triangle's own, as MikkTSpace
+/// (glTF's default for a mesh without `TANGENT`s) gives it on a flat face: the unit tangent
+/// `T` along increasing u in the surface's plane, the bitangent `B = ±n × T` on the side of
+/// decreasing v (glTF's convention: +y of the map is up the texture).
 fn normal_mapped(p: &[DVec3; 3], uv: &[DVec2; 3], n: DVec3, t: DVec3, scale: f64) -> DVec3 {
     let (e1, e2) = (p[1] - p[0], p[2] - p[0]);
     let (d1, d2) = (uv[1] - uv[0], uv[2] - uv[0]);
-    let area = n.dot(e1.cross(e2));
-    if area == 0.0 || !area.is_finite() {
+    let det = d1.x * d2.y - d2.x * d1.y;
+    if det == 0.0 || !det.is_finite() {
         return n;
     }
-    // The in-plane gradients of u and v.
-    let (a, b) = (e2.cross(n), n.cross(e1));
-    let gu = (a * d1.x + b * d2.x) / area;
-    let gv = (a * d1.y + b * d2.y) / area;
-    let len = gu.length_squared().max(gv.length_squared()).sqrt();
-    if len == 0.0 || !len.is_finite() {
+    // dP/du and dP/dv of the triangle's linear map from UV to space.
+    let dpdu = (e1 * d2.y - e2 * d1.y) / det;
+    let dpdv = (e2 * d1.x - e1 * d2.x) / det;
+    let Some(tangent) = (dpdu - n * n.dot(dpdu)).try_normalize() else {
         return n;
-    }
-    let m = (gu * t.x - gv * t.y) * (scale / len) + n * t.z;
+    };
+    let b = n.cross(tangent);
+    let bitangent = if b.dot(dpdv) > 0.0 { -b } else { b };
+    let m = (tangent * t.x + bitangent * t.y) * scale + n * t.z;
     m.try_normalize().unwrap_or(n)
 }
 

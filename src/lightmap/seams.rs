@@ -764,6 +764,7 @@ mod tests {
             ],
             normals: None,
             texcoords: None,
+            tangents: None,
             // Up-facing: (0,0,0) (0,0,1) (1,0,1) runs counter-clockwise seen from +y.
             indices: vec![0, 2, 1, 0, 3, 2, 0, 1, 4],
         };

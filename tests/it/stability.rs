@@ -290,6 +290,7 @@ fn sphere(center: [f64; 3], radius: f64, rings: usize) -> TriangleMesh {
         positions: vec![],
         normals: None,
         texcoords: None,
+        tangents: None,
         indices: vec![],
     };
     let seg = 2 * rings;

@@ -17,7 +17,16 @@
 // shows group `lamp` at half its baked power: H + (0.5 - 1) x H_lamp, composed once on the CPU
 // into a float texture (a game that flickers a lamp does the same sum in its shader).
 
+// Directional lightmaps (a bake's `--directional`): `extras.penumbra.directional` names three
+// more textures per page, the L1 ratio `r` per axis x, y, z (linear 8-bit, r = 2 v - 1, per
+// channel), and the irradiance for a unit world-space normal n is H (1/2 + 2 r · n). The plugin
+// loads them and files them under the page's lightmap texture in `directionalPages`; a client
+// shades with them in its shader (see view.mjs).
+
 import { DataTexture, DataUtils, HalfFloatType, LinearFilter, NoColorSpace, RGBAFormat, SRGBColorSpace } from 'three';
+
+/** Lightmap texture -> its directional pages [x, y, z] (textures). */
+export const directionalPages = new WeakMap();
 
 export class MozLightmapExtension {
   constructor(parser, layerScales = {}) {
@@ -44,6 +53,17 @@ export class MozLightmapExtension {
     }
     map.channel = ext.texCoord ?? 0; // like any glTF textureInfo; TEXCOORD_n is three's uv channel n
     materialParams.lightMap = map;
+    const directional = ext.extras?.penumbra?.directional;
+    if (directional) {
+      const pages = await Promise.all(['x', 'y', 'z'].map(async (axis) => {
+        const t = await this.parser.getDependency('texture', directional[axis].index);
+        t.colorSpace = NoColorSpace;
+        t.channel = directional[axis].texCoord ?? 0;
+        t.needsUpdate = true;
+        return t;
+      }));
+      directionalPages.set(map, pages);
+    }
   }
 
   encodingOf(texture) {

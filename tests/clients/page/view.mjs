@@ -12,7 +12,7 @@ import * as THREE from 'three';
 import { GLTFLoader } from 'three/addons/loaders/GLTFLoader.js';
 // For files that glTF-Transform or gltfpack compressed (EXT_meshopt_compression).
 import { MeshoptDecoder } from 'three/addons/libs/meshopt_decoder.module.js';
-import { MozLightmapExtension } from './moz-lightmap.mjs';
+import { MozLightmapExtension, directionalPages } from './moz-lightmap.mjs';
 
 let renderer = null;
 
@@ -48,6 +48,9 @@ function toLambert(root) {
           // glTF's occlusionTexture: three applies it to the indirect light, the lightmap's too.
           aoMap: m.aoMap,
           aoMapIntensity: m.aoMapIntensity,
+          // Shades nothing without lights, but the directional lightmap's shader reads it.
+          normalMap: m.normalMap,
+          normalScale: m.normalScale,
           side: m.side,
           vertexColors: m.vertexColors,
         }));
@@ -60,12 +63,44 @@ function toLambert(root) {
   return [...converted.values()];
 }
 
+/**
+ * Shades `material`'s lightmap with its directional pages ([x, y, z]): the irradiance for the
+ * normal-mapped world-space normal n is H (1/2 + 2 r · n), r = 2 v - 1 per channel and axis,
+ * clamped at zero (penumbra's `extras.penumbra.directional`). `swap` swaps the x and z pages
+ * (a self-test breaks the decoding with it).
+ */
+function useDirectional(material, pages, swap) {
+  const [x, y, z] = swap ? [pages[2], pages[1], pages[0]] : pages;
+  material.onBeforeCompile = (shader) => {
+    shader.uniforms.lightMapL1x = { value: x };
+    shader.uniforms.lightMapL1y = { value: y };
+    shader.uniforms.lightMapL1z = { value: z };
+    const before = 'vec3 lightMapIrradiance = lightMapTexel.rgb * lightMapIntensity;';
+    const chunk = THREE.ShaderChunk.lights_fragment_maps;
+    if (!chunk.includes(before) || !shader.fragmentShader.includes('#include <lights_fragment_maps>')) {
+      throw new Error('three.js lightmap chunk changed');
+    }
+    shader.fragmentShader = 'uniform sampler2D lightMapL1x;\nuniform sampler2D lightMapL1y;\nuniform sampler2D lightMapL1z;\n' +
+      shader.fragmentShader.replace('#include <lights_fragment_maps>', chunk.replace(before, `${before}
+        {
+          vec3 rx = texture2D( lightMapL1x, vLightMapUv ).rgb * 2.0 - 1.0;
+          vec3 ry = texture2D( lightMapL1y, vLightMapUv ).rgb * 2.0 - 1.0;
+          vec3 rz = texture2D( lightMapL1z, vLightMapUv ).rgb * 2.0 - 1.0;
+          // The normal-mapped normal, from view to world space.
+          vec3 n = normalize( ( vec4( normal, 0.0 ) * viewMatrix ).xyz );
+          lightMapIrradiance *= max( vec3( 0.0 ), 0.5 + 2.0 * ( rx * n.x + ry * n.y + rz * n.z ) );
+        }`));
+  };
+  material.customProgramCacheKey = () => (swap ? 'penumbra-l1-swapped' : 'penumbra-l1');
+  material.needsUpdate = true;
+}
+
 function dispose(root) {
   root.traverse((obj) => {
     if (!obj.isMesh) return;
     obj.geometry.dispose();
     for (const m of [obj.material].flat()) {
-      for (const t of [m.map, m.emissiveMap, m.lightMap, m.aoMap]) t?.dispose();
+      for (const t of [m.map, m.emissiveMap, m.lightMap, m.aoMap, m.normalMap]) t?.dispose();
       m.dispose();
     }
   });
@@ -108,7 +143,7 @@ function probeHarmonics(probes, centre, order) {
   return out;
 }
 
-window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'file', layerScales = {}, probeSphere = null }) {
+window.renderGlb = async function renderGlb({ url, width, height, exposure, lightmapColorSpace = 'file', layerScales = {}, probeSphere = null, directional = null }) {
   const r = rendererOfSize(width, height);
   const loader = new GLTFLoader();
   loader.register((parser) => new MozLightmapExtension(parser, layerScales));
@@ -123,8 +158,15 @@ window.renderGlb = async function renderGlb({ url, width, height, exposure, ligh
 
   const materials = toLambert(scene);
   const channels = new Set();
+  let directionalMaterials = 0;
   for (const m of materials) {
     m.emissiveIntensity /= exposure;
+    // Directional lightmaps: 'decode' as penumbra writes them, 'swapped' broken on purpose.
+    const pages = m.lightMap && directionalPages.get(m.lightMap);
+    if (directional && pages) {
+      useDirectional(m, pages, directional === 'swapped');
+      directionalMaterials++;
+    }
     if (m.lightMap) {
       m.lightMapIntensity /= exposure;
       channels.add(m.lightMap.channel);
@@ -172,6 +214,7 @@ window.renderGlb = async function renderGlb({ url, width, height, exposure, ligh
     // Distinct lightmap images three.js decoded (one per atlas page the scene uses).
     lightmapImages: new Set(materials.filter((m) => m.lightMap?.image?.width > 0).map((m) => m.lightMap.image)).size,
     lightsRemoved: lights.length,
+    directionalMaterials,
   };
   scene.traverse((obj) => { if (obj.isMesh) result.meshes++; });
   dispose(scene);
