@@ -10,15 +10,12 @@
 //! Their sums estimate the reflected light's irradiance `E = ∫ L cos θ dω` and light vector
 //! `Q = ∫ L ω dω`; the vertex's indirect light vector is `H_ind (n + Q_t / E)`, with `Q_t` the
 //! part of `Q` along the surface, per channel. Rays of equal solid angle, not
-//! cosine-distributed ones: `Q`'s integrand is then bounded (with cosine-distributed rays it
-//! is `ω / cos θ`, whose grazing tail made the estimate 0.05 noisy at 128 rays). So its component along the normal is `H_ind` exactly, and only the
-//! direction comes from the rays (a final gather's direction, as Reichert's: "A two-pass
-//! radiosity method driven by lights and viewer position", 1992).
-//!
-//! Why rays and not the links: a link of the hierarchical solver joins two nodes' centres,
-//! and from a wall beside a floor the floor's nodes are as large as their distance, so the
-//! centre's direction misses the light's mean direction by tens of degrees (measured: `r`
-//! 0.17 off on such a wall); rays see each surface where it is, and work with every solver.
+//! cosine-distributed ones: `Q`'s integrand is then bounded (with cosine-distributed rays it is
+//! `ω / cos θ`, heavy-tailed at grazing angles). So the indirect light vector's component
+//! along the normal is `H_ind` exactly, and only its direction comes from the rays (a final
+//! gather's direction, as in Reichert's "A two-pass radiosity method driven by lights and
+//! viewer position", 1992). Why rays and not the hierarchical solver's links:
+//! `docs/decisions.md` ("Engine outputs").
 
 use super::sky::CosineRays;
 use super::{SolveOptions, evaluation_points};
