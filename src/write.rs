@@ -31,6 +31,7 @@
 pub(crate) mod binding;
 mod expand;
 mod images;
+mod pages;
 mod probes;
 
 pub use images::exr_bytes;
@@ -235,109 +236,8 @@ pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -
         }
     }
 
-    // 3. The lightmap textures, one per page, with their convention in `extras`.
-    if image.pngs.len() != atlas.pages.max(1) as usize {
-        return Err(Error::Image(format!(
-            "{} lightmap images for {} atlas pages",
-            image.pngs.len(),
-            atlas.pages
-        )));
-    }
-    let samplers = array_mut(&mut root, "samplers");
-    samplers.push(json!({"magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071}));
-    let sampler_index = samplers.len() - 1;
-    let mut moz_of_page = Vec::new();
-    for (page, png) in image.pngs.iter().enumerate() {
-        let name = match page {
-            0 => "penumbra lightmap".to_string(),
-            p => format!("penumbra lightmap {p}"),
-        };
-        let extras = json!({"penumbra": {
-            "quantity": "irradiance",
-            "units": "W/m^2",
-            "encoding": image.encoding.name(),
-            "scale": image.intensity,
-            "page": page,
-        }});
-        let texture_index =
-            push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
-        moz_of_page
-            .push(json!({"index": texture_index, "texCoord": 1, "intensity": image.intensity}));
-    }
-    // The light groups' layers: one texture per group and page, named in the page's
-    // `MOZ_lightmap.extras.penumbra.layers`.
-    for layer in &image.layers {
-        for (page, png) in layer.pngs.iter().enumerate() {
-            let name = format!("penumbra lightmap layer {} {page}", layer.name);
-            let extras = json!({"penumbra": {
-                "quantity": "irradiance",
-                "layer": layer.name,
-                "units": "W/m^2",
-                "encoding": image.encoding.name(),
-                "scale": layer.intensity,
-                "page": page,
-            }});
-            let texture = push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
-            let entry = json!({
-                "group": layer.name,
-                "index": texture,
-                "texCoord": 1,
-                "intensity": layer.intensity,
-            });
-            if let Some(moz) = moz_of_page.get_mut(page) {
-                let list = &mut moz["extras"]["penumbra"]["layers"];
-                if !list.is_array() {
-                    *list = json!([]);
-                }
-                if let Some(list) = list.as_array_mut() {
-                    list.push(entry);
-                }
-            }
-        }
-    }
-    // The directional lightmap (`--directional`): three textures per page, named in the page's
-    // `MOZ_lightmap.extras.penumbra.directional`.
-    if let Some(axes) = &image.directional {
-        for (axis, pngs) in ["x", "y", "z"].iter().zip(axes) {
-            for (page, png) in pngs.iter().enumerate() {
-                let name = match page {
-                    0 => format!("penumbra lightmap L1 {axis}"),
-                    p => format!("penumbra lightmap L1 {axis} {p}"),
-                };
-                let extras = json!({"penumbra": {
-                    "quantity": "irradiance L1 ratio",
-                    "axis": axis,
-                    "encoding": "linear",
-                    "decode": DIRECTIONAL_DECODE,
-                    "page": page,
-                }});
-                let texture =
-                    push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
-                if let Some(moz) = moz_of_page.get_mut(page) {
-                    moz["extras"]["penumbra"]["directional"][*axis] =
-                        json!({"index": texture, "texCoord": 1});
-                }
-            }
-        }
-    }
-    // The ambient occlusion (`--ao`): one texture per page, bound below as `occlusionTexture`.
-    let mut ao_of_page = Vec::new();
-    if let Some(ao) = &image.ao {
-        for (page, png) in ao.pngs.iter().enumerate() {
-            let name = match page {
-                0 => "penumbra ambient occlusion".to_string(),
-                p => format!("penumbra ambient occlusion {p}"),
-            };
-            let extras = json!({"penumbra": {
-                "quantity": "ambient occlusion",
-                "distance": ao.distance,
-                "encoding": "linear",
-                "page": page,
-            }});
-            let texture = push_png_texture(&mut root, &mut bin, &name, png, sampler_index, extras);
-            ao_of_page.push(json!({"index": texture, "texCoord": 1}));
-        }
-    }
+    // 3. The lightmap textures, with the layers', the directional pages' and the AO's.
+    let (moz_of_page, ao_of_page) = pages::textures(&mut root, &mut bin, image, atlas)?;
 
     if let Some(probes) = &image.probes {
         probes::write(&mut root, &mut bin, probes)?;
