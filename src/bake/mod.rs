@@ -292,14 +292,16 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             "directional",
             progress,
             || {
-                let light = [0, 1, 2].map(|axis| {
-                    let values: Vec<Vec<DVec3>> = solution
-                        .light
-                        .iter()
-                        .map(|m| m.iter().map(|q| q[axis]).collect())
-                        .collect();
-                    lightmap_stage(&scene, &vis, &meshes, &of, &values, &atlas, options).0
-                });
+                let light = lightmap::directional::light_maps(
+                    &scene,
+                    &vis,
+                    &meshes,
+                    &of,
+                    &solution.light,
+                    &atlas,
+                    options.supersample,
+                    options.seams == Seams::Stitch,
+                );
                 lightmap::directional::ratios(&lightmap, &light)
             },
         )

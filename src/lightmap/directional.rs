@@ -19,8 +19,55 @@
 //! rasterized as the irradiance is ([`super::rasterize`]), component by component, so their
 //! texels are means over the same sub-samples, dilated and stitched the same way.
 
-use super::Lightmap;
+use super::{Lightmap, Locator, interpolate, rasterize_many, seams};
+use crate::atlas::Atlas;
+use crate::light::LightVector;
+use crate::mesh::ReceiverMesh;
+use crate::scene::Scene;
+use crate::visibility::Visibility;
 use glam::DVec3;
+
+/// The light vector's components `x`, `y`, `z` as three maps in the atlas, from its values at
+/// the vertices of `meshes` (`light[m][v]`), rasterized in one pass as the irradiance is
+/// ([`super::rasterize`]) and each stitched at the seams when `stitch`.
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn light_maps(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    mesh_of_polygon: &[usize],
+    light: &[Vec<LightVector>],
+    atlas: &Atlas,
+    supersample: u32,
+    stitch: bool,
+) -> [Lightmap; 3] {
+    // The locators find the triangle and weights; the values are interpolated per axis.
+    let axes: Vec<[Vec<DVec3>; 3]> = light
+        .iter()
+        .map(|l| [0, 1, 2].map(|axis| l.iter().map(|q| q[axis]).collect()))
+        .collect();
+    let locators: Vec<Locator> = meshes
+        .iter()
+        .zip(&axes)
+        .map(|(m, a)| Locator::new(m, &a[0]))
+        .collect();
+    let mut maps = rasterize_many(
+        scene,
+        vis,
+        meshes,
+        mesh_of_polygon,
+        atlas,
+        supersample,
+        &|at, hint| match locators[at.mesh].locate_near(at.q, hint) {
+            Some((t, l)) => [0, 1, 2].map(|axis| interpolate(&axes[at.mesh][axis], t, l)),
+            None => [DVec3::ZERO; 3],
+        },
+    );
+    for map in &mut maps {
+        seams::stitch_seams(map, scene, vis, atlas, stitch);
+    }
+    maps
+}
 
 /// The ratio pages `r = Q / (4 H)` from the irradiance map `irradiance` and the light vector's
 /// components `light` (`x`, `y`, `z`; each per channel, the same texel grid), each component

@@ -187,15 +187,28 @@ impl<'a> Locator<'a> {
     /// held `q`: neighbouring queries (the sub-samples of a texel, then of the next) mostly fall
     /// in the same triangle, and skip the search.
     pub(crate) fn value_near(&self, q: DVec2, hint: &mut Option<u32>) -> DVec3 {
+        match self.locate_near(q, hint) {
+            Some((t, l)) => self.interpolate(t, l),
+            None => DVec3::ZERO,
+        }
+    }
+
+    /// Where [`Locator::value_near`] interpolates at `q`: the triangle's vertex ids and the
+    /// (non-negative) barycentric weights; `None` in an empty mesh.
+    pub(crate) fn locate_near(
+        &self,
+        q: DVec2,
+        hint: &mut Option<u32>,
+    ) -> Option<([u32; 3], [f64; 3])> {
         if self.mesh.triangles.is_empty() {
-            return DVec3::ZERO;
+            return None;
         }
         if let Some(k) = *hint
             && let Some(t) = self.mesh.triangles.get(k as usize)
         {
             let l = self.barycentric(k, q);
             if l.iter().all(|&v| v >= 0.0 && v.is_finite()) {
-                return self.interpolate(*t, l);
+                return Some((*t, l));
             }
         }
         let (x, y) = self.grid.cell_of(q);
@@ -230,21 +243,22 @@ impl<'a> Locator<'a> {
                 search(&mut best, &mut (0..self.mesh.triangles.len() as u32));
             }
         }
-        let Some((_, k, l)) = best else {
-            return DVec3::ZERO;
-        };
+        let (_, k, l) = best?;
         *hint = Some(k);
         // Clamp to the triangle.
-        self.interpolate(self.mesh.triangles[k as usize], l.map(|x| x.max(0.0)))
+        Some((self.mesh.triangles[k as usize], l.map(|x| x.max(0.0))))
     }
 
     /// The values at triangle `t`'s corners weighted by `l` (non-negative), renormalised.
     fn interpolate(&self, t: [u32; 3], l: [f64; 3]) -> DVec3 {
-        let s = l[0] + l[1] + l[2];
-        (0..3)
-            .map(|i| self.values[t[i] as usize] * (l[i] / s))
-            .sum()
+        interpolate(self.values, t, l)
     }
+}
+
+/// `values` at the corners `t` weighted by `l` (non-negative), renormalised.
+pub(crate) fn interpolate(values: &[DVec3], t: [u32; 3], l: [f64; 3]) -> DVec3 {
+    let s = l[0] + l[1] + l[2];
+    (0..3).map(|i| values[t[i] as usize] * (l[i] / s)).sum()
 }
 
 /// Rasterizes the solved irradiance into the atlas. `meshes[m]` with `values[m]` at its vertices;
@@ -307,6 +321,29 @@ pub(crate) fn rasterize_with(
     supersample: u32,
     value: &(dyn Fn(&SubSample, &mut Option<u32>) -> DVec3 + Sync),
 ) -> Lightmap {
+    let [map] = rasterize_many(
+        scene,
+        vis,
+        meshes,
+        mesh_of_polygon,
+        atlas,
+        supersample,
+        &|at, hint| [value(at, hint)],
+    );
+    map
+}
+
+/// [`rasterize_with`] of `K` quantities at once: `value` gives all `K` at a visible sub-sample,
+/// and each goes into its own map (the sub-samples, buried tests and dilation shared).
+pub(crate) fn rasterize_many<const K: usize>(
+    scene: &Scene,
+    vis: &Visibility,
+    meshes: &[ReceiverMesh],
+    mesh_of_polygon: &[usize],
+    atlas: &Atlas,
+    supersample: u32,
+    value: &(dyn Fn(&SubSample, &mut Option<u32>) -> [DVec3; K] + Sync),
+) -> [Lightmap; K] {
     // The pages are rasterized as one tall image, page p's rows at p x height.
     let (w, page_h) = (atlas.width as usize, atlas.height as usize);
     let h = page_h * atlas.pages.max(1) as usize;
@@ -357,13 +394,13 @@ pub(crate) fn rasterize_with(
         }
     }
     let n = supersample.max(1) as usize;
-    let rows: Vec<(Vec<DVec3>, Vec<f32>)> = (0..bands)
+    let rows: Vec<(Vec<[DVec3; K]>, Vec<f32>)> = (0..bands)
         .into_par_iter()
         .map(|b| {
             let y_lo = b * BAND;
             let y_hi = ((b + 1) * BAND).min(h);
             let size = (y_hi - y_lo) * w;
-            let mut sum = vec![DVec3::ZERO; size];
+            let mut sum = vec![[DVec3::ZERO; K]; size];
             let mut count = vec![0u32; size];
             let mut claimed = vec![0u64; size];
             // Buried or not at the texel corners of the band, found once per corner and mesh:
@@ -449,7 +486,9 @@ pub(crate) fn rasterize_with(
                                 q: poly.frame.plane_from_world(p),
                                 p,
                             };
-                            sum[idx] += value(&at, &mut hint);
+                            for (s, v) in sum[idx].iter_mut().zip(value(&at, &mut hint)) {
+                                *s += v;
+                            }
                             count[idx] += 1;
                         }
                     }
@@ -458,26 +497,31 @@ pub(crate) fn rasterize_with(
             let values = sum
                 .iter()
                 .zip(&count)
-                .map(|(s, &c)| if c > 0 { *s / c as f64 } else { DVec3::ZERO })
+                .map(|(s, &c)| s.map(|s| if c > 0 { s / c as f64 } else { DVec3::ZERO }))
                 .collect();
             let cov = count.iter().map(|&c| c as f32 / (n * n) as f32).collect();
             (values, cov)
         })
         .collect();
-    let mut texels = Vec::with_capacity(w * h);
+    let mut texels: [Vec<DVec3>; K] = std::array::from_fn(|_| Vec::with_capacity(w * h));
     let mut coverage = Vec::with_capacity(w * h);
     for (v, c) in rows {
-        texels.extend(v);
+        for t in v {
+            for (texels, t) in texels.iter_mut().zip(t) {
+                texels.push(t);
+            }
+        }
         coverage.extend(c);
     }
-    let mut map = Lightmap {
+    let mut maps = texels.map(|texels| Lightmap {
         width: atlas.width,
         height: atlas.height,
         texels,
-        coverage,
-    };
-    dilate_into_padding(&mut map, u32::MAX);
-    map
+        coverage: coverage.clone(),
+    });
+    let filled = coverage.iter().map(|&c| c > 0.0).collect();
+    dilate_all(&mut maps, filled, u32::MAX);
+    maps
 }
 
 /// [`dilate_page`] on every page of `map`, each on its own, from the covered texels.
@@ -489,13 +533,26 @@ pub(crate) fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
 /// Dilation on every page of `map`, each on its own, from the texels marked in `filled` (same
 /// layout as the texels): the others are filled, ring by ring outward, with the mean of their
 /// already-filled 8-neighbours, at most `rings` rings (`u32::MAX`: the whole page).
-pub(crate) fn dilate_from(map: &mut Lightmap, mut filled: Vec<bool>, rings: u32) {
-    let n = map.width as usize * map.height as usize;
+pub(crate) fn dilate_from(map: &mut Lightmap, filled: Vec<bool>, rings: u32) {
+    dilate_all(std::slice::from_mut(map), filled, rings);
+}
+
+/// [`dilate_from`] of maps of one layout (the same pages and size) from the same `filled`
+/// texels: the rings are found once for all of them.
+fn dilate_all(maps: &mut [Lightmap], mut filled: Vec<bool>, rings: u32) {
+    let Some(first) = maps.first() else { return };
+    let (width, height) = (first.width, first.height);
+    let n = width as usize * height as usize;
     if n == 0 {
         return;
     }
-    for (texels, filled) in map.texels.chunks_mut(n).zip(filled.chunks_mut(n)) {
-        dilate_page(texels, filled, map.width, map.height, rings);
+    let pages = first.texels.len() / n;
+    for (p, filled) in filled.chunks_mut(n).enumerate().take(pages) {
+        let mut texels: Vec<&mut [DVec3]> = maps
+            .iter_mut()
+            .map(|m| &mut m.texels[p * n..(p + 1) * n])
+            .collect();
+        dilate_page(&mut texels, filled, width, height, rings);
     }
 }
 
@@ -504,7 +561,13 @@ pub(crate) fn dilate_from(map: &mut Lightmap, mut filled: Vec<bool>, rings: u32)
 /// image, so that bilinear filtering and every mipmap level at chart edges see chart colours,
 /// not black). Marked texels are never changed. Each texel is visited once per ring it
 /// borders.
-fn dilate_page(texels: &mut [DVec3], filled: &mut [bool], width: u32, height: u32, rings: u32) {
+fn dilate_page(
+    texels: &mut [&mut [DVec3]],
+    filled: &mut [bool],
+    width: u32,
+    height: u32,
+    rings: u32,
+) {
     let (w, h) = (width as usize, height as usize);
     let neighbours = |i: usize| {
         let (x, y) = ((i % w) as i64, (i / w) as i64);
@@ -527,17 +590,21 @@ fn dilate_page(texels: &mut [DVec3], filled: &mut [bool], width: u32, height: u3
         if ring.is_empty() {
             break;
         }
-        let values: Vec<DVec3> = ring
-            .iter()
-            .map(|&i| {
-                let (s, k) = neighbours(i)
-                    .filter(|&j| filled[j])
-                    .fold((DVec3::ZERO, 0), |(s, k), j| (s + texels[j], k + 1));
-                s / k as f64
-            })
-            .collect();
-        for (&i, v) in ring.iter().zip(values) {
-            texels[i] = v;
+        for texels in texels.iter_mut() {
+            let values: Vec<DVec3> = ring
+                .iter()
+                .map(|&i| {
+                    let (s, k) = neighbours(i)
+                        .filter(|&j| filled[j])
+                        .fold((DVec3::ZERO, 0), |(s, k), j| (s + texels[j], k + 1));
+                    s / k as f64
+                })
+                .collect();
+            for (&i, v) in ring.iter().zip(values) {
+                texels[i] = v;
+            }
+        }
+        for &i in &ring {
             filled[i] = true;
         }
         frontier = ring;
