@@ -130,7 +130,7 @@ pub struct SceneReport {
     pub covered_texels: usize,
     pub region_texels: BTreeMap<Region, usize>,
     /// `E_lit`, W/m²: the errors are relative to it.
-    pub mean_lit_irradiance: f64,
+    pub(crate) mean_lit_irradiance: f64,
     pub(crate) reference_spp: u32,
     pub(crate) reference_seconds: f64,
     pub(crate) reference_mean_relative_std_error: f64,

@@ -43,7 +43,7 @@ pub fn point_polygon_form_factor(p: DVec3, n: DVec3, poly: &[DVec3]) -> f64 {
 /// non-Lambertian phenomena", SIGGRAPH 1995), signed so that its component along `n` is
 /// `pi F` ([`point_polygon_form_factor`]). Either winding; zero when nothing is above the
 /// horizon.
-pub fn polygon_light_vector(p: DVec3, n: DVec3, poly: &[DVec3]) -> DVec3 {
+pub(crate) fn polygon_light_vector(p: DVec3, n: DVec3, poly: &[DVec3]) -> DVec3 {
     let clipped = clip_to_horizon(poly, p, n);
     if clipped.len() < 3 {
         return DVec3::ZERO;

@@ -42,7 +42,7 @@ impl SurfacePoint {
     /// evaluated a few centimetres beside a shadow line lands on its wrong side. Not farther
     /// along the ray than the lift: at a grazing sun that would step past an occluder a few
     /// centimetres from the wall (a parapet, a neighbour's roof edge).
-    pub fn ray_origin_towards(&self, dir: DVec3) -> DVec3 {
+    pub(crate) fn ray_origin_towards(&self, dir: DVec3) -> DVec3 {
         let lift = self.n.dot(self.ray_origin - self.p);
         let below = self.ray_origin - self.n * lift;
         below + dir * lift

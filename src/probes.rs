@@ -81,7 +81,7 @@ pub const AXES: [DVec3; 6] = [
 
 /// The nine real spherical harmonics of unit direction `d`, three.js's `SphericalHarmonics3`
 /// basis (`getBasisAt`).
-pub fn sh_basis(d: DVec3) -> [f64; 9] {
+pub(crate) fn sh_basis(d: DVec3) -> [f64; 9] {
     let (x, y, z) = (d.x, d.y, d.z);
     [
         0.282095,

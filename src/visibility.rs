@@ -377,7 +377,7 @@ impl Visibility {
 
     /// [`Visibility::transmitted_skipping`] along the ray from `a` in unit direction `dir` to
     /// infinity, polygon `skip` left out ([`Visibility::unoccluded_towards`]).
-    pub fn transmitted_towards(&self, a: DVec3, dir: DVec3, skip: usize) -> DVec3 {
+    pub(crate) fn transmitted_towards(&self, a: DVec3, dir: DVec3, skip: usize) -> DVec3 {
         self.transmitted(
             a,
             dir,

@@ -85,11 +85,11 @@ thread_local! {
 pub(super) struct Atlas {
     pub width: u32,
     pub height: u32,
-    pub atlas_count: u32,
-    pub chart_count: u32,
-    pub mesh_count: u32,
+    pub(crate) atlas_count: u32,
+    pub(crate) chart_count: u32,
+    pub(crate) mesh_count: u32,
     pub meshes: *mut c_void,
-    pub utilization: *mut f32,
+    pub(crate) utilization: *mut f32,
     pub texels_per_unit: f32,
 }
 
@@ -98,16 +98,16 @@ pub(super) struct Atlas {
 #[repr(C)]
 #[derive(Clone, Copy)]
 pub(super) struct ChartOptions {
-    pub max_chart_area: f32,
-    pub max_boundary_length: f32,
-    pub proxy_fit_metric_weight: f32,
-    pub roundness_metric_weight: f32,
-    pub straightness_metric_weight: f32,
-    pub normal_seam_metric_weight: f32,
-    pub texture_seam_metric_weight: f32,
-    pub max_threshold: f32,
-    pub grow_face_count: u32,
-    pub max_iterations: u32,
+    pub(crate) max_chart_area: f32,
+    pub(crate) max_boundary_length: f32,
+    pub(crate) proxy_fit_metric_weight: f32,
+    pub(crate) roundness_metric_weight: f32,
+    pub(crate) straightness_metric_weight: f32,
+    pub(crate) normal_seam_metric_weight: f32,
+    pub(crate) texture_seam_metric_weight: f32,
+    pub(crate) max_threshold: f32,
+    pub(crate) grow_face_count: u32,
+    pub(crate) max_iterations: u32,
 }
 
 /// `struct xatlas::PackOptions`, passed by value. Same field order in xatlas-rs's bindings.
@@ -117,9 +117,9 @@ pub(super) struct PackOptions {
     pub attempts: c_int,
     pub texels_per_unit: f32,
     pub resolution: u32,
-    pub max_chart_size: u32,
-    pub block_align: bool,
-    pub conservative: bool,
+    pub(crate) max_chart_size: u32,
+    pub(crate) block_align: bool,
+    pub(crate) conservative: bool,
     pub padding: u32,
 }
 

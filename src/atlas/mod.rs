@@ -310,7 +310,7 @@ impl Default for AtlasOptions {
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct AtlasMesh {
     /// For each output vertex, the index of the input vertex it comes from.
-    pub xref: Vec<u32>,
+    pub(crate) xref: Vec<u32>,
     /// For each output vertex, its UV in texels (0..width, 0..height), texel centres at +0.5.
     ///
     /// Vertices of triangles that xatlas leaves out of every chart (degenerate ones: a repeated
@@ -347,7 +347,8 @@ pub struct Atlas {
 /// inside it, triangle order kept). See the module documentation for what it works around in
 /// xatlas-rs, and [`AtlasOptions`] for how the pages are sized (with a fixed resolution it lowers
 /// the texel density until all charts fit on one page; with a fixed density it adds pages).
-pub fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, AtlasError> {
+#[cfg(test)]
+pub(crate) fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, AtlasError> {
     pack_estimating(inputs, options, &mut |_| {})
 }
 

@@ -8,7 +8,7 @@ use plotters::prelude::*;
 /// One curve.
 #[derive(Clone, Debug)]
 pub(crate) struct Series {
-    pub label: String,
+    pub(crate) label: String,
     pub colour: (u8, u8, u8),
     /// Dashed (e.g. sampled direct light) rather than solid.
     pub(crate) dashed: bool,

@@ -241,11 +241,11 @@ pub struct MeshError {
     /// Area-weighted RMSE over all points.
     pub rmse: f64,
     /// Area-weighted RMSE over the lit points.
-    pub rmse_lit: f64,
+    pub(crate) rmse_lit: f64,
     /// The light shown over the exact light, both integrated over the points.
     pub shown_over_exact: f64,
     /// The mean exact light over the lit points (W/m²).
-    pub lit_mean: f64,
+    pub(crate) lit_mean: f64,
 }
 
 /// The error of `samples` (see [`MeshError`]); `None` when no point is lit.

@@ -115,7 +115,7 @@ pub struct DmStats {
     pub dropped_threshold: usize,
     /// (Area emitter, occluder edge or vertex) pairs whose wedges were not built: no piece of
     /// them could reach the threshold (bound from the emitter's power and distance).
-    pub culled: usize,
+    pub(crate) culled: usize,
     /// Wedge pieces dropped to stay within the element budget.
     pub dropped_budget: usize,
     /// Constraint pieces spade refused (they would have crossed another; should be 0).
@@ -123,7 +123,7 @@ pub struct DmStats {
     /// Wedge pieces left out by the mesher because they run along a stronger line (the
     /// outline, a D0 line, a stronger wedge piece) within half an element, or all along the
     /// other boundary of their own penumbra.
-    pub crowded: usize,
+    pub(crate) crowded: usize,
 }
 
 /// Per receiver polygon: its discontinuity segments.

@@ -54,7 +54,7 @@ pub struct AoStats {
     /// `--ao`, scene units.
     pub distance: f64,
     /// Rays per sub-sample.
-    pub rays_per_sample: usize,
+    pub(crate) rays_per_sample: usize,
     /// Rays cast.
     pub rays: u64,
     /// Mean AO over the covered texels.

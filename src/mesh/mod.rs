@@ -62,7 +62,7 @@ pub struct Inserted {
     pub refused: usize,
     /// Wedge segments left out because they run along a stronger line within the clearance
     /// (or, all of them, along the other boundary of their own penumbra).
-    pub crowded: usize,
+    pub(crate) crowded: usize,
 }
 
 /// A triangulated receiver polygon. Coordinates are in the polygon's plane frame

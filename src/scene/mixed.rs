@@ -74,7 +74,7 @@ pub struct Mixed {
 /// A command-line rule: lights whose name matches `pattern` get `bake` or `group`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CliRule {
-    pub pattern: String,
+    pub(crate) pattern: String,
     pub bake: Option<BakeMode>,
     pub group: Option<String>,
 }
@@ -269,7 +269,7 @@ fn silence(scene: &mut Scene) {
 
 impl Mixed {
     /// True when every light is baked fully into the main lightmap alone.
-    pub fn is_plain(&self) -> bool {
+    pub(crate) fn is_plain(&self) -> bool {
         self.lights
             .iter()
             .chain(&self.instances)

@@ -20,12 +20,12 @@ pub struct Base {
     /// `baseColorFactor`'s RGB, linear.
     pub factor: DVec3,
     /// `baseColorFactor`'s alpha.
-    pub opacity: f64,
+    pub(crate) opacity: f64,
     /// `baseColorTexture`.
     pub texture: Option<TextureRef>,
     /// `alphaCutoff` under `alphaMode: MASK`: a point whose alpha (opacity x texture alpha) is
     /// under it is a hole, which neither occludes nor reflects.
-    pub cutoff: Option<f64>,
+    pub(crate) cutoff: Option<f64>,
     /// `emissiveTexture` and the radiance it multiplies (`emissiveFactor` x
     /// `emissiveStrength`, W/(m² sr)): the emitting triangles are split where it changes
     /// ([`super::emission`]).
@@ -35,7 +35,7 @@ pub struct Base {
     pub passes: Option<Passes>,
     /// `KHR_materials_transmission`'s `transmissionTexture`: its red channel scales the
     /// transmission factor.
-    pub transmission_texture: Option<TextureRef>,
+    pub(crate) transmission_texture: Option<TextureRef>,
 }
 
 /// How light passes through a see-through surface ([`Pane`]).
@@ -182,7 +182,7 @@ impl Scene {
     }
 
     /// True when triangle `t`'s material is alpha-tested (`alphaMode: MASK`).
-    pub fn is_cut_out(&self, t: usize) -> bool {
+    pub(crate) fn is_cut_out(&self, t: usize) -> bool {
         self.base_of(t).0.is_some_and(|b| b.cutoff.is_some())
     }
 
@@ -238,13 +238,13 @@ impl Scene {
     }
 
     /// True when triangle `t` lets light through (`BLEND`, transmission).
-    pub fn is_see_through(&self, t: usize) -> bool {
+    pub(crate) fn is_see_through(&self, t: usize) -> bool {
         self.base_of(t).0.is_some_and(|b| b.passes.is_some())
     }
 
     /// True when the point at barycentric `bary` of triangle `t` is a hole of an alpha-tested
     /// material (its alpha under `alphaCutoff`).
-    pub fn cut_out_at(&self, t: usize, bary: [f64; 3]) -> bool {
+    pub(crate) fn cut_out_at(&self, t: usize, bary: [f64; 3]) -> bool {
         self.cutout_of(t)
             .is_some_and(|c| c.hole(&self.images, bary))
     }

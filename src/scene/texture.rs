@@ -24,7 +24,7 @@ pub enum Wrap {
 
 impl Wrap {
     /// The wrap mode of a glTF sampler's `wrapS`/`wrapT` code.
-    pub fn from_gl(code: u32) -> Wrap {
+    pub(crate) fn from_gl(code: u32) -> Wrap {
         match code {
             33071 => Wrap::ClampToEdge,
             33648 => Wrap::MirroredRepeat,
@@ -53,7 +53,7 @@ pub struct TextureRef {
     /// Index into [`crate::scene::Scene::images`].
     pub image: usize,
     /// The `TEXCOORD_n` set.
-    pub tex_coord: u32,
+    pub(crate) tex_coord: u32,
     /// `wrapS`, `wrapT`.
     pub wrap: [Wrap; 2],
     /// `KHR_texture_transform` as two rows of an affine map; identity without one.
@@ -66,7 +66,7 @@ impl TextureRef {
 
     /// `KHR_texture_transform`'s matrix, translation x rotation x scale (the extension's
     /// definition; rotation in radians, counter-clockwise in UV space).
-    pub fn transform_of(offset: DVec2, rotation: f64, scale: DVec2) -> [DVec3; 2] {
+    pub(crate) fn transform_of(offset: DVec2, rotation: f64, scale: DVec2) -> [DVec3; 2] {
         let (s, c) = rotation.sin_cos();
         [
             DVec3::new(c * scale.x, s * scale.y, offset.x),
@@ -78,12 +78,6 @@ impl TextureRef {
     pub fn apply(&self, uv: DVec2) -> DVec2 {
         let h = DVec3::new(uv.x, uv.y, 1.0);
         DVec2::new(self.transform[0].dot(h), self.transform[1].dot(h))
-    }
-
-    /// How much the transform scales areas (|det|).
-    pub fn area_scale(&self) -> f64 {
-        let [a, b] = self.transform;
-        (a.x * b.y - a.y * b.x).abs()
     }
 }
 
@@ -171,7 +165,7 @@ impl Image {
 
     /// Linear RGB and alpha averaged over a square footprint `footprint` texture units wide
     /// around `uv`: trilinear between the two mip levels whose texels are nearest that size.
-    pub fn filtered(&self, uv: DVec2, footprint: f64, wrap: [Wrap; 2]) -> (DVec3, f64) {
+    pub(crate) fn filtered(&self, uv: DVec2, footprint: f64, wrap: [Wrap; 2]) -> (DVec3, f64) {
         let (w, h) = self.size();
         let texels = footprint * w.max(h) as f64;
         let lod = if texels > 1.0 { texels.log2() } else { 0.0 };
@@ -306,6 +300,5 @@ mod tests {
         // (0, -2); translate to (0.5, -1.75).
         let uv = t.apply(DVec2::new(1.0, 0.0));
         assert!((uv - DVec2::new(0.5, -1.75)).length() < 1e-12, "{uv}");
-        assert!((t.area_scale() - 6.0).abs() < 1e-12);
     }
 }

@@ -51,7 +51,7 @@ pub struct OccluderPiece {
     /// True when the polygon is alpha-tested or see-through: its outline is not its shadow's
     /// (or its shadow is not black), so a point it may shadow takes shadow rays instead
     /// ([`crate::scene::Scene::cut_out_at`], [`crate::visibility::Visibility::transmitted_skipping`]).
-    pub cut_out: bool,
+    pub(crate) cut_out: bool,
 }
 
 /// Every polygon of a scene cut into convex pieces, for backprojection.

@@ -96,7 +96,7 @@ pub struct Cut {
     pub bounded: DVec3,
     /// Its light vector ([`crate::light::LightVector`]), each node's light taken to come from
     /// its representative emitter's centre.
-    pub bounded_light: crate::light::LightVector,
+    pub(crate) bounded_light: crate::light::LightVector,
     /// Bounded nodes.
     pub(crate) bounded_nodes: u64,
     /// Shadow rays of the bounded nodes.

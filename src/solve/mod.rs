@@ -228,7 +228,7 @@ pub struct SolveStats {
     pub(crate) directional_seconds: f64,
     pub rays: u64,
     /// Unshot power left at the end, relative to the power first received.
-    pub unshot_fraction: f64,
+    pub(crate) unshot_fraction: f64,
     /// Power emitted by area emitters, W (mean over RGB).
     pub emitted_power: f64,
     /// Power received directly by all patches, W (mean over RGB). The hierarchical solver

@@ -116,7 +116,7 @@ impl Sky {
 
     /// [`Sky::visible_fraction`] per linear RGB channel: a ray through see-through surfaces
     /// counts for what they let through ([`Visibility::transmitted_towards`]).
-    pub fn transmitted_fraction(&self, vis: &Visibility, at: &SurfacePoint) -> (DVec3, u64) {
+    pub(crate) fn transmitted_fraction(&self, vis: &Visibility, at: &SurfacePoint) -> (DVec3, u64) {
         let o = at.ray_origin;
         if self.corners.iter().all(|c| at.n.dot(*c - o) <= 0.0) {
             return (DVec3::ONE, 0);

@@ -336,7 +336,7 @@ pub struct HierStats {
     /// Links of the last refinement pass.
     pub links: usize,
     /// Links refined (split), summed over the passes.
-    pub refinements: u64,
+    pub(crate) refinements: u64,
     /// Jacobi iterations, summed over the passes.
     pub iterations: usize,
     /// Shadow rays of the link estimates.
@@ -345,13 +345,13 @@ pub struct HierStats {
     /// power.
     pub tolerance: f64,
     /// Seconds building the hierarchy.
-    pub build_seconds: f64,
+    pub(crate) build_seconds: f64,
     /// Seconds refining links (all passes).
-    pub link_seconds: f64,
+    pub(crate) link_seconds: f64,
     /// Seconds iterating (all passes).
-    pub solve_seconds: f64,
+    pub(crate) solve_seconds: f64,
     /// Seconds computing the vertex values.
-    pub vertex_seconds: f64,
+    pub(crate) vertex_seconds: f64,
 }
 
 /// The indirect light at every vertex of `meshes`, added to their direct light `direct_h`, by

@@ -179,7 +179,7 @@ pub struct Linked {
     /// The links, sorted by receiver then source; empty on overflow.
     pub links: Vec<Link>,
     /// Links split.
-    pub refinements: u64,
+    pub(crate) refinements: u64,
     /// Shadow rays cast.
     pub rays: u64,
     /// True when the refinement stopped at [`Limits::max_links`] links.
@@ -467,7 +467,7 @@ impl Hierarchy {
     /// from the root and starting again 4x looser on each overflow, as a small hierarchy still
     /// does, threw away every link refined so far: on a 267 000-triangle city three times, for
     /// most of its bake.
-    pub fn staged_link(
+    pub(crate) fn staged_link(
         &self,
         vis: &Visibility,
         b: &Sources,

@@ -56,7 +56,7 @@ pub struct Node {
     /// Projected areas (scene units²) along `+x, +y, +z` and `-x, -y, -z`: the sums over the
     /// node's elements of `area × max(0, ±n_axis)`; see
     /// [`projected_bound`](super::transfer::projected_bound).
-    pub proj: [DVec3; 2],
+    pub(crate) proj: [DVec3; 2],
 }
 
 /// A sample point of a node: where it is, its surface's normal, its ray origin, its polygon.
