@@ -96,6 +96,7 @@ fn main() -> std::io::Result<()> {
             ("masked-occluder", textured::masked_occluder()),
             ("ring-occluder", textured::ring_occluder()),
             ("half-lit-emitter", textured::half_lit_emitter()),
+            ("sunlit-fence", textured::sunlit_fence()),
             (
                 "checker-room",
                 textured::floor_room(Floor::Checker {

@@ -271,6 +271,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             &meshes,
             &of,
             &solution.irradiance,
+            &solution.shadows,
             &atlas,
             options,
         )
@@ -281,7 +282,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             .layers
             .iter()
             .map(|(name, values)| {
-                let (map, _) = lightmap_stage(&scene, &vis, &meshes, &of, values, &atlas, options);
+                let (map, _) =
+                    lightmap_stage(&scene, &vis, &meshes, &of, values, &[], &atlas, options);
                 (name.clone(), map)
             })
             .collect()
@@ -523,6 +525,7 @@ fn lightmap_stage(
     meshes: &[ReceiverMesh],
     mesh_of_polygon: &[usize],
     irradiance: &[Vec<DVec3>],
+    shadows: &[solve::direct::PunctualShadows],
     atlas: &Atlas,
     options: &BakeOptions,
 ) -> (Lightmap, lightmap::seams::SeamStats) {
@@ -531,6 +534,7 @@ fn lightmap_stage(
         vis,
         meshes,
         irradiance,
+        shadows,
         mesh_of_polygon,
         atlas,
         options.supersample,

@@ -11,6 +11,8 @@ use crate::atlas::Atlas;
 use crate::geometry::{BoxGrid, barycentric_2d, triangle_bounds};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
+use crate::solve::direct::PunctualShadows;
+use crate::solve::{SurfacePoint, punctual_irradiance};
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -274,11 +276,20 @@ pub(crate) fn interpolate(values: &[DVec3], t: [u32; 3], l: [f64; 3]) -> DVec3 {
 /// (about one test per texel); only a texel whose corners disagree (a
 /// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
 /// that touches none of its corners is missed (its sub-samples count as visible).
+///
+/// With `shadows` (per mesh, [`PunctualShadows`]; empty: none), a sub-sample in a triangle that
+/// a punctual light's shadow edge crosses takes the punctual lights per point instead of from
+/// the vertices: the interpolated value minus the vertices' punctual part, plus each punctual
+/// light's irradiance at the point with one shadow ray. The vertices cannot hold a shadow
+/// edge inside an element (the cut-outs of a fence, an occluder the discontinuity mesh left
+/// out), so there the lightmap resolves it per texel, as a texel-based baker does.
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn rasterize(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],
     values: &[Vec<DVec3>],
+    shadows: &[PunctualShadows],
     mesh_of_polygon: &[usize],
     atlas: &Atlas,
     supersample: u32,
@@ -295,7 +306,25 @@ pub(crate) fn rasterize(
         mesh_of_polygon,
         atlas,
         supersample,
-        &|at, hint| locators[at.mesh].value_near(at.q, hint),
+        &|at, hint| {
+            let Some((t, l)) = locators[at.mesh].locate_near(at.q, hint) else {
+                return DVec3::ZERO;
+            };
+            let value = interpolate(&values[at.mesh], t, l);
+            match (shadows.get(at.mesh), *hint) {
+                (Some(s), Some(k)) if s.crossed.get(k as usize) == Some(&true) => {
+                    let poly = meshes[at.mesh].polygon;
+                    let point = SurfacePoint::new(at.p, scene.polygons[poly].frame.n, poly, vis);
+                    let exact: DVec3 = scene
+                        .lights
+                        .iter()
+                        .map(|light| punctual_irradiance(light, vis, &point).0)
+                        .sum();
+                    (value - interpolate(&s.punctual, t, l)).max(DVec3::ZERO) + exact
+                }
+                _ => value,
+            }
+        },
     )
 }
 

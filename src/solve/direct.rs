@@ -129,6 +129,17 @@ pub struct Direct<'a> {
     per_emitter: Vec<EmitterCounters>,
 }
 
+/// The punctual lights' direct light at a mesh's vertices (W/m², their part of the direct
+/// irradiance) and the triangles of the mesh that a punctual light's shadow edge crosses (its
+/// visibility at the triangle's fan samples differs): there the vertices cannot hold the
+/// shadow, and the lightmap takes the punctual light per texel instead
+/// ([`crate::lightmap::rasterize`]).
+#[derive(Clone, Debug, Default)]
+pub struct PunctualShadows {
+    pub punctual: Vec<DVec3>,
+    pub crossed: Vec<bool>,
+}
+
 /// Points per leaf of the cluster tree of [`Direct::irradiance_points`].
 const CLUSTER_LEAF: usize = 12;
 
@@ -237,13 +248,21 @@ impl<'a> Direct<'a> {
     /// [`evaluation_points`]): area emitters and the sky at the points, as
     /// [`Direct::irradiance_points`]; punctual lights unoccluded at the points times their
     /// visibility averaged over each vertex's fan ([`punctual_over_fans`]).
+    /// Irradiance H (W/m²) at the vertices of `mesh`, evaluated at `points` (one per vertex,
+    /// [`evaluation_points`]): area emitters and the sky at the points, as
+    /// [`Direct::irradiance_points`]; punctual lights unoccluded at the points times their
+    /// visibility averaged over each vertex's fan ([`punctual_over_fans`]). Also the punctual
+    /// lights' part of it, with the triangles that a punctual light's shadow edge crosses
+    /// ([`PunctualShadows`]).
     pub(crate) fn irradiance_vertices(
         &self,
         mesh: &ReceiverMesh,
         points: &[SurfacePoint],
         mut light: Option<&mut [LightVector]>,
-    ) -> Vec<DVec3> {
+    ) -> (Vec<DVec3>, PunctualShadows) {
         let mut h = self.evaluate(points, false, light.as_deref_mut());
+        let before = h.clone();
+        let mut crossed = vec![false; mesh.triangles.len()];
         let rays = punctual_over_fans(
             self.scene,
             self.vis,
@@ -252,9 +271,11 @@ impl<'a> Direct<'a> {
             points,
             &mut h,
             light,
+            &mut crossed,
         );
         self.rays.fetch_add(rays, Ordering::Relaxed);
-        h
+        let punctual = h.iter().zip(&before).map(|(a, b)| *a - *b).collect();
+        (h, PunctualShadows { punctual, crossed })
     }
 
     /// [`Direct::irradiance_points`], with the punctual lights at the points or left out; with
@@ -836,6 +857,18 @@ fn punctual_transmitted(light: &PunctualLight, vis: &Visibility, at: &SurfacePoi
     }
 }
 
+/// Whether the shadow ray from `at` toward a punctual light crosses a cut-out surface
+/// ([`Visibility::meets_cut_out`]).
+fn punctual_meets_cut_out(light: &PunctualLight, vis: &Visibility, at: &SurfacePoint) -> bool {
+    let dir = towards(light, at.p);
+    let origin = at.ray_origin_towards(dir);
+    let reach = match light.kind {
+        LightKind::Directional => f64::from(f32::MAX),
+        LightKind::Point | LightKind::Spot { .. } => light.position.distance(origin),
+    };
+    vis.meets_cut_out(origin, dir, reach, [at.polygon, NO_POLYGON])
+}
+
 /// Barycentric coordinates of the points where [`punctual_over_fans`] tests a triangle: the
 /// centroids of its four midpoint sub-triangles, a quadrature of equal weights.
 const FAN_SAMPLES: [[f64; 3]; 4] = [
@@ -856,6 +889,7 @@ const FAN_SAMPLES: [[f64; 3]; 4] = [
 /// whatever its one point happens to see, so a 6 cm strip along a wall's corner no longer
 /// darkens half the wall. Samples buried under other geometry ([`Visibility::buried`]) do not
 /// count; a vertex without any other sample keeps the test at its point.
+#[allow(clippy::too_many_arguments)]
 fn punctual_over_fans(
     scene: &Scene,
     vis: &Visibility,
@@ -864,6 +898,7 @@ fn punctual_over_fans(
     points: &[SurfacePoint],
     h: &mut [DVec3],
     mut light_vectors: Option<&mut [LightVector]>,
+    crossed: &mut [bool],
 ) -> u64 {
     let frame = &scene.polygons[mesh.polygon].frame;
     // Every triangle's samples in world space, once for all the lights.
@@ -894,20 +929,24 @@ fn punctual_over_fans(
             .triangles
             .iter()
             .zip(&samples)
-            .map(|(t, at)| {
+            .enumerate()
+            .map(|(k, (t, at))| {
                 if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
                     return None;
                 }
                 let lit = at.map(|p| {
                     rays += 1;
-                    punctual_transmitted(
-                        light,
-                        vis,
-                        &SurfacePoint::new(p, frame.n, mesh.polygon, vis),
-                    )
+                    let point = SurfacePoint::new(p, frame.n, mesh.polygon, vis);
+                    if !crossed[k] && punctual_meets_cut_out(light, vis, &point) {
+                        crossed[k] = true;
+                    }
+                    punctual_transmitted(light, vis, &point)
                 });
                 if lit.iter().any(|l| *l != DVec3::ZERO) {
                     t.iter().for_each(|&i| seen[i as usize] = true);
+                }
+                if lit.iter().any(|l| *l != lit[0]) {
+                    crossed[k] = true;
                 }
                 Some(lit)
             })
@@ -975,18 +1014,38 @@ pub(crate) fn direct_light_at(
     directional: bool,
     progress: &crate::progress::Progress<'_>,
 ) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>) {
+    let (h, light, _) = direct_light_shadows(scene, vis, direct, meshes, directional, progress);
+    (h, light)
+}
+
+/// [`direct_light_at`], and per mesh its [`PunctualShadows`].
+pub(crate) fn direct_light_shadows(
+    scene: &Scene,
+    vis: &Visibility,
+    direct: &Direct<'_>,
+    meshes: &[ReceiverMesh],
+    directional: bool,
+    progress: &crate::progress::Progress<'_>,
+) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>, Vec<PunctualShadows>) {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let done = AtomicU64::new(0);
-    let (h, light): (Vec<_>, Vec<_>) = meshes
+    let per_mesh: Vec<(Vec<DVec3>, Vec<LightVector>, PunctualShadows)> = meshes
         .par_iter()
         .map(|m| {
             let pts = evaluation_points(scene, vis, m);
             let mut light = vec![LightVector::default(); if directional { pts.len() } else { 0 }];
-            let out = direct.irradiance_vertices(m, &pts, directional.then_some(&mut light[..]));
+            let (out, shadows) =
+                direct.irradiance_vertices(m, &pts, directional.then_some(&mut light[..]));
             let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
             progress("direct light", d + m.vertices.len() as u64, total_vertices);
-            (out, light)
+            (out, light, shadows)
         })
-        .unzip();
-    (h, if directional { light } else { Vec::new() })
+        .collect();
+    let (mut h, mut light, mut shadows) = (Vec::new(), Vec::new(), Vec::new());
+    for (a, b, c) in per_mesh {
+        h.push(a);
+        light.push(b);
+        shadows.push(c);
+    }
+    (h, if directional { light } else { Vec::new() }, shadows)
 }

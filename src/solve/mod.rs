@@ -206,6 +206,10 @@ pub struct Solution {
     /// With [`SolveOptions::directional`], the light vector ([`LightVector`]) of `irradiance`
     /// at every vertex, same layout; empty without.
     pub light: Vec<Vec<LightVector>>,
+    /// Per mesh, the punctual lights' part of `direct` and the triangles their shadow edges
+    /// cross ([`direct::PunctualShadows`]), for the lightmap's per-texel shadows; empty with
+    /// light rules ([`crate::scene::mixed`]).
+    pub shadows: Vec<direct::PunctualShadows>,
     pub stats: SolveStats,
 }
 
@@ -355,10 +359,18 @@ pub fn radiosity(
     // Direct light at the vertices: of every light at once, or of each set of lights with
     // one rule ([`crate::scene::mixed`]) on its own.
     let start = Instant::now();
+    let mut shadows = Vec::new();
     let parts = if scene.mixed.is_plain() {
-        let (direct_h, light) =
-            direct::direct_light_at(scene, vis, &direct, meshes, options.directional, progress);
+        let (direct_h, light, s) = direct::direct_light_shadows(
+            scene,
+            vis,
+            &direct,
+            meshes,
+            options.directional,
+            progress,
+        );
         stats.direct = direct.stats();
+        shadows = s;
         vec![(LightRule::default(), direct_h, light)]
     } else {
         direct_by_rule(
@@ -459,6 +471,7 @@ pub fn radiosity(
         direct: direct_h,
         layers: groups.into_iter().zip(layers).collect(),
         light,
+        shadows,
         stats,
     }
 }
