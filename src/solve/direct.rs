@@ -1001,24 +1001,11 @@ pub fn direct_light(
     meshes: &[ReceiverMesh],
     progress: &crate::progress::Progress<'_>,
 ) -> Vec<Vec<DVec3>> {
-    direct_light_at(scene, vis, direct, meshes, false, progress).0
+    direct_light_shadows(scene, vis, direct, meshes, false, progress).0
 }
 
-/// [`direct_light`], and with `directional` the light vector at every vertex too
-/// ([`LightVector`]; empty without).
-pub(crate) fn direct_light_at(
-    scene: &Scene,
-    vis: &Visibility,
-    direct: &Direct<'_>,
-    meshes: &[ReceiverMesh],
-    directional: bool,
-    progress: &crate::progress::Progress<'_>,
-) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>) {
-    let (h, light, _) = direct_light_shadows(scene, vis, direct, meshes, directional, progress);
-    (h, light)
-}
-
-/// [`direct_light_at`], and per mesh its [`PunctualShadows`].
+/// [`direct_light`], and per mesh its [`PunctualShadows`]; with `directional`, the light vector
+/// at every vertex too ([`LightVector`]; empty without).
 pub(crate) fn direct_light_shadows(
     scene: &Scene,
     vis: &Visibility,

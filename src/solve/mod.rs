@@ -516,8 +516,14 @@ fn direct_by_rule(
                 |l| mixed.light(l) == rule,
                 rule == LightRule::default(),
             );
-            let (d, l) =
-                direct::direct_light_at(scene, vis, &direct, meshes, options.directional, progress);
+            let (d, l, _) = direct::direct_light_shadows(
+                scene,
+                vis,
+                &direct,
+                meshes,
+                options.directional,
+                progress,
+            );
             let s = direct.stats();
             stats.direct.evaluations += s.evaluations;
             stats.direct.fallbacks += s.fallbacks;
