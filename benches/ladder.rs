@@ -50,6 +50,11 @@ use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
 /// Stages as `--stats` names them in `timings_s`, in pipeline order.
+/// What `--help` (or an unknown argument) prints.
+const USAGE: &str = "usage: cargo bench --bench ladder [-- --scenes a,b,c --timeout SECS \
+    --solver S --extra \"ARGS\" --out FILE --title TITLE --keep DIR --bin PATH --real DIR \
+    --accuracy SPP] (see the module doc in benches/ladder.rs)";
+
 const STAGES: [&str; 9] = [
     "load",
     "visibility",
@@ -182,7 +187,16 @@ fn options() -> Options {
             "--bin" => o.bin = PathBuf::from(value()),
             "--real" => o.real = Some(PathBuf::from(value())),
             "--accuracy" => o.accuracy = Some(value().parse().expect("--accuracy SPP")),
-            _ => {} // `cargo bench` passes --bench; filters are not supported.
+            "--bench" => {} // `cargo bench` passes it.
+            "--help" | "-h" => {
+                println!("{USAGE}");
+                std::process::exit(0);
+            }
+            other => {
+                // A typo must not start an hour of baking that overwrites the report.
+                eprintln!("unknown argument {other:?}\n{USAGE}");
+                std::process::exit(2);
+            }
         }
     }
     o
