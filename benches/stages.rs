@@ -66,7 +66,17 @@ fn options() -> Options {
         match a.as_str() {
             "--rays" => o.rays = args.next().and_then(|v| v.parse().ok()).expect("--rays N"),
             "--reps" => o.reps = args.next().and_then(|v| v.parse().ok()).expect("--reps R"),
-            _ => {} // `cargo bench` passes --bench; filters are not supported.
+            "--bench" => {} // `cargo bench` passes it.
+            other => {
+                // `--help`, or a typo: say what it takes instead of running with the defaults.
+                let usage = "usage: cargo bench --bench stages [-- --rays N --reps R]";
+                if other == "--help" || other == "-h" {
+                    println!("{usage}");
+                    std::process::exit(0);
+                }
+                eprintln!("unknown argument {other:?}\n{usage}");
+                std::process::exit(2);
+            }
         }
     }
     o.reps = o.reps.max(1);
