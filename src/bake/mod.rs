@@ -294,17 +294,17 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             "directional",
             progress,
             || {
-                let light = lightmap::directional::light_maps(
+                lightmap::directional::ratio_maps(
                     &scene,
                     &vis,
                     &meshes,
                     &of,
                     &solution.light,
+                    &solution.irradiance,
                     &atlas,
                     options.supersample,
                     options.seams == Seams::Stitch,
-                );
-                lightmap::directional::ratios(&lightmap, &light)
+                )
             },
         )
     });

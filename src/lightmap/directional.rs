@@ -27,29 +27,37 @@ use crate::scene::Scene;
 use crate::visibility::Visibility;
 use glam::DVec3;
 
-/// The light vector's components `x`, `y`, `z` as three maps in the atlas, from its values at
-/// the vertices of `meshes` (`light[m][v]`), rasterized in one pass as the irradiance is
-/// ([`super::rasterize`]) and each stitched at the seams when `stitch`.
+/// The ratio pages `r` (`x`, `y`, `z`) in the atlas from the light vector at the vertices of
+/// `meshes` (`light[m][v]`) and their irradiance (`irradiance[m][v]`): both rasterized in one
+/// pass as the lightmap is ([`super::rasterize`], each map stitched at the seams when
+/// `stitch`), then [`ratios`]. The irradiance is the vertices' own, interpolated: where the
+/// lightmap takes a punctual light per texel (a shadow edge inside an element) the light
+/// vector stays interpolated, and so must the irradiance it is divided by.
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn light_maps(
+pub(crate) fn ratio_maps(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],
     mesh_of_polygon: &[usize],
     light: &[Vec<LightVector>],
+    irradiance: &[Vec<DVec3>],
     atlas: &Atlas,
     supersample: u32,
     stitch: bool,
 ) -> [Lightmap; 3] {
-    // The locators find the triangle and weights; the values are interpolated per axis.
-    let axes: Vec<[Vec<DVec3>; 3]> = light
+    // The locators find the triangle and weights; the values are interpolated per map.
+    let values: Vec<[Vec<DVec3>; 4]> = light
         .iter()
-        .map(|l| [0, 1, 2].map(|axis| l.iter().map(|q| q[axis]).collect()))
+        .zip(irradiance)
+        .map(|(l, h)| {
+            let [x, y, z] = [0, 1, 2].map(|axis| l.iter().map(|q| q[axis]).collect());
+            [x, y, z, h.clone()]
+        })
         .collect();
     let locators: Vec<Locator> = meshes
         .iter()
-        .zip(&axes)
-        .map(|(m, a)| Locator::new(m, &a[0]))
+        .zip(&values)
+        .map(|(m, v)| Locator::new(m, &v[3]))
         .collect();
     let mut maps = rasterize_many(
         scene,
@@ -59,14 +67,15 @@ pub(crate) fn light_maps(
         atlas,
         supersample,
         &|at, hint| match locators[at.mesh].locate_near(at.q, hint) {
-            Some((t, l)) => [0, 1, 2].map(|axis| interpolate(&axes[at.mesh][axis], t, l)),
-            None => [DVec3::ZERO; 3],
+            Some((t, l)) => [0, 1, 2, 3].map(|k| interpolate(&values[at.mesh][k], t, l)),
+            None => [DVec3::ZERO; 4],
         },
     );
     for map in &mut maps {
         seams::stitch_seams(map, scene, vis, atlas, stitch);
     }
-    maps
+    let [x, y, z, h] = maps;
+    ratios(&h, &[x, y, z])
 }
 
 /// The ratio pages `r = Q / (4 H)` from the irradiance map `irradiance` and the light vector's

@@ -312,3 +312,33 @@ fn a_normal_mapped_wall_is_closer_to_the_path_tracer_with_the_directional_lightm
     // direction exactly; the path tracer's noise adds a little).
     assert!(d < 0.2 && d < 0.5 * f, "directional {d}, flat {f}");
 }
+
+#[test]
+fn per_texel_shadows_keep_the_sun_direction() {
+    // Behind a fence of cut-out slats the lightmap takes the sun per texel; the ratio pages
+    // stay the vertices' light vector over the vertices' irradiance, so every lit texel still
+    // points at the sun (nothing bounces: every surface is black), and none is clamped by a
+    // per-texel shadow under an interpolated light vector.
+    let dir = scratch("directional-fence");
+    let glb = penumbra::fixtures::textured::sunlit_fence();
+    let out = bake_to_file_with(&glb, &dir, 2, &with_directional());
+    let w = -DVec3::from(penumbra::fixtures::textured::FENCE_SUN).normalize();
+    let want = w / (4.0 * w.y);
+    let mut lit = 0;
+    for t in covered(&out)
+        .iter()
+        .filter(|t| t.n.y > 0.99 && t.p.z < -0.2 && t.p.z > -1.5)
+    {
+        let got = channel(&t.r, 1);
+        if got.abs().max_element() <= 0.5 * CODE + 1e-12 {
+            continue; // no light at the texel's vertices
+        }
+        assert!(
+            (got - want).abs().max_element() < 1.5 * CODE,
+            "texel at {}: r {got}, want {want}",
+            t.p
+        );
+        lit += 1;
+    }
+    assert!(lit > 1000, "{lit} lit texels");
+}
