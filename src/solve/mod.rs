@@ -29,12 +29,13 @@
 //!   Greenberg 1985), which also carries the area emitters' light.
 //!
 //! One solver per file: `direct.rs` (the direct light at the vertices; the exact visible part of
-//! each emitter in `backproject.rs`), `progressive.rs` (the indirect light: progressive
+//! each emitter in `backproject.rs`, the punctual lights in `punctual.rs`), `progressive.rs` (the indirect light: progressive
 //! refinement, final gather), `matrix.rs` (classic radiosity and its Gauss-Seidel iteration,
 //! also the progressive solver's test oracle), `patches.rs` (the patches and the linear system
 //! these two share), `hierarchical/` (hierarchical radiosity, one file per part: the tree, the
 //! link estimates, the refinement, gather and push-pull, the vertex values); the form factors
-//! in `form_factors.rs` and `hemicube.rs`; the sky's direct light in `sky.rs`. [`radiosity`] is
+//! in `form_factors.rs` and `hemicube.rs`; the sky's direct light in `sky.rs`; the indirect
+//! light's directions for directional lightmaps in `light_vector.rs`. [`radiosity`] is
 //! the entry point: the direct light, then the indirect solver. The shared physics (form
 //! factors, emitters, the punctual light model) is in [`crate::geometry`] and
 //! [`crate::light`].
@@ -49,6 +50,7 @@ pub mod lightcuts;
 pub mod matrix;
 pub mod patches;
 pub mod progressive;
+pub mod punctual;
 pub mod sky;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
