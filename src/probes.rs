@@ -29,10 +29,10 @@
 //! blend in the dark inside it.
 
 use crate::light::{NO_POLYGON, SurfacePoint, radical_inverse2};
-use crate::lightmap::Locator;
 use crate::mesh::ReceiverMesh;
 use crate::rng::{mix64, unit_f64};
 use crate::scene::Scene;
+use crate::solve::reflected::{Reflected, Seen};
 use crate::solve::{Direct, SolveOptions};
 use crate::visibility::Visibility;
 use glam::DVec3;
@@ -249,11 +249,9 @@ pub struct Probe {
 /// What a probe anywhere is computed from: the scene's direct light, its solved meshes, the
 /// rays.
 pub struct ProbeBaker<'a> {
-    scene: &'a Scene,
     vis: &'a Visibility,
     direct: Direct<'a>,
-    locators: Vec<Locator<'a>>,
-    mesh_of_polygon: Vec<usize>,
+    reflected: Reflected<'a>,
     normals: Vec<DVec3>,
     fit: Vec<Vec<f64>>,
     sphere: Vec<(f64, f64)>,
@@ -273,15 +271,9 @@ impl<'a> ProbeBaker<'a> {
         let normals = fit_normals();
         let rays = rays.max(1);
         ProbeBaker {
-            scene,
             vis,
             direct: Direct::with_options(scene, vis, solve),
-            locators: meshes
-                .iter()
-                .zip(irradiance)
-                .map(|(m, v)| Locator::new(m, v))
-                .collect(),
-            mesh_of_polygon: crate::mesh::mesh_of_polygon(scene, meshes),
+            reflected: Reflected::new(scene, meshes, irradiance),
             fit: least_squares_fit(&normals),
             normals,
             sphere: (0..rays)
@@ -292,7 +284,6 @@ impl<'a> ProbeBaker<'a> {
 
     /// The probe at `p`; `seed` rotates its rays.
     pub fn probe(&self, p: DVec3, seed: u64) -> Probe {
-        let scene = self.scene;
         // Direct: exact at the 26 normals; the first six are the cube's.
         let e_direct: Vec<DVec3> = self
             .normals
@@ -324,22 +315,14 @@ impl<'a> ProbeBaker<'a> {
         let mut backs = 0usize;
         for &(u, v) in &self.sphere {
             let d = sphere_direction((u + shift.0).fract(), (v + shift.1).fract());
-            let Some(hit) = self.vis.first_hit(p, d, f64::MAX) else {
-                continue;
+            let radiance = match self.reflected.along(self.vis, p, d) {
+                Seen::Nothing => continue,
+                Seen::Back => {
+                    backs += 1;
+                    continue;
+                }
+                Seen::Radiosity(b) => b / PI,
             };
-            let tri = &scene.triangles[hit.triangle];
-            if tri.normal.dot(d) >= 0.0 {
-                backs += 1;
-                continue;
-            }
-            let Some(poly) = tri.polygon else { continue };
-            let Some(locator) = self.locators.get(self.mesh_of_polygon[poly]) else {
-                continue;
-            };
-            let x = p + d * hit.t;
-            let bary = crate::geometry::barycentric_3d(&tri.p, x);
-            let q = scene.polygons[poly].frame.plane_from_world(x);
-            let radiance = scene.albedo_at(hit.triangle, bary) * locator.value(q) / PI;
             for (c, y) in sh.iter_mut().zip(sh_basis(d)) {
                 *c += radiance * (y * weight);
             }

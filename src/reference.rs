@@ -537,13 +537,7 @@ impl<'a> Tracer<'a> {
             .scene
             .lights
             .iter()
-            .filter(|l| {
-                let w = match l.kind {
-                    crate::scene::LightKind::Directional => -l.direction,
-                    _ => l.position - at.p,
-                };
-                w.dot(at.n) > 0.0
-            })
+            .filter(|l| solve::punctual::towards(l, at.p).dot(at.n) > 0.0)
             .map(|l| solve::punctual_irradiance(l, self.vis, &facing).0)
             .sum();
         let mut probe = Probe::default();

@@ -46,18 +46,14 @@ pub(crate) fn ratio_maps(
     stitch: bool,
 ) -> [Lightmap; 3] {
     // The locators find the triangle and weights; the values are interpolated per map.
-    let values: Vec<[Vec<DVec3>; 4]> = light
+    let axes: Vec<[Vec<DVec3>; 3]> = light
         .iter()
-        .zip(irradiance)
-        .map(|(l, h)| {
-            let [x, y, z] = [0, 1, 2].map(|axis| l.iter().map(|q| q[axis]).collect());
-            [x, y, z, h.clone()]
-        })
+        .map(|l| [0, 1, 2].map(|axis| l.iter().map(|q| q[axis]).collect()))
         .collect();
     let locators: Vec<Locator> = meshes
         .iter()
-        .zip(&values)
-        .map(|(m, v)| Locator::new(m, &v[3]))
+        .zip(irradiance)
+        .map(|(m, h)| Locator::new(m, h))
         .collect();
     let mut maps = rasterize_many(
         scene,
@@ -67,7 +63,10 @@ pub(crate) fn ratio_maps(
         atlas,
         supersample,
         &|at, hint| match locators[at.mesh].locate_near(at.q, hint) {
-            Some((t, l)) => [0, 1, 2, 3].map(|k| interpolate(&values[at.mesh][k], t, l)),
+            Some((t, l)) => {
+                let [x, y, z] = &axes[at.mesh];
+                [x, y, z, &irradiance[at.mesh]].map(|v| interpolate(v, t, l))
+            }
             None => [DVec3::ZERO; 4],
         },
     );

@@ -246,6 +246,9 @@ impl<'a> Direct<'a> {
         mut light: Option<&mut [LightVector]>,
     ) -> (Vec<DVec3>, PunctualShadows) {
         let mut h = self.evaluate(points, false, light.as_deref_mut());
+        if self.lights.is_empty() {
+            return (h, PunctualShadows::default());
+        }
         let before = h.clone();
         let mut crossed = vec![false; mesh.triangles.len()];
         let rays = punctual_over_fans(
@@ -259,6 +262,10 @@ impl<'a> Direct<'a> {
             &mut crossed,
         );
         self.rays.fetch_add(rays, Ordering::Relaxed);
+        // Kept only where the lightmap will read it.
+        if !crossed.contains(&true) {
+            return (h, PunctualShadows::default());
+        }
         let punctual = h.iter().zip(&before).map(|(a, b)| *a - *b).collect();
         (h, PunctualShadows { punctual, crossed })
     }

@@ -6,7 +6,7 @@
 //! solve's indirect irradiance `H_ind` at the vertex) but not its direction. Each vertex casts
 //! a fixed set of rays of equal solid angle over its hemisphere (the sky's Hammersley set,
 //! [`super::sky::CosineRays::uniform_directions`]); a ray that hits a receiver brings that
-//! point's reflected radiosity `rho H / pi` (the solved irradiance, interpolated in its mesh).
+//! point's reflected radiosity `rho H / pi` ([`super::reflected`]).
 //! Their sums estimate the reflected light's irradiance `E = ∫ L cos θ dω` and light vector
 //! `Q = ∫ L ω dω`; the vertex's indirect light vector is `H_ind (n + Q_t / E)`, with `Q_t` the
 //! part of `Q` along the surface, per channel. Rays of equal solid angle, not
@@ -17,11 +17,10 @@
 //! viewer position", 1992). Why rays and not the hierarchical solver's links:
 //! `docs/decisions.md` ("Engine outputs").
 
+use super::reflected::{Reflected, Seen};
 use super::sky::CosineRays;
 use super::{SolveOptions, evaluation_points};
-use crate::geometry::barycentric_3d;
 use crate::light::{LightVector, add_light};
-use crate::lightmap::Locator;
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
 use crate::visibility::Visibility;
@@ -41,12 +40,7 @@ pub(crate) fn indirect(
     direct: &[Vec<DVec3>],
     options: &SolveOptions,
 ) -> (Vec<Vec<LightVector>>, u64) {
-    let of = crate::mesh::mesh_of_polygon(scene, meshes);
-    let locators: Vec<Locator> = meshes
-        .iter()
-        .zip(irradiance)
-        .map(|(m, h)| Locator::new(m, h))
-        .collect();
+    let reflected = Reflected::new(scene, meshes, irradiance);
     let rays = CosineRays::new(options.directional_rays);
     let per_mesh: Vec<(Vec<LightVector>, u64)> = meshes
         .par_iter()
@@ -61,21 +55,9 @@ pub(crate) fn indirect(
                     let (mut e, mut q) = (DVec3::ZERO, LightVector::default());
                     for w in rays.uniform_directions(at) {
                         cast += 1;
-                        let Some(hit) = vis.first_hit(at.ray_origin, w, f64::MAX) else {
-                            continue;
-                        };
-                        let tri = &scene.triangles[hit.triangle];
-                        let (Some(poly), true) = (tri.polygon, tri.normal.dot(w) < 0.0) else {
+                        let Seen::Radiosity(b) = reflected.along(vis, at.ray_origin, w) else {
                             continue; // nothing, or the back of a one-sided surface
                         };
-                        let Some(locator) = of.get(poly).and_then(|&k| locators.get(k)) else {
-                            continue;
-                        };
-                        let p = at.ray_origin + w * hit.t;
-                        let bary = barycentric_3d(&tri.p, p);
-                        let frame = &scene.polygons[poly].frame;
-                        let b = scene.albedo_at(hit.triangle, bary)
-                            * locator.value(frame.plane_from_world(p));
                         e += b * w.dot(at.n);
                         add_light(&mut q, b, w);
                     }

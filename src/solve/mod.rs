@@ -51,6 +51,7 @@ pub mod matrix;
 pub mod patches;
 pub mod progressive;
 pub mod punctual;
+pub(crate) mod reflected;
 pub mod sky;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};

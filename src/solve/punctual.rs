@@ -13,7 +13,7 @@ use glam::DVec3;
 /// irradiance) and the triangles of the mesh that a punctual light's shadow edge crosses (its
 /// visibility at the triangle's fan samples differs): there the vertices cannot hold the
 /// shadow, and the lightmap takes the punctual light per texel instead
-/// ([`crate::lightmap::rasterize`]).
+/// ([`crate::lightmap::rasterize`]). Both empty for a mesh that no shadow edge crosses.
 #[derive(Clone, Debug, Default)]
 pub struct PunctualShadows {
     pub punctual: Vec<DVec3>,
@@ -35,7 +35,7 @@ pub fn punctual_irradiance(
 
 /// The unit direction from `p` towards a punctual light (a directional light: against its
 /// direction).
-pub(super) fn towards(light: &PunctualLight, p: DVec3) -> DVec3 {
+pub(crate) fn towards(light: &PunctualLight, p: DVec3) -> DVec3 {
     match light.kind {
         LightKind::Directional => -light.direction,
         LightKind::Point | LightKind::Spot { .. } => (light.position - p).normalize_or_zero(),

@@ -117,28 +117,23 @@ impl Sky {
     /// [`Sky::visible_fraction`] per linear RGB channel: a ray through see-through surfaces
     /// counts for what they let through ([`Visibility::transmitted_towards`]).
     pub(crate) fn transmitted_fraction(&self, vis: &Visibility, at: &SurfacePoint) -> (DVec3, u64) {
-        let o = at.ray_origin;
-        if self.corners.iter().all(|c| at.n.dot(*c - o) <= 0.0) {
-            return (DVec3::ONE, 0);
-        }
-        let free: DVec3 = self
-            .directions(at)
-            .map(|d| vis.transmitted_towards(o, d, at.polygon))
-            .sum();
-        let n = self.rays_of.len();
-        (free / n as f64, n as u64)
+        self.transmitted(vis, at, None)
     }
 
-    /// [`Sky::transmitted_fraction`], adding the sky's light vector at `at` to `light`.
-    fn transmitted_with_slant(
+    /// [`Sky::transmitted_fraction`], and with `light` the sky's light vector at `at` added to
+    /// it: `pi L_sky / N` times what each ray lets through times its [`crate::light::slant`]
+    /// (an open point: `pi L_sky n`).
+    fn transmitted(
         &self,
         vis: &Visibility,
         at: &SurfacePoint,
-        light: &mut crate::light::LightVector,
+        mut light: Option<&mut crate::light::LightVector>,
     ) -> (DVec3, u64) {
         let o = at.ray_origin;
         if self.corners.iter().all(|c| at.n.dot(*c - o) <= 0.0) {
-            crate::light::add_light(light, self.radiance * PI, at.n);
+            if let Some(light) = light {
+                crate::light::add_light(light, self.radiance * PI, at.n);
+            }
             return (DVec3::ONE, 0);
         }
         let n = self.rays_of.len() as f64;
@@ -146,8 +141,10 @@ impl Sky {
         for d in self.directions(at) {
             let t = vis.transmitted_towards(o, d, at.polygon);
             free += t;
-            let u = crate::light::slant(d, at.n);
-            crate::light::add_light(light, self.radiance * (t * (PI / n)), u);
+            if let Some(light) = light.as_deref_mut() {
+                let u = crate::light::slant(d, at.n);
+                crate::light::add_light(light, self.radiance * (t * (PI / n)), u);
+            }
         }
         (free / n, n as u64)
     }
@@ -191,18 +188,8 @@ impl Sky {
         let start = Instant::now();
         let (mut open, mut rays) = (0, 0);
         for (i, (at, h)) in points.iter().zip(h).enumerate() {
-            let r = match light.as_deref_mut() {
-                None => {
-                    let (v, r) = self.transmitted_fraction(vis, at);
-                    *h += self.radiance * (v * PI);
-                    r
-                }
-                Some(light) => {
-                    let (v, r) = self.transmitted_with_slant(vis, at, &mut light[i]);
-                    *h += self.radiance * (v * PI);
-                    r
-                }
-            };
+            let (v, r) = self.transmitted(vis, at, light.as_deref_mut().map(|l| &mut l[i]));
+            *h += self.radiance * (v * PI);
             rays += r;
             open += u64::from(r == 0);
         }
