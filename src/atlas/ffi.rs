@@ -1,13 +1,11 @@
-//! The xatlas FFI: xatlas's C++ API by its Itanium (gcc/clang) symbol names, the shims that
-//! export it under the MSVC names xatlas-rs's bindings import (see the module doc of
-//! [`crate::atlas`] for why), and the thread-local stash where the shims keep what xatlas-rs
-//! drops. Every `unsafe` of the crate's atlas is here or next to a call into this module.
+//! The xatlas FFI: `#[repr(C)]` mirrors of the structs of `xatlas/xatlas.h`, the C functions of
+//! `xatlas/shim.cpp` (C names, so they link alike under every C++ ABI), and [`Xatlas`], the one
+//! owner of an atlas. Every `unsafe` of the crate's atlas is here.
 
-use std::cell::Cell;
 use std::ffi::{c_int, c_void};
-use std::ptr;
+use std::marker::PhantomData;
 
-/// `atlasIndex` -1 (as xatlas-rs's `u32`): a vertex of a triangle xatlas left out of every chart.
+/// `atlasIndex` -1 (read as `u32`): a vertex of a triangle xatlas left out of every chart.
 pub(super) const UNCHARTED: u32 = u32::MAX;
 
 /// `xatlas::AddMeshError::Success`.
@@ -22,25 +20,141 @@ pub(super) fn add_mesh_error_text(code: c_int) -> String {
     }
 }
 
-pub(super) fn positions_as_bytes(positions: &[[f32; 3]]) -> &[u8] {
-    // SAFETY: [f32; 3] has no padding and any initialized bytes are valid u8s; same extent.
-    unsafe { std::slice::from_raw_parts(positions.as_ptr().cast(), size_of_val(positions)) }
+/// `struct xatlas::Atlas`.
+#[repr(C)]
+struct RawAtlas {
+    width: u32,
+    height: u32,
+    atlas_count: u32,
+    chart_count: u32,
+    mesh_count: u32,
+    meshes: *const RawMesh,
+    utilization: *const f32,
+    texels_per_unit: f32,
 }
 
-pub(super) fn indices_as_bytes(indices: &[u32]) -> &[u8] {
-    // SAFETY: u32 has no padding and any initialized bytes are valid u8s; same extent.
-    unsafe { std::slice::from_raw_parts(indices.as_ptr().cast(), size_of_val(indices)) }
+/// `struct xatlas::Mesh`.
+#[repr(C)]
+struct RawMesh {
+    chart_array: *const RawChart,
+    chart_count: u32,
+    index_array: *const u32,
+    index_count: u32,
+    vertex_array: *const Vertex,
+    vertex_count: u32,
+}
+
+/// `struct xatlas::Chart`.
+#[repr(C)]
+struct RawChart {
+    atlas_index: u32,
+    index_array: *const u32,
+    index_count: u32,
+}
+
+/// `struct xatlas::Vertex`: an output vertex.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Vertex {
+    /// The page (xatlas's sub-atlas), or [`UNCHARTED`].
+    pub(super) atlas_index: u32,
+    /// In texels of the page.
+    pub(super) uv: [f32; 2],
+    /// The input vertex it came from.
+    pub(super) xref: u32,
+}
+
+/// `struct xatlas::MeshDecl`, with 32-bit indices.
+#[repr(C)]
+struct RawMeshDecl {
+    vertex_count: u32,
+    vertex_position_data: *const c_void,
+    vertex_position_stride: u32,
+    vertex_normal_data: *const c_void,
+    vertex_normal_stride: u32,
+    vertex_uv_data: *const c_void,
+    vertex_uv_stride: u32,
+    index_count: u32,
+    index_data: *const c_void,
+    index_offset: i32,
+    /// `xatlas::IndexFormat::Enum`: 1 is `UInt32`.
+    index_format: c_int,
+    face_ignore_data: *const bool,
+}
+
+/// `struct xatlas::ChartOptions`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub(super) struct ChartOptions {
+    pub(super) max_chart_area: f32,
+    pub(super) max_boundary_length: f32,
+    pub(super) proxy_fit_metric_weight: f32,
+    pub(super) roundness_metric_weight: f32,
+    pub(super) straightness_metric_weight: f32,
+    pub(super) normal_seam_metric_weight: f32,
+    pub(super) texture_seam_metric_weight: f32,
+    pub(super) max_threshold: f32,
+    pub(super) grow_face_count: u32,
+    pub(super) max_iterations: u32,
+}
+
+impl Default for ChartOptions {
+    /// The header's defaults.
+    fn default() -> Self {
+        Self {
+            max_chart_area: 0.0,
+            max_boundary_length: 0.0,
+            proxy_fit_metric_weight: 2.0,
+            roundness_metric_weight: 0.01,
+            straightness_metric_weight: 6.0,
+            normal_seam_metric_weight: 4.0,
+            texture_seam_metric_weight: 0.5,
+            max_threshold: 2.0,
+            grow_face_count: 32,
+            max_iterations: 1,
+        }
+    }
+}
+
+/// `struct xatlas::PackOptions`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+pub(super) struct PackOptions {
+    pub(super) attempts: c_int,
+    pub(super) texels_per_unit: f32,
+    pub(super) resolution: u32,
+    pub(super) max_chart_size: u32,
+    pub(super) block_align: bool,
+    pub(super) conservative: bool,
+    pub(super) padding: u32,
+}
+
+unsafe extern "C" {
+    fn penumbra_xatlas_create() -> *mut RawAtlas;
+    fn penumbra_xatlas_destroy(atlas: *mut RawAtlas);
+    fn penumbra_xatlas_add_mesh(atlas: *mut RawAtlas, decl: *const RawMeshDecl) -> c_int;
+    fn penumbra_xatlas_generate(
+        atlas: *mut RawAtlas,
+        chart_options: *const ChartOptions,
+        pack_options: *const PackOptions,
+    );
+    fn penumbra_xatlas_pack_charts(atlas: *mut RawAtlas, pack_options: *const PackOptions);
+    fn penumbra_xatlas_silence();
+    #[cfg(test)]
+    fn penumbra_xatlas_multithreaded() -> c_int;
+    #[cfg(test)]
+    fn penumbra_xatlas_sizeof(which: c_int) -> usize;
 }
 
 /// Turns off xatlas's `printf` to stdout, once per process, before any atlas is made.
-pub(super) fn silence_xatlas() {
+fn silence_xatlas() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     // SAFETY: SetPrint only stores the function pointer and flag in globals; Once makes this
     // happen before any xatlas call of this module, on any thread.
-    ONCE.call_once(|| unsafe { set_print(ptr::null(), false) });
+    ONCE.call_once(|| unsafe { penumbra_xatlas_silence() });
 }
 
-/// What xatlas reports after packing: fields of `xatlas::Atlas` that xatlas-rs hides.
+/// What xatlas reports after packing.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) struct PackInfo {
     pub(super) width: u32,
@@ -50,15 +164,112 @@ pub(super) struct PackInfo {
     pub(super) texels_per_unit: f32,
 }
 
-impl PackInfo {
-    /// Reads the packing results from an atlas.
-    ///
-    /// # Safety
-    /// `atlas` must be a live atlas from `xatlas::Create`.
-    pub(super) unsafe fn read(atlas: *const Atlas) -> Self {
+/// One chart of an output mesh: its page and its triangles' output vertex indices.
+pub(super) struct Chart<'a> {
+    pub(super) atlas_index: u32,
+    pub(super) indices: &'a [u32],
+}
+
+/// A view of one output mesh, valid until the next packing or the atlas's drop.
+pub(super) struct Mesh<'a> {
+    pub(super) charts: Vec<Chart<'a>>,
+    pub(super) indices: &'a [u32],
+    pub(super) vertices: &'a [Vertex],
+}
+
+/// An xatlas atlas, destroyed on drop. Each has its own state, so atlases on different threads
+/// need no lock.
+pub(super) struct Xatlas {
+    raw: *mut RawAtlas,
+    /// Not `Send`: xatlas's state is not known to be safe to move between threads.
+    _not_send: PhantomData<*mut ()>,
+}
+
+/// A slice from xatlas's array and count, empty for a null array.
+///
+/// # Safety
+/// A non-null `data` must point to `count` initialized `T`s that live for `'a`.
+unsafe fn slice<'a, T>(data: *const T, count: u32) -> &'a [T] {
+    if data.is_null() || count == 0 {
+        &[]
+    } else {
         // SAFETY: by the caller's contract.
-        let a = unsafe { &*atlas };
-        Self {
+        unsafe { std::slice::from_raw_parts(data, count as usize) }
+    }
+}
+
+impl Xatlas {
+    /// A new, empty atlas (`None` if xatlas could not make one).
+    pub(super) fn new() -> Option<Self> {
+        silence_xatlas();
+        // SAFETY: Create has no preconditions.
+        let raw = unsafe { penumbra_xatlas_create() };
+        (!raw.is_null()).then_some(Self {
+            raw,
+            _not_send: PhantomData,
+        })
+    }
+
+    /// Adds a mesh of `positions` (scene units) and 32-bit `indices`, leaving out the triangles
+    /// whose `ignore` flag is set (`ignore` is empty or one flag per triangle). Returns xatlas's
+    /// `AddMeshError` code.
+    pub(super) fn add_mesh(
+        &mut self,
+        positions: &[[f32; 3]],
+        indices: &[u32],
+        ignore: &[bool],
+    ) -> c_int {
+        assert!(ignore.is_empty() || ignore.len() * 3 == indices.len());
+        let decl = RawMeshDecl {
+            vertex_count: positions.len() as u32,
+            vertex_position_data: positions.as_ptr().cast(),
+            vertex_position_stride: 12,
+            vertex_normal_data: std::ptr::null(),
+            vertex_normal_stride: 0,
+            vertex_uv_data: std::ptr::null(),
+            vertex_uv_stride: 0,
+            index_count: indices.len() as u32,
+            index_data: if indices.is_empty() {
+                std::ptr::null()
+            } else {
+                indices.as_ptr().cast()
+            },
+            index_offset: 0,
+            index_format: 1,
+            face_ignore_data: if ignore.is_empty() {
+                std::ptr::null()
+            } else {
+                ignore.as_ptr()
+            },
+        };
+        // SAFETY: the atlas is live; the arrays outlive the call (xatlas copies them) and hold
+        // what the counts and strides say.
+        unsafe { penumbra_xatlas_add_mesh(self.raw, &decl) }
+    }
+
+    /// Charts, parameterizes and packs the added meshes.
+    pub(super) fn generate(
+        &mut self,
+        chart_options: &ChartOptions,
+        pack_options: &PackOptions,
+    ) -> PackInfo {
+        // SAFETY: the atlas is live and the options are plain values.
+        unsafe { penumbra_xatlas_generate(self.raw, chart_options, pack_options) };
+        self.info()
+    }
+
+    /// Packs the charts again (after [`Self::generate`]; xatlas restores the chart UVs first).
+    /// Frees the previous output meshes: `&mut self` ends their views' borrows.
+    pub(super) fn pack_charts(&mut self, pack_options: &PackOptions) -> PackInfo {
+        // SAFETY: the atlas is live and was generated; no view of its output outlives this.
+        unsafe { penumbra_xatlas_pack_charts(self.raw, pack_options) };
+        self.info()
+    }
+
+    fn info(&self) -> PackInfo {
+        // SAFETY: the atlas is live.
+        let a = unsafe { &*self.raw };
+        PackInfo {
             width: a.width,
             height: a.height,
             atlas_count: a.atlas_count,
@@ -66,180 +277,60 @@ impl PackInfo {
             texels_per_unit: a.texels_per_unit,
         }
     }
-}
 
-thread_local! {
-    /// The atlas the `Create` shim last returned on this thread.
-    pub(super) static LAST_HANDLE: Cell<*mut Atlas> = const { Cell::new(ptr::null_mut()) };
-    /// The code the `AddMesh` shim last returned on this thread.
-    pub(super) static LAST_ADD_MESH: Cell<Option<c_int>> = const { Cell::new(None) };
-    /// What the `Generate` shim last read from its atlas on this thread.
-    pub(super) static LAST_GENERATE: Cell<Option<PackInfo>> = const { Cell::new(None) };
-}
-
-// The xatlas C++ API, by its Itanium (gcc/clang) symbol names, and `#[repr(C)]` mirrors of the
-// structs it takes by value or that we read, in the field order of `vendor/xatlas.h`.
-
-/// `struct xatlas::Atlas`.
-#[repr(C)]
-pub(super) struct Atlas {
-    pub width: u32,
-    pub height: u32,
-    pub(crate) atlas_count: u32,
-    pub(crate) chart_count: u32,
-    pub(crate) mesh_count: u32,
-    pub meshes: *mut c_void,
-    pub(crate) utilization: *mut f32,
-    pub texels_per_unit: f32,
-}
-
-/// `struct xatlas::ChartOptions`, passed by value. xatlas-rs's bindings have the same field
-/// order as the header, and its `convert()` fills them by name.
-#[repr(C)]
-#[derive(Clone, Copy)]
-pub(super) struct ChartOptions {
-    pub(crate) max_chart_area: f32,
-    pub(crate) max_boundary_length: f32,
-    pub(crate) proxy_fit_metric_weight: f32,
-    pub(crate) roundness_metric_weight: f32,
-    pub(crate) straightness_metric_weight: f32,
-    pub(crate) normal_seam_metric_weight: f32,
-    pub(crate) texture_seam_metric_weight: f32,
-    pub(crate) max_threshold: f32,
-    pub(crate) grow_face_count: u32,
-    pub(crate) max_iterations: u32,
-}
-
-/// `struct xatlas::PackOptions`, passed by value. Same field order in xatlas-rs's bindings.
-#[repr(C)]
-#[derive(Clone, Copy)]
-pub(super) struct PackOptions {
-    pub attempts: c_int,
-    pub texels_per_unit: f32,
-    pub resolution: u32,
-    pub(crate) max_chart_size: u32,
-    pub(crate) block_align: bool,
-    pub(crate) conservative: bool,
-    pub padding: u32,
-}
-
-impl PackOptions {
-    pub(super) fn to_xatlas_rs(self) -> xatlas_rs::PackOptions {
-        xatlas_rs::PackOptions {
-            attempts: self.attempts,
-            texels_per_unit: self.texels_per_unit,
-            resolution: self.resolution,
-            max_chart_size: self.max_chart_size,
-            block_align: self.block_align,
-            conservative: self.conservative,
-            padding: self.padding,
+    /// Views of the output meshes, one per added mesh.
+    pub(super) fn meshes(&self) -> Vec<Mesh<'_>> {
+        // SAFETY: the atlas is live; its output arrays hold the counts it says, and live until
+        // the next packing or the drop, both of which need `&mut self`.
+        unsafe {
+            let a = &*self.raw;
+            slice(a.meshes, a.mesh_count)
+                .iter()
+                .map(|m| Mesh {
+                    charts: slice(m.chart_array, m.chart_count)
+                        .iter()
+                        .map(|c| Chart {
+                            atlas_index: c.atlas_index,
+                            indices: slice(c.index_array, c.index_count),
+                        })
+                        .collect(),
+                    indices: slice(m.index_array, m.index_count),
+                    vertices: slice(m.vertex_array, m.vertex_count),
+                })
+                .collect()
         }
     }
 }
 
-/// `xatlas::ParameterizeFunc`.
-pub(super) type ParameterizeFunc = Option<
-    unsafe extern "C" fn(
-        positions: *const f32,
-        texcoords: *mut f32,
-        vertex_count: u32,
-        indices: *const u32,
-        index_count: u32,
-        is_planar: bool,
-    ),
->;
-
-/// `xatlas::ProgressFunc`.
-pub(super) type ProgressFunc =
-    Option<unsafe extern "C" fn(category: c_int, progress: c_int, user_data: *mut c_void)>;
-
-unsafe extern "C" {
-    /// `xatlas::Create()`.
-    #[link_name = "_ZN6xatlas6CreateEv"]
-    pub(super) fn create() -> *mut Atlas;
-    /// `xatlas::Destroy(Atlas*)`.
-    #[link_name = "_ZN6xatlas7DestroyEPNS_5AtlasE"]
-    pub(super) fn destroy(atlas: *mut Atlas);
-    /// `xatlas::AddMesh(Atlas*, const MeshDecl&)`; the `MeshDecl` is xatlas-rs's.
-    #[link_name = "_ZN6xatlas7AddMeshEPNS_5AtlasERKNS_8MeshDeclE"]
-    pub(super) fn add_mesh(atlas: *mut Atlas, mesh_decl: *const c_void) -> c_int;
-    /// `xatlas::Generate(Atlas*, ChartOptions, ParameterizeFunc, PackOptions, ProgressFunc,
-    /// void*)`.
-    #[link_name = "_ZN6xatlas8GenerateEPNS_5AtlasENS_12ChartOptionsEPFvPKfPfjPKjjbENS_11PackOptionsEPFvNS_16ProgressCategory4EnumEiPvESD_"]
-    pub(super) fn generate(
-        atlas: *mut Atlas,
-        chart_options: ChartOptions,
-        param_func: ParameterizeFunc,
-        pack_options: PackOptions,
-        progress_func: ProgressFunc,
-        progress_user_data: *mut c_void,
-    );
-    /// `xatlas::PackCharts(Atlas*, PackOptions, ProgressFunc, void*)`.
-    #[link_name = "_ZN6xatlas10PackChartsEPNS_5AtlasENS_11PackOptionsEPFvNS_16ProgressCategory4EnumEiPvES5_"]
-    pub(super) fn pack_charts(
-        atlas: *mut Atlas,
-        pack_options: PackOptions,
-        progress_func: ProgressFunc,
-        progress_user_data: *mut c_void,
-    );
-    /// `xatlas::SetPrint(PrintFunc, bool)`; `print` is an `int (*)(const char*, ...)` or null.
-    #[link_name = "_ZN6xatlas8SetPrintEPFiPKczEb"]
-    pub(super) fn set_print(print: *const c_void, verbose: bool);
-}
-
-// The shims: xatlas-rs's bindings import these MSVC names (as `\u{1}?Create@...`: the name as is,
-// which on ELF is the same symbol as `?Create@...`); each forwards to the Itanium symbol with the
-// same signature, and keeps what xatlas-rs would drop in this thread's stash.
-
-#[unsafe(export_name = "?Create@xatlas@@YAPEAUAtlas@1@XZ")]
-unsafe extern "C" fn xatlas_create_shim() -> *mut Atlas {
-    // SAFETY: forwards the call xatlas-rs made, with the same signature.
-    let atlas = unsafe { create() };
-    let _ = LAST_HANDLE.try_with(|h| h.set(atlas));
-    atlas
-}
-
-#[unsafe(export_name = "?Destroy@xatlas@@YAXPEAUAtlas@1@@Z")]
-unsafe extern "C" fn xatlas_destroy_shim(atlas: *mut Atlas) {
-    let _ = LAST_HANDLE.try_with(|h| {
-        if h.get() == atlas {
-            h.set(ptr::null_mut());
-        }
-    });
-    // SAFETY: forwards the call xatlas-rs made, with the same signature.
-    unsafe { destroy(atlas) }
-}
-
-#[unsafe(export_name = "?AddMesh@xatlas@@YA?AW4Enum@AddMeshError@1@PEAUAtlas@1@AEBUMeshDecl@1@@Z")]
-unsafe extern "C" fn xatlas_add_mesh_shim(atlas: *mut Atlas, mesh_decl: *const c_void) -> c_int {
-    // SAFETY: forwards the call xatlas-rs made, with the same signature.
-    let result = unsafe { add_mesh(atlas, mesh_decl) };
-    let _ = LAST_ADD_MESH.try_with(|r| r.set(Some(result)));
-    result
-}
-
-#[unsafe(export_name = "?Generate@xatlas@@YAXPEAUAtlas@1@UChartOptions@1@P6AXPEBMPEAMIPEBII_N@ZUPackOptions@1@P6AXW4Enum@ProgressCategory@1@HPEAX@Z9@Z")]
-unsafe extern "C" fn xatlas_generate_shim(
-    atlas: *mut Atlas,
-    chart_options: ChartOptions,
-    param_func: ParameterizeFunc,
-    pack_options: PackOptions,
-    progress_func: ProgressFunc,
-    progress_user_data: *mut c_void,
-) {
-    // SAFETY: forwards the call xatlas-rs made, with the same signature; `atlas` is then live.
-    unsafe {
-        generate(
-            atlas,
-            chart_options,
-            param_func,
-            pack_options,
-            progress_func,
-            progress_user_data,
-        );
-        if !atlas.is_null() {
-            let info = PackInfo::read(atlas);
-            let _ = LAST_GENERATE.try_with(|g| g.set(Some(info)));
-        }
+impl Drop for Xatlas {
+    fn drop(&mut self) {
+        // SAFETY: the atlas is live and dropped once.
+        unsafe { penumbra_xatlas_destroy(self.raw) }
     }
+}
+
+#[cfg(test)]
+/// Whether xatlas was built with its worker-thread scheduler (build.rs builds it without).
+pub(super) fn multithreaded() -> bool {
+    // SAFETY: returns a constant.
+    unsafe { penumbra_xatlas_multithreaded() != 0 }
+}
+
+#[cfg(test)]
+/// `(name, C++ sizeof, Rust size_of)` of every mirrored struct.
+pub(super) fn layouts() -> Vec<(&'static str, usize, usize)> {
+    let rust = [
+        ("Atlas", size_of::<RawAtlas>()),
+        ("Mesh", size_of::<RawMesh>()),
+        ("Chart", size_of::<RawChart>()),
+        ("Vertex", size_of::<Vertex>()),
+        ("MeshDecl", size_of::<RawMeshDecl>()),
+        ("ChartOptions", size_of::<ChartOptions>()),
+        ("PackOptions", size_of::<PackOptions>()),
+    ];
+    rust.iter()
+        .enumerate()
+        // SAFETY: returns a constant.
+        .map(|(k, &(name, size))| (name, unsafe { penumbra_xatlas_sizeof(k as c_int) }, size))
+        .collect()
 }

@@ -10,29 +10,28 @@
 //! several, see [`AtlasMesh::page`]). Each output mesh carries, for every output vertex (input
 //! vertices are split at chart seams), the input vertex it came from and its UV in texels.
 //!
-//! # The xatlas-rs traps this module works around
+//! # xatlas, and the traps this module works around
 //!
-//! It uses the `xatlas-rs` 0.1.3 crate (xatlas of 2019, vendored C++), which has these problems:
+//! It uses xatlas of 2019 (Jonathan Young, MIT), the C++ that the `xatlas-rs` 0.1.3 crate
+//! vendors, compiled by `build.rs` from `xatlas/` with a small C interface (`xatlas/shim.cpp`,
+//! bound in `ffi.rs`). xatlas-rs's own Rust layer is not used:
 //!
 //! - **It does not link outside MSVC.** Its pre-generated bindings name the C++ functions by their
 //!   MSVC decorated names (`?Create@xatlas@@YAPEAUAtlas@1@XZ`, ...), while gcc and clang export
-//!   Itanium names (`_ZN6xatlas6CreateEv`, ...). This module exports, under the exact MSVC names,
-//!   shim functions that forward to the Itanium symbols of the same functions. Only the four that
-//!   xatlas-rs's safe API calls are shimmed (`Create`, `Destroy`, `AddMesh`, `Generate`); its other
-//!   bindings (`ComputeCharts`, `PackCharts`, `SetPrint`, ...) are never called by it, so the
-//!   linker never asks for them. This is for ELF targets (Linux): on MSVC xatlas's own symbols
-//!   would collide with the shims (the module refuses to compile there), and on Mach-O the
-//!   exported names would get a leading `_` that the bindings' `\u{1}`-prefixed imports lack
-//!   (a `\u{1}` in `export_name` does not help: rustc then drops the symbol from executables).
-//! - **`AddMesh`'s error code is dropped** by `Xatlas::add_mesh`. The `AddMesh` shim keeps the last
-//!   result in a thread-local; [`pack`] checks it after each mesh. (Inputs are checked before they
-//!   reach xatlas anyway: non-finite positions, indices out of range, an index count that is not a
-//!   multiple of 3.)
-//! - **The atlas size is hidden** (`Atlas::width`, `height`, `atlasCount`, `texelsPerUnit`): the
-//!   `Generate` shim reads them from the `xatlas::Atlas` after forwarding and keeps them in a
-//!   thread-local.
+//!   Itanium names (`_ZN6xatlas6CreateEv`, ...). The shim's functions have C names, which every
+//!   platform links alike.
+//! - **It drops `AddMesh`'s error code and hides the atlas size** (`Atlas::width`, `height`,
+//!   `atlasCount`, `texelsPerUnit`) and `PackCharts`. The shim returns the code; `ffi.rs` reads
+//!   the `xatlas::Atlas` fields through a `#[repr(C)]` mirror whose size a test checks against
+//!   the C++ compiler's. (Inputs are checked before they reach xatlas anyway: non-finite
+//!   positions, indices out of range, an index count that is not a multiple of 3.)
+//! - **Its build takes xatlas's flags only from the environment** (`CXXFLAGS`), which a crate
+//!   that depends on penumbra would have to repeat; `build.rs` sets them itself.
+//!
+//! xatlas itself:
+//!
 //! - **`padding` is ignored unless `conservative` is set**: [`pack`] always sets it.
-//! - **Index format defaults to 16 bits** in `xatlas_rs::MeshDecl`: [`pack`] passes 32-bit indices.
+//! - **Index format defaults to 16 bits** in `xatlas::MeshDecl`: [`pack`] passes 32-bit indices.
 //! - **An `AddMesh` with no indices is taken as an unindexed triangle soup** (every 3 vertices a
 //!   triangle): [`pack`] never adds a mesh without triangles; it outputs an empty [`AtlasMesh`].
 //! - **Charts larger than `maxChartSize` (default 1024 texels) are silently scaled down**, which
@@ -71,14 +70,12 @@
 //!   registers itself as asleep and waits; `Scheduler::stop` clears `m_running` and wakes the
 //!   registered sleepers. A worker between the two steps is missed and sleeps forever, so `stop`
 //!   never joins it (seen once in a few thousand bakes, a test's child process stuck in
-//!   `xatlas::Destroy`). The repository's `.cargo/config.toml` builds xatlas with
-//!   `-DXA_MULTITHREADED=0` (its single-threaded scheduler: no worker threads, the same
-//!   output); a crate that depends on penumbra must set the same `CXXFLAGS`.
+//!   `xatlas::Destroy`). `build.rs` builds xatlas with `XA_MULTITHREADED=0` (its
+//!   single-threaded scheduler: no worker threads, the same output); a test checks the build.
 //!
 //! Output is deterministic: xatlas's random generators are seeded with constants per atlas, and
 //! it runs single-threaded (see above), so the same input gives the same bytes on every run, also
-//! when several threads pack at once (each call has its own xatlas atlas; the shim stash is
-//! thread-local, so calls need no lock).
+//! when several threads pack at once (each call has its own xatlas atlas, so calls need no lock).
 //!
 //! Triangle order is kept: xatlas writes output triangle `k` at `indexArray[3k..3k+3]` for input
 //! face `k` (it maps faces back to their source face), and [`pack`] checks that output triangle
@@ -88,24 +85,13 @@ mod ffi;
 mod groups;
 mod packed;
 
-use ffi::{
-    ADD_MESH_SUCCESS, LAST_ADD_MESH, LAST_GENERATE, LAST_HANDLE, PackInfo, add_mesh_error_text,
-    indices_as_bytes, positions_as_bytes, silence_xatlas,
-};
+use ffi::{ADD_MESH_SUCCESS, Xatlas, add_mesh_error_text};
 use groups::{merge_groups, page_groups};
 use packed::{
     boxes_area, chart_boxes, collect_output, fitting_density, fixed_page_shrink, internal,
     largest_side,
 };
 use rayon::prelude::*;
-use std::ptr;
-
-#[cfg(target_env = "msvc")]
-compile_error!(
-    "penumbra's atlas module shims xatlas-rs's MSVC symbol names onto the Itanium-ABI names that \
-     gcc/clang export; on MSVC targets xatlas already exports the MSVC names and the shims would \
-     collide"
-);
 
 /// A chart made of average-sized triangles has at most about this many triangles: [`pack`] sets
 /// xatlas's `maxChartArea` to `total area / total triangles * TRIANGLES_PER_CHART`.
@@ -192,7 +178,7 @@ pub enum AtlasError {
         option: &'static str,
         reason: String,
     },
-    /// xatlas's `AddMesh` rejected a mesh (its error code, which xatlas-rs drops).
+    /// xatlas's `AddMesh` rejected a mesh (its error code).
     #[error("mesh {mesh}: xatlas rejected it: {reason}")]
     AddMesh { mesh: usize, reason: String },
     /// There is no triangle to chart: no input, or every input mesh is empty or degenerate.
@@ -345,7 +331,7 @@ pub struct Atlas {
 /// Checks the inputs first (finite positions, indices in range, index count a multiple of 3;
 /// meshes with no triangles give an empty [`AtlasMesh`]) and the output after (one page, UVs
 /// inside it, triangle order kept). See the module documentation for what it works around in
-/// xatlas-rs, and [`AtlasOptions`] for how the pages are sized (with a fixed resolution it lowers
+/// xatlas, and [`AtlasOptions`] for how the pages are sized (with a fixed resolution it lowers
 /// the texel density until all charts fit on one page; with a fixed density it adds pages).
 #[cfg(test)]
 pub(crate) fn pack(inputs: &[AtlasInput<'_>], options: &AtlasOptions) -> Result<Atlas, AtlasError> {
@@ -437,12 +423,7 @@ fn pack_group(
         }
     };
 
-    silence_xatlas();
-    let mut xatlas = xatlas_rs::Xatlas::new();
-    let handle = LAST_HANDLE.with(|h| h.replace(ptr::null_mut()));
-    if handle.is_null() {
-        return Err(internal(0, "xatlas Create returned no atlas"));
-    }
+    let mut xatlas = Xatlas::new().ok_or_else(|| internal(0, "xatlas Create returned no atlas"))?;
 
     // Add the meshes that have triangles; `added[i]` is the input index of xatlas mesh i.
     let mut added = Vec::new();
@@ -455,32 +436,18 @@ fn pack_group(
         let ignore: Vec<bool> = triangle_areas(input)
             .map(|a| a < SPECK_AREA * stats.area)
             .collect();
-        let decl = xatlas_rs::MeshDecl {
-            face_ignore_data: if ignore.contains(&true) { &ignore } else { &[] },
-            vertex_count: input.positions.len() as u32,
-            vertex_position_data: positions_as_bytes(input.positions),
-            vertex_position_stride: 12,
-            index_count: input.indices.len() as u32,
-            index_data: indices_as_bytes(input.indices),
-            index_format: xatlas_rs::IndexFormat::Uint32,
-            ..Default::default()
-        };
-        LAST_ADD_MESH.with(|r| r.set(None));
-        xatlas.add_mesh(&decl);
-        match LAST_ADD_MESH.with(|r| r.take()) {
-            Some(ADD_MESH_SUCCESS) => {}
-            Some(code) => {
-                return Err(AtlasError::AddMesh {
-                    mesh: m,
-                    reason: add_mesh_error_text(code),
-                });
-            }
-            None => return Err(internal(m, "the AddMesh shim was not called")),
+        let ignore: &[bool] = if ignore.contains(&true) { &ignore } else { &[] };
+        let code = xatlas.add_mesh(input.positions, input.indices, ignore);
+        if code != ADD_MESH_SUCCESS {
+            return Err(AtlasError::AddMesh {
+                mesh: m,
+                reason: add_mesh_error_text(code),
+            });
         }
         added.push(m);
     }
 
-    let chart_options = xatlas_rs::ChartOptions {
+    let chart_options = ffi::ChartOptions {
         max_chart_area: (stats.area / stats.triangles as f64 * TRIANGLES_PER_CHART) as f32,
         // With a fixed density a chart must fit on one page: a chart whose outline is at most
         // twice the page side is at most a page side across (two points split the outline
@@ -530,11 +497,7 @@ fn pack_group(
         conservative: true,
         padding: options.padding,
     };
-    LAST_GENERATE.with(|g| g.set(None));
-    xatlas.generate_simple(chart_options, pack_options.to_xatlas_rs());
-    let mut info = LAST_GENERATE
-        .with(|g| g.take())
-        .ok_or_else(|| internal(0, "the Generate shim was not called"))?;
+    let mut info = xatlas.generate(&chart_options, &pack_options);
     if info.chart_count == 0 {
         return Err(AtlasError::Empty);
     }
@@ -546,7 +509,7 @@ fn pack_group(
         } => {
             let grown = pack_options.resolution == 0;
             let too_big = {
-                let meshes = output_meshes(&mut xatlas, added.len())?;
+                let meshes = output_meshes(&xatlas, added.len())?;
                 // A chart that reached `max_chart_size` may have been scaled down by xatlas.
                 let largest = largest_side(&chart_boxes(&meshes));
                 if largest > max_chart_size as f32 - 0.5 {
@@ -561,13 +524,9 @@ fn pack_group(
             if grown && too_big {
                 // The grown page is too large: pack the same charts onto fixed pages.
                 pack_options.resolution = page_size;
-                // SAFETY: as for the re-packing below.
-                unsafe {
-                    ffi::pack_charts(handle, pack_options, None, ptr::null_mut());
-                    info = PackInfo::read(handle);
-                }
+                info = xatlas.pack_charts(&pack_options);
             }
-            let meshes = output_meshes(&mut xatlas, added.len())?;
+            let meshes = output_meshes(&xatlas, added.len())?;
             if info.width.max(info.height) > page_size {
                 return Err(internal(
                     0,
@@ -607,7 +566,7 @@ fn pack_group(
                 // The sizing packing: pack onto the page at its density if the grown page is no
                 // larger, else at the density at which the charts, packed as tightly, fill it.
                 let next = {
-                    let meshes = output_meshes(&mut xatlas, added.len())?;
+                    let meshes = output_meshes(&xatlas, added.len())?;
                     let boxes = chart_boxes(&meshes);
                     // Every chart's bit image is at least `1 + padding` texels a side at any
                     // density: when those alone overflow the page, no density fits.
@@ -638,7 +597,7 @@ fn pack_group(
                 break 'next next;
             }
             let (shrink, estimate, smallest) = {
-                let meshes = output_meshes(&mut xatlas, added.len())?;
+                let meshes = output_meshes(&xatlas, added.len())?;
                 let boxes = chart_boxes(&meshes);
                 // Every chart at the smallest size xatlas rasterizes: a lower density cannot
                 // make the charts take less room (their padding does not shrink).
@@ -718,13 +677,7 @@ fn pack_group(
         };
         attempts += 1;
         pack_options.texels_per_unit = next;
-        // SAFETY: `handle` is the atlas owned by `xatlas`, alive until it drops; charts were
-        // computed and parameterized by Generate, and PackCharts may be called again (it restores
-        // the original chart UVs first). It frees the output meshes, whose views were dropped.
-        unsafe {
-            ffi::pack_charts(handle, pack_options, None, ptr::null_mut());
-            info = PackInfo::read(handle);
-        }
+        info = xatlas.pack_charts(&pack_options);
     }
 }
 
@@ -743,12 +696,9 @@ pub(crate) fn check_density(area: f64, texels_per_unit: f32) -> Result<(), Atlas
     Ok(())
 }
 
-/// xatlas-rs's views of the output meshes, checked to be one per added mesh. The views borrow
-/// memory that the next `PackCharts` or the drop of `xatlas` frees.
-fn output_meshes<'a>(
-    xatlas: &mut xatlas_rs::Xatlas,
-    expected: usize,
-) -> Result<Vec<xatlas_rs::Mesh<'a>>, AtlasError> {
+/// The views of the output meshes, checked to be one per added mesh. They borrow memory that
+/// the next packing or the drop of `xatlas` frees.
+fn output_meshes(xatlas: &Xatlas, expected: usize) -> Result<Vec<ffi::Mesh<'_>>, AtlasError> {
     let meshes = xatlas.meshes();
     if meshes.len() != expected {
         return Err(internal(

@@ -1,13 +1,13 @@
 //! What a packing produced: the charts' boxes on their pages, the density estimate they give,
 //! and the checked copy of xatlas's output into [`AtlasMesh`]es.
 
-use super::ffi::{PackInfo, UNCHARTED};
+use super::ffi::{Mesh, PackInfo, UNCHARTED};
 use super::{Atlas, AtlasError, AtlasInput, AtlasMesh};
 
 /// With a fixed page: `None` if everything is on one page, inside it and unscaled; else the factor
 /// to multiply the texel density by before packing again.
 pub(super) fn fixed_page_shrink(
-    meshes: &[xatlas_rs::Mesh<'_>],
+    meshes: &[Mesh<'_>],
     boxes: &[ChartBox],
     info: &PackInfo,
     max_chart_size: u32,
@@ -46,7 +46,7 @@ pub(super) struct ChartBox {
 }
 
 /// The UV bounding box of every chart of `meshes`, in their order.
-pub(super) fn chart_boxes(meshes: &[xatlas_rs::Mesh<'_>]) -> Vec<ChartBox> {
+pub(super) fn chart_boxes(meshes: &[Mesh<'_>]) -> Vec<ChartBox> {
     let mut boxes = Vec::new();
     for mesh in meshes {
         for chart in &mesh.charts {
@@ -119,7 +119,7 @@ pub(super) fn fitting_density(
 pub(super) fn collect_output(
     inputs: &[AtlasInput<'_>],
     added: &[usize],
-    meshes: &[xatlas_rs::Mesh<'_>],
+    meshes: &[Mesh<'_>],
     info: &PackInfo,
     paged: bool,
 ) -> Result<Atlas, AtlasError> {

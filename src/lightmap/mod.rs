@@ -554,6 +554,7 @@ pub(crate) fn rasterize_many<const K: usize>(
 }
 
 /// [`dilate_page`] on every page of `map`, each on its own, from the covered texels.
+#[cfg(any(test, feature = "measure"))]
 pub(crate) fn dilate_into_padding(map: &mut Lightmap, rings: u32) {
     let filled = map.coverage.iter().map(|&c| c > 0.0).collect();
     dilate_from(map, filled, rings);
