@@ -361,29 +361,6 @@ impl Visibility {
         blocked
     }
 
-    /// Whether the ray from `a` along unit `dir` (up to `tmax`; the polygons in `skip` left out)
-    /// crosses an alpha-tested triangle, through a hole or not: its light may be cut into a
-    /// pattern finer than the mesh. False at once in a scene without cut-outs.
-    pub(crate) fn meets_cut_out(&self, a: DVec3, dir: DVec3, tmax: f64, skip: [usize; 2]) -> bool {
-        if self.cutouts.is_empty() || self.tris.is_empty() {
-            return false;
-        }
-        let ray = self.ray(a, dir, self.eps, tmax);
-        let skip = skip.map(|s| s as u32);
-        let met = std::cell::Cell::new(false);
-        self.bvh.ray_traverse_miss(ray, |r, id| {
-            if self.cut[id] != u32::MAX
-                && self.polygons[id] != skip[0]
-                && self.polygons[id] != skip[1]
-                && self.tris[id].intersect(r).is_finite()
-            {
-                met.set(true);
-            }
-            f32::INFINITY
-        });
-        met.get()
-    }
-
     /// The fraction of light (per linear RGB channel) that reaches `b` from `a` ([`Visibility::
     /// occluded_skipping`]'s segment, triangles of the polygons in `skip` left out): 0 where an
     /// opaque surface blocks it, else the product of the see-through surfaces' transmittances

@@ -281,9 +281,10 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         solution
             .layers
             .iter()
-            .map(|(name, values)| {
+            .zip(&solution.layer_shadows)
+            .map(|((name, values), shadows)| {
                 let (map, _) =
-                    lightmap_stage(&scene, &vis, &meshes, &of, values, &[], &atlas, options);
+                    lightmap_stage(&scene, &vis, &meshes, &of, values, shadows, &atlas, options);
                 (name.clone(), map)
             })
             .collect()
@@ -525,7 +526,7 @@ fn lightmap_stage(
     meshes: &[ReceiverMesh],
     mesh_of_polygon: &[usize],
     irradiance: &[Vec<DVec3>],
-    shadows: &[solve::direct::PunctualShadows],
+    shadows: &solve::direct::PunctualShadows,
     atlas: &Atlas,
     options: &BakeOptions,
 ) -> (Lightmap, lightmap::seams::SeamStats) {

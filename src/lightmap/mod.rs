@@ -277,19 +277,19 @@ pub(crate) fn interpolate(values: &[DVec3], t: [u32; 3], l: [f64; 3]) -> DVec3 {
 /// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
 /// that touches none of its corners is missed (its sub-samples count as visible).
 ///
-/// With `shadows` (per mesh, [`PunctualShadows`]; empty: none), a sub-sample in a triangle that
-/// a punctual light's shadow edge crosses takes the punctual lights per point instead of from
-/// the vertices: the interpolated value minus the vertices' punctual part, plus each punctual
-/// light's irradiance at the point with one shadow ray. The vertices cannot hold a shadow
-/// edge inside an element (the cut-outs of a fence, an occluder the discontinuity mesh left
-/// out), so there the lightmap resolves it per texel, as a texel-based baker does.
+/// With `shadows` ([`PunctualShadows`]; without lights: none), every sub-sample takes those
+/// punctual lights per point instead of from the vertices: the interpolated value minus the
+/// vertices' punctual part, plus each punctual light's irradiance at the point with one shadow
+/// ray. The vertices hold a hard shadow's edge only where the discontinuity mesh has it, up to
+/// the snapping of its lines, and not through a cut-out's holes; per point, the edge is where
+/// the shadow ray says, as in a texel baker.
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn rasterize(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],
     values: &[Vec<DVec3>],
-    shadows: &[PunctualShadows],
+    shadows: &PunctualShadows,
     mesh_of_polygon: &[usize],
     atlas: &Atlas,
     supersample: u32,
@@ -311,19 +311,17 @@ pub(crate) fn rasterize(
                 return DVec3::ZERO;
             };
             let value = interpolate(&values[at.mesh], t, l);
-            match (shadows.get(at.mesh), *hint) {
-                (Some(s), Some(k)) if s.crossed.get(k as usize) == Some(&true) => {
-                    let poly = meshes[at.mesh].polygon;
-                    let point = SurfacePoint::new(at.p, scene.polygons[poly].frame.n, poly, vis);
-                    let exact: DVec3 = scene
-                        .lights
-                        .iter()
-                        .map(|light| punctual_irradiance(light, vis, &point).0)
-                        .sum();
-                    (value - interpolate(&s.punctual, t, l)).max(DVec3::ZERO) + exact
-                }
-                _ => value,
+            if shadows.lights.is_empty() {
+                return value;
             }
+            let poly = meshes[at.mesh].polygon;
+            let point = SurfacePoint::new(at.p, scene.polygons[poly].frame.n, poly, vis);
+            let exact: DVec3 = shadows
+                .lights
+                .iter()
+                .map(|&k| punctual_irradiance(&scene.lights[k], vis, &point).0)
+                .sum();
+            (value - interpolate(&shadows.punctual[at.mesh], t, l)).max(DVec3::ZERO) + exact
         },
     )
 }
@@ -445,6 +443,7 @@ pub(crate) fn rasterize_many<const K: usize>(
                 y_hi - y_lo + 1
             };
             let mut corner: Vec<Option<(DVec3, usize, bool)>> = vec![None; cw * rows];
+            let mut nearby = Vec::new();
             for &ti in &by_band[b] {
                 let t = &tris[ti as usize];
                 let area = (t.uv[1] - t.uv[0]).perp_dot(t.uv[2] - t.uv[0]);
@@ -463,8 +462,57 @@ pub(crate) fn rasterize_many<const K: usize>(
                 };
                 // Buried or not at the texel corners (on the triangle's plane, also beyond
                 // its edges): a texel whose four corners agree takes their answer for all its
-                // sub-samples; one whose corners differ (a contact line crosses it) tests every
-                // sub-sample.
+                // sub-samples, unless other geometry comes within a texel of its front, where
+                // a buried patch smaller than the texel may lie between the corners (a thin
+                // wall standing on the ground, a neighbour's wall a few centimetres away); a
+                // texel whose corners differ (a contact line crosses it) or that has geometry
+                // in front tests every sub-sample.
+                // The box over the texels `[x0, x1 + 1] x [ya, yb + 1]` and one texel in
+                // front of them.
+                let front_box = |xa: usize, xb: usize, y0: usize, y1: usize| {
+                    let c = [(xa, y0), (xb, y0), (xa, y1), (xb, y1)]
+                        .map(|(cx, cy)| world(DVec2::new(cx as f64, cy as f64)));
+                    let side = c[0].distance(world(DVec2::new(xa as f64 + 1.0, y0 as f64 + 1.0)));
+                    let front = poly.frame.n * side;
+                    let (mut lo, mut hi) = (c[0], c[0]);
+                    for p in c {
+                        lo = lo.min(p).min(p + front);
+                        hi = hi.max(p).max(p + front);
+                    }
+                    (lo, hi)
+                };
+                // Other geometry near the triangle's texels (not its own polygon's); when it
+                // is a short list, each texel checks it, else it asks the BVH.
+                let polygon = meshes[t.mesh].polygon;
+                let others = |nearby: &mut Vec<usize>, (lo, hi): (DVec3, DVec3)| {
+                    nearby.clear();
+                    vis.triangles_overlapping(lo, hi, nearby);
+                    nearby.retain(|&k| scene.triangles[k].polygon != Some(polygon));
+                };
+                others(&mut nearby, front_box(x0, x1 + 1, ya, yb + 1));
+                let pad = vis.epsilon();
+                // A triangle meets the box only if its box and its plane do.
+                let meets = |k: usize, (lo, hi): (DVec3, DVec3)| {
+                    let tri = &scene.triangles[k];
+                    let p = tri.p;
+                    let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+                    let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5 + pad);
+                    a.cmple(hi + pad).all()
+                        && b.cmpge(lo - pad).all()
+                        && tri.normal.dot(centre - p[0]).abs() <= half.dot(tri.normal.abs())
+                };
+                let short = nearby.len() <= 32;
+                let crowded = |x: usize, y: usize| {
+                    let box_ = front_box(x, x + 1, y, y + 1);
+                    match short {
+                        true => nearby.iter().any(|&k| meets(k, box_)),
+                        false => {
+                            let mut near = Vec::new();
+                            others(&mut near, box_);
+                            near.iter().any(|&k| meets(k, box_))
+                        }
+                    }
+                };
                 let mut hint = None;
                 let same = crate::scene::tolerance::COINCIDENT * scene.extent();
                 let mut corner_buried = |cx: usize, cy: usize| {
@@ -483,6 +531,7 @@ pub(crate) fn rasterize_many<const K: usize>(
                     for x in x0..=x1 {
                         let idx = (y - y_lo) * w + x;
                         let mut corners: Option<[bool; 4]> = None;
+                        let mut crowd: Option<bool> = None;
                         for s in 0..n * n {
                             let bit = 1u64 << (s % 64);
                             if claimed[idx] & bit != 0 {
@@ -502,7 +551,9 @@ pub(crate) fn rasterize_many<const K: usize>(
                                 [(x, y), (x + 1, y), (x, y + 1), (x + 1, y + 1)]
                                     .map(|(cx, cy)| corner_buried(cx, cy))
                             });
-                            let buried = if c.iter().all(|&b| b == c[0]) {
+                            let alike = c.iter().all(|&b| b == c[0]);
+                            let crowded = alike && *crowd.get_or_insert_with(|| crowded(x, y));
+                            let buried = if alike && !crowded {
                                 c[0]
                             } else {
                                 vis.buried(p, poly.frame.n)

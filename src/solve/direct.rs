@@ -237,20 +237,19 @@ impl<'a> Direct<'a> {
     /// [`evaluation_points`]): area emitters and the sky at the points, as
     /// [`Direct::irradiance_points`]; punctual lights unoccluded at the points times their
     /// visibility averaged over each vertex's fan ([`punctual_over_fans`]). Also the punctual
-    /// lights' part of it, with the triangles that a punctual light's shadow edge crosses
-    /// ([`PunctualShadows`]).
+    /// lights' part of it (empty without punctual lights), which the lightmap takes per
+    /// sub-sample ([`PunctualShadows`]).
     pub(crate) fn irradiance_vertices(
         &self,
         mesh: &ReceiverMesh,
         points: &[SurfacePoint],
         mut light: Option<&mut [LightVector]>,
-    ) -> (Vec<DVec3>, PunctualShadows) {
+    ) -> (Vec<DVec3>, Vec<DVec3>) {
         let mut h = self.evaluate(points, false, light.as_deref_mut());
         if self.lights.is_empty() {
-            return (h, PunctualShadows::default());
+            return (h, Vec::new());
         }
         let before = h.clone();
-        let mut crossed = vec![false; mesh.triangles.len()];
         let rays = punctual_over_fans(
             self.scene,
             self.vis,
@@ -259,15 +258,10 @@ impl<'a> Direct<'a> {
             points,
             &mut h,
             light,
-            &mut crossed,
         );
         self.rays.fetch_add(rays, Ordering::Relaxed);
-        // Kept only where the lightmap will read it.
-        if !crossed.contains(&true) {
-            return (h, PunctualShadows::default());
-        }
         let punctual = h.iter().zip(&before).map(|(a, b)| *a - *b).collect();
-        (h, PunctualShadows { punctual, crossed })
+        (h, punctual)
     }
 
     /// [`Direct::irradiance_points`], with the punctual lights at the points or left out; with
@@ -822,7 +816,7 @@ pub fn direct_light(
     direct_light_shadows(scene, vis, direct, meshes, false, progress).0
 }
 
-/// [`direct_light`], and per mesh its [`PunctualShadows`]; with `directional`, the light vector
+/// [`direct_light`], and its punctual lights' [`PunctualShadows`]; with `directional`, the light vector
 /// at every vertex too ([`LightVector`]; empty without).
 pub(crate) fn direct_light_shadows(
     scene: &Scene,
@@ -831,10 +825,10 @@ pub(crate) fn direct_light_shadows(
     meshes: &[ReceiverMesh],
     directional: bool,
     progress: &crate::progress::Progress<'_>,
-) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>, Vec<PunctualShadows>) {
+) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>, PunctualShadows) {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let done = AtomicU64::new(0);
-    let per_mesh: Vec<(Vec<DVec3>, Vec<LightVector>, PunctualShadows)> = meshes
+    let per_mesh: Vec<(Vec<DVec3>, Vec<LightVector>, Vec<DVec3>)> = meshes
         .par_iter()
         .map(|m| {
             let pts = evaluation_points(scene, vis, m);
@@ -846,11 +840,19 @@ pub(crate) fn direct_light_shadows(
             (out, light, shadows)
         })
         .collect();
-    let (mut h, mut light, mut shadows) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut h, mut light, mut punctual) = (Vec::new(), Vec::new(), Vec::new());
     for (a, b, c) in per_mesh {
         h.push(a);
         light.push(b);
-        shadows.push(c);
+        punctual.push(c);
     }
+    let shadows = if direct.lights.is_empty() {
+        PunctualShadows::default()
+    } else {
+        PunctualShadows {
+            lights: direct.lights.clone(),
+            punctual,
+        }
+    };
     (h, if directional { light } else { Vec::new() }, shadows)
 }

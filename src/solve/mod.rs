@@ -209,10 +209,11 @@ pub struct Solution {
     /// With [`SolveOptions::directional`], the light vector ([`LightVector`]) of `irradiance`
     /// at every vertex, same layout; empty without.
     pub light: Vec<Vec<LightVector>>,
-    /// Per mesh, the punctual lights' part of `direct` and the triangles their shadow edges
-    /// cross ([`direct::PunctualShadows`]), for the lightmap's per-texel shadows; empty with
-    /// light rules ([`crate::scene::mixed`]).
-    pub shadows: Vec<direct::PunctualShadows>,
+    /// The punctual lights in `irradiance`'s direct light and their part of it
+    /// ([`direct::PunctualShadows`]), which the lightmap takes per sub-sample.
+    pub shadows: direct::PunctualShadows,
+    /// The same for each of `layers`.
+    pub layer_shadows: Vec<direct::PunctualShadows>,
     pub stats: SolveStats,
 }
 
@@ -362,9 +363,8 @@ pub fn radiosity(
     // Direct light at the vertices: of every light at once, or of each set of lights with
     // one rule ([`crate::scene::mixed`]) on its own.
     let start = Instant::now();
-    let mut shadows = Vec::new();
     let parts = if scene.mixed.is_plain() {
-        let (direct_h, light, s) = direct::direct_light_shadows(
+        let (direct_h, light, shadows) = direct::direct_light_shadows(
             scene,
             vis,
             &direct,
@@ -373,8 +373,7 @@ pub fn radiosity(
             progress,
         );
         stats.direct = direct.stats();
-        shadows = s;
-        vec![(LightRule::default(), direct_h, light)]
+        vec![(LightRule::default(), direct_h, light, shadows)]
     } else {
         direct_by_rule(
             scene,
@@ -388,20 +387,39 @@ pub fn radiosity(
     };
     stats.direct.seconds = start.elapsed().as_secs_f64();
     let mut direct_h = match &parts[..] {
-        [(_, one, _)] => one.clone(),
-        _ => sum_of(parts.iter().map(|(_, d, _)| d), meshes),
+        [(_, one, _, _)] => one.clone(),
+        _ => sum_of(parts.iter().map(|(_, d, _, _)| d), meshes),
     };
     let mut light = match &parts[..] {
-        [(_, _, one)] => one.clone(),
-        _ if options.directional => sum_of(parts.iter().map(|(_, _, l)| l), meshes),
+        [(_, _, one, _)] => one.clone(),
+        _ if options.directional => sum_of(parts.iter().map(|(_, _, l, _)| l), meshes),
         _ => Vec::new(),
     };
+    // The punctual lights whose direct light each lightmap holds: all but the `indirect` ones,
+    // the main lightmap's and each group's layer's.
+    let shadows_of = |keep: &dyn Fn(&LightRule) -> bool| {
+        let mut out = direct::PunctualShadows::default();
+        for (_, _, _, s) in parts
+            .iter()
+            .filter(|(r, ..)| r.bake == BakeMode::All && keep(r))
+        {
+            out.add(s);
+        }
+        out
+    };
+    let shadows = shadows_of(&|_| true);
     let groups = scene.mixed.groups();
+    let layer_shadows = groups
+        .iter()
+        .map(|g| shadows_of(&|r| r.group.as_ref() == Some(g)))
+        .collect();
     let layers_direct: Vec<Vec<Vec<DVec3>>> = groups
         .iter()
         .map(|g| {
-            let of_group = parts.iter().filter(|(r, _, _)| r.group.as_ref() == Some(g));
-            sum_of(of_group.map(|(_, d, _)| d), meshes)
+            let of_group = parts
+                .iter()
+                .filter(|(r, _, _, _)| r.group.as_ref() == Some(g));
+            sum_of(of_group.map(|(_, d, _, _)| d), meshes)
         })
         .collect();
 
@@ -449,9 +467,9 @@ pub fn radiosity(
     }
     // `bake: indirect`: the bounces of those lights stay, their direct light goes.
     let mut irradiance = irradiance;
-    for (rule, d, l) in parts
+    for (rule, d, l, _) in parts
         .iter()
-        .filter(|(r, _, _)| r.bake == BakeMode::Indirect)
+        .filter(|(r, _, _, _)| r.bake == BakeMode::Indirect)
     {
         subtract(&mut irradiance, d);
         subtract(&mut direct_h, d);
@@ -475,13 +493,19 @@ pub fn radiosity(
         layers: groups.into_iter().zip(layers).collect(),
         light,
         shadows,
+        layer_shadows,
         stats,
     }
 }
 
 /// The direct light of a set of lights that share a rule: the rule, the irradiance at the
 /// vertices, and their light vectors (empty without [`SolveOptions::directional`]).
-type DirectPart = (LightRule, Vec<Vec<DVec3>>, Vec<Vec<LightVector>>);
+type DirectPart = (
+    LightRule,
+    Vec<Vec<DVec3>>,
+    Vec<Vec<LightVector>>,
+    direct::PunctualShadows,
+);
 
 /// The direct light at the vertices of each set of lights that share a rule
 /// ([`crate::scene::mixed`]), in the rules' order: the sky goes with the lights baked fully in
@@ -519,7 +543,7 @@ fn direct_by_rule(
                 |l| mixed.light(l) == rule,
                 rule == LightRule::default(),
             );
-            let (d, l, _) = direct::direct_light_shadows(
+            let (d, l, shadows) = direct::direct_light_shadows(
                 scene,
                 vis,
                 &direct,
@@ -539,7 +563,7 @@ fn direct_by_rule(
                 rays += sky.rays();
                 stats.sky = Some(sky.stats());
             }
-            (rule, d, l)
+            (rule, d, l, shadows)
         })
         .collect();
     stats.rays += rays;

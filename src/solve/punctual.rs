@@ -1,7 +1,7 @@
 //! Punctual lights at the mesh vertices: one light's irradiance at a point with its shadow
 //! ray, and every light's at the vertices of a mesh, its visibility averaged over each
-//! vertex's fan; with the triangles a shadow edge crosses, which the lightmap takes per texel.
-//! Irradiance in W/m² per linear RGB channel.
+//! vertex's fan (what the solve's bounces start from; the lightmap takes these lights per
+//! texel). Irradiance in W/m² per linear RGB channel.
 
 use crate::light::{LightVector, NO_POLYGON, SurfacePoint, add_light, punctual_unoccluded, slant};
 use crate::mesh::ReceiverMesh;
@@ -9,15 +9,39 @@ use crate::scene::{LightKind, PunctualLight, Scene};
 use crate::visibility::Visibility;
 use glam::DVec3;
 
-/// The punctual lights' direct light at a mesh's vertices (W/m², their part of the direct
-/// irradiance) and the triangles of the mesh that a punctual light's shadow edge crosses (its
-/// visibility at the triangle's fan samples differs): there the vertices cannot hold the
-/// shadow, and the lightmap takes the punctual light per texel instead
-/// ([`crate::lightmap::rasterize`]). Both empty for a mesh that no shadow edge crosses.
+/// The punctual lights that a lightmap takes per sub-sample, and their part of the direct
+/// light at the vertices. The lightmap takes that part out of the interpolated value and puts
+/// each light's exact irradiance at every sub-sample in its place
+/// ([`crate::lightmap::rasterize`]), as a texel baker does: the vertices hold a shadow edge
+/// only where the discontinuity mesh has it, up to the snapping of its lines, and not through
+/// a cut-out's holes. Empty (no lights) for a scene without punctual lights.
 #[derive(Clone, Debug, Default)]
 pub struct PunctualShadows {
-    pub punctual: Vec<DVec3>,
-    pub crossed: Vec<bool>,
+    /// Indices into [`Scene::lights`].
+    pub lights: Vec<usize>,
+    /// Per mesh and vertex: these lights' part of the direct irradiance (W/m²).
+    pub punctual: Vec<Vec<DVec3>>,
+}
+
+impl PunctualShadows {
+    /// `self` and `other` together: the lights of both, their parts summed.
+    pub(crate) fn add(&mut self, other: &PunctualShadows) {
+        if other.lights.is_empty() {
+            return;
+        }
+        if self.lights.is_empty() {
+            *self = other.clone();
+            return;
+        }
+        self.lights.extend(&other.lights);
+        self.lights.sort_unstable();
+        self.lights.dedup();
+        for (mine, theirs) in self.punctual.iter_mut().zip(&other.punctual) {
+            for (a, b) in mine.iter_mut().zip(theirs) {
+                *a += *b;
+            }
+        }
+    }
 }
 
 /// Irradiance from one punctual light at a receiving point, and the rays it cast: the
@@ -59,18 +83,6 @@ fn punctual_transmitted(light: &PunctualLight, vis: &Visibility, at: &SurfacePoi
     }
 }
 
-/// Whether the shadow ray from `at` toward a punctual light crosses a cut-out surface
-/// ([`Visibility::meets_cut_out`]).
-fn punctual_meets_cut_out(light: &PunctualLight, vis: &Visibility, at: &SurfacePoint) -> bool {
-    let dir = towards(light, at.p);
-    let origin = at.ray_origin_towards(dir);
-    let reach = match light.kind {
-        LightKind::Directional => f64::from(f32::MAX),
-        LightKind::Point | LightKind::Spot { .. } => light.position.distance(origin),
-    };
-    vis.meets_cut_out(origin, dir, reach, [at.polygon, NO_POLYGON])
-}
-
 /// Barycentric coordinates of the points where [`punctual_over_fans`] tests a triangle: the
 /// centroids of its four midpoint sub-triangles, a quadrature of equal weights.
 const FAN_SAMPLES: [[f64; 3]; 4] = [
@@ -100,7 +112,6 @@ pub(super) fn punctual_over_fans(
     points: &[SurfacePoint],
     h: &mut [DVec3],
     mut light_vectors: Option<&mut [LightVector]>,
-    crossed: &mut [bool],
 ) -> u64 {
     let frame = &scene.polygons[mesh.polygon].frame;
     // Every triangle's samples in world space, once for all the lights.
@@ -131,24 +142,17 @@ pub(super) fn punctual_over_fans(
             .triangles
             .iter()
             .zip(&samples)
-            .enumerate()
-            .map(|(k, (t, at))| {
+            .map(|(t, at)| {
                 if t.iter().all(|&i| unoccluded[i as usize].is_none()) {
                     return None;
                 }
                 let lit = at.map(|p| {
                     rays += 1;
                     let point = SurfacePoint::new(p, frame.n, mesh.polygon, vis);
-                    if !crossed[k] && punctual_meets_cut_out(light, vis, &point) {
-                        crossed[k] = true;
-                    }
                     punctual_transmitted(light, vis, &point)
                 });
                 if lit.iter().any(|l| *l != DVec3::ZERO) {
                     t.iter().for_each(|&i| seen[i as usize] = true);
-                }
-                if lit.iter().any(|l| *l != lit[0]) {
-                    crossed[k] = true;
                 }
                 Some(lit)
             })
