@@ -443,7 +443,7 @@ pub(crate) fn rasterize_many<const K: usize>(
                 y_hi - y_lo + 1
             };
             let mut corner: Vec<Option<(DVec3, usize, bool)>> = vec![None; cw * rows];
-            let mut nearby = Vec::new();
+            let (mut nearby, mut near) = (Vec::new(), Vec::new());
             for &ti in &by_band[b] {
                 let t = &tris[ti as usize];
                 let area = (t.uv[1] - t.uv[0]).perp_dot(t.uv[2] - t.uv[0]);
@@ -466,9 +466,8 @@ pub(crate) fn rasterize_many<const K: usize>(
                 // a buried patch smaller than the texel may lie between the corners (a thin
                 // wall standing on the ground, a neighbour's wall a few centimetres away); a
                 // texel whose corners differ (a contact line crosses it) or that has geometry
-                // in front tests every sub-sample.
-                // The box over the texels `[x0, x1 + 1] x [ya, yb + 1]` and one texel in
-                // front of them.
+                // in front tests every sub-sample. `front_box`: the box over the texels
+                // `[xa, xb] x [y0, y1]` and one texel in front of them.
                 let front_box = |xa: usize, xb: usize, y0: usize, y1: usize| {
                     let c = [(xa, y0), (xb, y0), (xa, y1), (xb, y1)]
                         .map(|(cx, cy)| world(DVec2::new(cx as f64, cy as f64)));
@@ -502,16 +501,13 @@ pub(crate) fn rasterize_many<const K: usize>(
                         && tri.normal.dot(centre - p[0]).abs() <= half.dot(tri.normal.abs())
                 };
                 let short = nearby.len() <= 32;
-                let crowded = |x: usize, y: usize| {
-                    let box_ = front_box(x, x + 1, y, y + 1);
-                    match short {
-                        true => nearby.iter().any(|&k| meets(k, box_)),
-                        false => {
-                            let mut near = Vec::new();
-                            others(&mut near, box_);
-                            near.iter().any(|&k| meets(k, box_))
-                        }
+                let mut crowded = |x: usize, y: usize| {
+                    let texel = front_box(x, x + 1, y, y + 1);
+                    if !short {
+                        others(&mut near, texel);
                     }
+                    let candidates = if short { &nearby } else { &near };
+                    candidates.iter().any(|&k| meets(k, texel))
                 };
                 let mut hint = None;
                 let same = crate::scene::tolerance::COINCIDENT * scene.extent();
