@@ -699,8 +699,26 @@ fn past_the_slats(p: DVec3) -> bool {
     (column.min(textured::FENCE_TEXELS - 1) / textured::FENCE_SLAT).is_multiple_of(2)
 }
 
+/// Bakes `glb` to a file (2 threads) and reads it back: the reference's layout of its texels
+/// (each texel's visible sub-samples) and the irradiance of each texel of its lightmap.
+fn baked_texels(
+    glb: &[u8],
+    name: &str,
+    options: &penumbra::BakeOptions,
+) -> (
+    penumbra::reference::TexelLayout,
+    impl Fn(usize) -> f64 + use<>,
+) {
+    let out = crate::output::bake_to_file_with(glb, &crate::scratch(name), 2, options);
+    let gltf = parse(&out, &format!("{name}.glb"));
+    let scene = penumbra::load::scene(&gltf).unwrap();
+    let vis = Visibility::new(&scene);
+    let layout = penumbra::reference::texel_layout(&gltf, &scene, &vis, 4).unwrap();
+    (layout, lightmap_irradiance(&out))
+}
+
 /// The red channel's irradiance of texel `i` of a baked glb's (first, 8-bit) lightmap page.
-fn lightmap_irradiance(out: &[u8]) -> impl Fn(usize) -> f64 {
+fn lightmap_irradiance(out: &[u8]) -> impl Fn(usize) -> f64 + use<> {
     let (json, bin) = crate::output::split_glb(out);
     let moz = &json["materials"][0]["extensions"]["MOZ_lightmap"];
     let intensity = moz["intensity"].as_f64().unwrap();
@@ -719,19 +737,11 @@ fn a_sunlit_fence_casts_its_slats_shadows_per_texel() {
     // The slats are no discontinuity (one textured quad), so their shadow edges cross the
     // floor's elements: the lightmap takes the sun per texel there. Against the closed form
     // (nothing bounces: every surface is black), texel by texel over the floor behind the fence.
-    use crate::output::bake_to_file_with;
-    let dir = crate::scratch("sunlit-fence");
-    let glb = textured::sunlit_fence();
     let options = penumbra::BakeOptions {
         resolution: Some(512),
         ..quick()
     };
-    let out = bake_to_file_with(&glb, &dir, 2, &options);
-    let gltf = parse(&out, "fence.glb");
-    let scene = penumbra::load::scene(&gltf).unwrap();
-    let vis = Visibility::new(&scene);
-    let layout = penumbra::reference::texel_layout(&gltf, &scene, &vis, 4).unwrap();
-    let irradiance = lightmap_irradiance(&out);
+    let (layout, irradiance) = baked_texels(&textured::sunlit_fence(), "sunlit-fence", &options);
     let sun = -DVec3::from(textured::FENCE_SUN).normalize();
     let (mut sq, mut n) = (0.0, 0);
     for (i, samples) in layout.samples.iter().enumerate() {
@@ -762,7 +772,6 @@ fn a_sunlit_fence_casts_its_slats_shadows_per_texel() {
 /// is averaged into the texel. So every ground texel holds the sun's full irradiance.
 #[test]
 fn a_wall_thinner_than_a_texel_hides_only_what_it_stands_on() {
-    use crate::output::bake_to_file_with;
     use penumbra::fixtures::{GlbBuilder, Light, Material, Node, Transform, block};
     // Turned 30 degrees off the ground's axes, so that the wall runs across the texel grid
     // and passes between the corners of some texels.
@@ -792,12 +801,7 @@ fn a_wall_thinner_than_a_texel_hides_only_what_it_stands_on() {
         texels_per_unit: Some(1.0),
         ..quick()
     };
-    let out = bake_to_file_with(&b.to_glb(), &crate::scratch("thin-wall"), 2, &options);
-    let gltf = parse(&out, "thin-wall.glb");
-    let scene = penumbra::load::scene(&gltf).unwrap();
-    let vis = Visibility::new(&scene);
-    let layout = penumbra::reference::texel_layout(&gltf, &scene, &vis, 4).unwrap();
-    let irradiance = lightmap_irradiance(&out);
+    let (layout, irradiance) = baked_texels(&b.to_glb(), "thin-wall", &options);
     let (mut across, mut worst) = (0, 0.0f64);
     for (i, samples) in layout.samples.iter().enumerate() {
         if samples.is_empty() || !samples.iter().all(|s| s.n.y > 0.99) {
@@ -822,7 +826,6 @@ fn a_wall_thinner_than_a_texel_hides_only_what_it_stands_on() {
 /// sub-sample. Every surface is black, so nothing else lights the wall.
 #[test]
 fn a_sunlit_strip_between_the_vertices_is_kept() {
-    use crate::output::bake_to_file_with;
     use penumbra::fixtures::{GlbBuilder, Light, Material, Node, Transform, cuboid, quad};
     let mut b = GlbBuilder::new();
     let black = b.add_material(Material::diffuse("black", [0.0; 3]));
@@ -850,12 +853,7 @@ fn a_sunlit_strip_between_the_vertices_is_kept() {
         texels_per_unit: Some(8.0),
         ..quick()
     };
-    let out = bake_to_file_with(&b.to_glb(), &crate::scratch("sunlit-strip"), 2, &options);
-    let gltf = parse(&out, "strip.glb");
-    let scene = penumbra::load::scene(&gltf).unwrap();
-    let vis = Visibility::new(&scene);
-    let layout = penumbra::reference::texel_layout(&gltf, &scene, &vis, 4).unwrap();
-    let irradiance = lightmap_irradiance(&out);
+    let (layout, irradiance) = baked_texels(&b.to_glb(), "sunlit-strip", &options);
     let (mut sq, mut n) = (0.0, 0);
     for (i, samples) in layout.samples.iter().enumerate() {
         let on_wall = samples.iter().all(|s| s.n.z > 0.99 && s.p.z.abs() < 1e-6);
