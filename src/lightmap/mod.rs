@@ -273,9 +273,9 @@ pub(crate) fn interpolate(values: &[DVec3], t: [u32; 3], l: [f64; 3]) -> DVec3 {
 /// is filled by the dilation from its visible neighbours, so that bilinear filtering along a
 /// contact line reads the light beside the box, not the dark under it. The test runs at the
 /// texel corners, each tested once for all the triangles of its chart in a band of rows
-/// (about one test per texel); only a texel whose corners disagree (a
-/// contact line crosses it) tests each of its sub-samples. A buried strip narrower than a texel
-/// that touches none of its corners is missed (its sub-samples count as visible).
+/// (about one test per texel); a texel whose corners disagree (a contact line crosses it), or
+/// that other geometry comes within a texel of (a wall thinner than a texel may stand between
+/// agreeing corners), tests each of its sub-samples.
 ///
 /// With `shadows` ([`PunctualShadows`]; without lights: none), every sub-sample takes those
 /// punctual lights per point instead of from the vertices: the interpolated value minus the
