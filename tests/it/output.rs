@@ -170,7 +170,7 @@ fn output_is_byte_identical_across_runs_and_thread_counts() {
 }
 
 /// The PNG of texture `tex` in a baked glb, decoded to 8-bit RGB.
-fn texture_rgb(json: &Value, bin: &[u8], tex: usize) -> image::RgbImage {
+pub fn texture_rgb(json: &Value, bin: &[u8], tex: usize) -> image::RgbImage {
     let img = &json["images"][json["textures"][tex]["source"].as_u64().unwrap() as usize];
     let view = &json["bufferViews"][img["bufferView"].as_u64().unwrap() as usize];
     let off = view["byteOffset"].as_u64().unwrap_or(0) as usize;

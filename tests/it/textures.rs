@@ -717,19 +717,19 @@ fn baked_texels(
     (layout, lightmap_irradiance(&out))
 }
 
-/// The red channel's irradiance of texel `i` of a baked glb's (first, 8-bit) lightmap page.
+/// The red channel's irradiance of texel `i` of a baked glb's (first, 8-bit) lightmap page,
+/// decoded as its extras say.
 fn lightmap_irradiance(out: &[u8]) -> impl Fn(usize) -> f64 + use<> {
     let (json, bin) = crate::output::split_glb(out);
     let moz = &json["materials"][0]["extensions"]["MOZ_lightmap"];
     let intensity = moz["intensity"].as_f64().unwrap();
     let t = moz["index"].as_u64().unwrap() as usize;
-    let source = json["textures"][t]["source"].as_u64().unwrap() as usize;
-    let view =
-        &json["bufferViews"][json["images"][source]["bufferView"].as_u64().unwrap() as usize];
-    let at = view["byteOffset"].as_u64().unwrap_or(0) as usize;
-    let bytes = &bin[at..at + view["byteLength"].as_u64().unwrap() as usize];
-    let img = image::load_from_memory(bytes).unwrap().to_rgb8();
-    move |i| penumbra::color::srgb_to_linear(img.as_raw()[3 * i] as f64 / 255.0) * intensity
+    let encoding = json["textures"][t]["extras"]["penumbra"]["encoding"]
+        .as_str()
+        .unwrap();
+    let encoding = penumbra::lightmap::Encoding::from_name(encoding).unwrap();
+    let img = crate::output::texture_rgb(&json, &bin, t);
+    move |i| encoding.decode(img.as_raw()[3 * i] as f64 / 255.0) * intensity
 }
 
 #[test]
