@@ -263,18 +263,18 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     let atlas = atlas?;
     let (segments, meshes, solution) = solved.expect("the atlas estimates before it succeeds")?;
     let of = mesh::mesh_of_polygon(&scene, &meshes);
+    let raster = lightmap::Raster {
+        scene: &scene,
+        vis: &vis,
+        meshes: &meshes,
+        mesh_of_polygon: &of,
+        atlas: &atlas,
+        supersample: options.supersample,
+        stitch: options.seams == Seams::Stitch,
+    };
     let t = &mut stats.timings_s;
     let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
-        lightmap_stage(
-            &scene,
-            &vis,
-            &meshes,
-            &of,
-            &solution.irradiance,
-            &solution.shadows,
-            &atlas,
-            options,
-        )
+        lightmap_stage(&raster, &solution.irradiance, &solution.shadows)
     });
     stats.seams = seams;
     let layers = stage(&mut t.lightmap, "light groups", progress, || {
@@ -283,8 +283,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             .iter()
             .zip(&solution.layer_shadows)
             .map(|((name, values), shadows)| {
-                let (map, _) =
-                    lightmap_stage(&scene, &vis, &meshes, &of, values, shadows, &atlas, options);
+                let (map, _) = lightmap_stage(&raster, values, shadows);
                 (name.clone(), map)
             })
             .collect()
@@ -294,19 +293,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             &mut stats.timings_s.lightmap,
             "directional",
             progress,
-            || {
-                lightmap::directional::ratio_maps(
-                    &scene,
-                    &vis,
-                    &meshes,
-                    &of,
-                    &solution.light,
-                    &solution.irradiance,
-                    &atlas,
-                    options.supersample,
-                    options.seams == Seams::Stitch,
-                )
-            },
+            || lightmap::directional::ratio_maps(&raster, &solution.light, &solution.irradiance),
         )
     });
     let ao = options.ao.map(|ao| {
@@ -314,18 +301,7 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
             &mut stats.timings_s.lightmap,
             "ambient occlusion",
             progress,
-            || {
-                lightmap::ao::ambient_occlusion(
-                    &scene,
-                    &vis,
-                    &meshes,
-                    &of,
-                    &atlas,
-                    options.supersample,
-                    options.seams == Seams::Stitch,
-                    &ao,
-                )
-            },
+            || lightmap::ao::ambient_occlusion(&raster, &ao),
         );
         stats.ao = Some(ao_stats);
         map
@@ -519,29 +495,13 @@ fn mesh_and_solve(
 
 /// The lightmap stage: the meshes' irradiance rasterized into the atlas, the seams stitched
 /// (or only measured, with `--seams off`).
-#[allow(clippy::too_many_arguments)]
 fn lightmap_stage(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    mesh_of_polygon: &[usize],
+    raster: &lightmap::Raster,
     irradiance: &[Vec<DVec3>],
     shadows: &solve::direct::PunctualShadows,
-    atlas: &Atlas,
-    options: &BakeOptions,
 ) -> (Lightmap, lightmap::seams::SeamStats) {
-    let mut map = lightmap::rasterize(
-        scene,
-        vis,
-        meshes,
-        irradiance,
-        shadows,
-        mesh_of_polygon,
-        atlas,
-        options.supersample,
-    );
-    let on = options.seams == Seams::Stitch;
-    let seams = lightmap::seams::stitch_seams(&mut map, scene, vis, atlas, on);
+    let mut map = lightmap::rasterize(raster, irradiance, shadows);
+    let seams = raster.stitch_seams(&mut map);
     (map, seams)
 }
 

@@ -22,10 +22,8 @@
 //! within `D` exactly when its horizontal component towards the wall exceeds `h = d/D`: the
 //! blocked part is the disk's segment beyond `h`, so `AO = 1 - (acos h - h sqrt(1 - h²)) / pi`.
 
-use super::{Lightmap, rasterize_with, seams};
-use crate::atlas::Atlas;
+use super::{Lightmap, Raster, rasterize_with};
 use crate::light::SurfacePoint;
-use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
 use crate::solve::sky::CosineRays;
 use crate::visibility::{Visibility, channel_mean};
@@ -65,38 +63,27 @@ pub struct AoStats {
 
 /// The ambient occlusion of every texel of `atlas` (grey: the three channels equal), with the
 /// lightmap's own sub-samples, dilation and seam stitching; and its counters.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn ambient_occlusion(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    mesh_of_polygon: &[usize],
-    atlas: &Atlas,
-    supersample: u32,
-    stitch: bool,
-    options: &AoOptions,
-) -> (Lightmap, AoStats) {
+pub(crate) fn ambient_occlusion(r: &Raster, options: &AoOptions) -> (Lightmap, AoStats) {
+    let Raster {
+        scene,
+        vis,
+        meshes,
+        supersample,
+        ..
+    } = *r;
     let start = std::time::Instant::now();
     let n2 = (supersample.max(1) * supersample.max(1)) as usize;
     let rays_of = CosineRays::new(options.samples.div_ceil(n2));
     let rays = AtomicU64::new(0);
-    let mut map = rasterize_with(
-        scene,
-        vis,
-        meshes,
-        mesh_of_polygon,
-        atlas,
-        supersample,
-        &|at, _| {
-            let polygon = meshes[at.mesh].polygon;
-            let n = scene.polygons[polygon].frame.n;
-            let point = SurfacePoint::new(at.p, n, polygon, vis);
-            let (open, cast) = open_fraction(scene, vis, &rays_of, &point, options.distance);
-            rays.fetch_add(cast, Ordering::Relaxed);
-            DVec3::splat(open)
-        },
-    );
-    seams::stitch_seams(&mut map, scene, vis, atlas, stitch);
+    let mut map = rasterize_with(r, &|at, _| {
+        let polygon = meshes[at.mesh].polygon;
+        let n = scene.polygons[polygon].frame.n;
+        let point = SurfacePoint::new(at.p, n, polygon, vis);
+        let (open, cast) = open_fraction(scene, vis, &rays_of, &point, options.distance);
+        rays.fetch_add(cast, Ordering::Relaxed);
+        DVec3::splat(open)
+    });
+    r.stitch_seams(&mut map);
     let covered: Vec<f64> = map
         .texels
         .iter()

@@ -19,12 +19,8 @@
 //! rasterized as the irradiance is ([`super::rasterize`]), component by component, so their
 //! texels are means over the same sub-samples, dilated and stitched the same way.
 
-use super::{Lightmap, Locator, interpolate, rasterize_many, seams};
-use crate::atlas::Atlas;
+use super::{Lightmap, Locator, Raster, interpolate, rasterize_many};
 use crate::light::LightVector;
-use crate::mesh::ReceiverMesh;
-use crate::scene::Scene;
-use crate::visibility::Visibility;
 use glam::DVec3;
 
 /// The ratio pages `r` (`x`, `y`, `z`) in the atlas from the light vector at the vertices of
@@ -33,35 +29,24 @@ use glam::DVec3;
 /// `stitch`), then [`ratios`]. The irradiance is the vertices' own, interpolated: where the
 /// lightmap takes a punctual light per texel (a shadow edge inside an element) the light
 /// vector stays interpolated, and so must the irradiance it is divided by.
-#[allow(clippy::too_many_arguments)]
 pub(crate) fn ratio_maps(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    mesh_of_polygon: &[usize],
+    r: &Raster,
     light: &[Vec<LightVector>],
     irradiance: &[Vec<DVec3>],
-    atlas: &Atlas,
-    supersample: u32,
-    stitch: bool,
 ) -> [Lightmap; 3] {
     // The locators find the triangle and weights; the values are interpolated per map.
     let axes: Vec<[Vec<DVec3>; 3]> = light
         .iter()
         .map(|l| [0, 1, 2].map(|axis| l.iter().map(|q| q[axis]).collect()))
         .collect();
-    let locators: Vec<Locator> = meshes
+    let locators: Vec<Locator> = r
+        .meshes
         .iter()
         .zip(irradiance)
         .map(|(m, h)| Locator::new(m, h))
         .collect();
     let mut maps = rasterize_many(
-        scene,
-        vis,
-        meshes,
-        mesh_of_polygon,
-        atlas,
-        supersample,
+        r,
         &|at, hint| match locators[at.mesh].locate_near(at.q, hint) {
             Some((t, l)) => {
                 let [x, y, z] = &axes[at.mesh];
@@ -71,7 +56,7 @@ pub(crate) fn ratio_maps(
         },
     );
     for map in &mut maps {
-        seams::stitch_seams(map, scene, vis, atlas, stitch);
+        r.stitch_seams(map);
     }
     let [x, y, z, h] = maps;
     ratios(&h, &[x, y, z])

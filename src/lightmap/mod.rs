@@ -283,47 +283,55 @@ pub(crate) fn interpolate(values: &[DVec3], t: [u32; 3], l: [f64; 3]) -> DVec3 {
 /// ray. The vertices hold a hard shadow's edge only where the discontinuity mesh has it, up to
 /// the snapping of its lines, and not through a cut-out's holes; per point, the edge is where
 /// the shadow ray says, as in a texel baker.
-#[allow(clippy::too_many_arguments)]
-pub(crate) fn rasterize(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    values: &[Vec<DVec3>],
-    shadows: &PunctualShadows,
-    mesh_of_polygon: &[usize],
-    atlas: &Atlas,
-    supersample: u32,
-) -> Lightmap {
+pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], shadows: &PunctualShadows) -> Lightmap {
+    let Raster {
+        scene, vis, meshes, ..
+    } = *r;
     let locators: Vec<Locator> = meshes
         .iter()
         .zip(values)
         .map(|(m, v)| Locator::new(m, v))
         .collect();
-    rasterize_with(
-        scene,
-        vis,
-        meshes,
-        mesh_of_polygon,
-        atlas,
-        supersample,
-        &|at, hint| {
-            let Some((t, l)) = locators[at.mesh].locate_near(at.q, hint) else {
-                return DVec3::ZERO;
-            };
-            let value = interpolate(&values[at.mesh], t, l);
-            if shadows.lights.is_empty() {
-                return value;
-            }
-            let poly = meshes[at.mesh].polygon;
-            let point = SurfacePoint::new(at.p, scene.polygons[poly].frame.n, poly, vis);
-            let exact: DVec3 = shadows
-                .lights
-                .iter()
-                .map(|&k| punctual_irradiance(&scene.lights[k], vis, &point).0)
-                .sum();
-            (value - interpolate(&shadows.punctual[at.mesh], t, l)).max(DVec3::ZERO) + exact
-        },
-    )
+    rasterize_with(r, &|at, hint| {
+        let Some((t, l)) = locators[at.mesh].locate_near(at.q, hint) else {
+            return DVec3::ZERO;
+        };
+        let value = interpolate(&values[at.mesh], t, l);
+        if shadows.lights.is_empty() {
+            return value;
+        }
+        let poly = meshes[at.mesh].polygon;
+        let point = SurfacePoint::new(at.p, scene.polygons[poly].frame.n, poly, vis);
+        let exact: DVec3 = shadows
+            .lights
+            .iter()
+            .map(|&k| punctual_irradiance(&scene.lights[k], vis, &point).0)
+            .sum();
+        (value - interpolate(&shadows.punctual[at.mesh], t, l)).max(DVec3::ZERO) + exact
+    })
+}
+
+/// What every rasterization of the atlas shares: the scene and its receiver meshes, the atlas,
+/// the sub-sampling, and whether the seams are stitched.
+#[derive(Clone, Copy)]
+pub(crate) struct Raster<'a> {
+    pub(crate) scene: &'a Scene,
+    pub(crate) vis: &'a Visibility,
+    pub(crate) meshes: &'a [ReceiverMesh],
+    /// `mesh_of_polygon[p]`: the index in `meshes` of polygon `p`'s mesh.
+    pub(crate) mesh_of_polygon: &'a [usize],
+    pub(crate) atlas: &'a Atlas,
+    /// Sub-samples per texel side (`n x n` per texel).
+    pub(crate) supersample: u32,
+    /// Stitch the seams between charts, or only measure them ([`seams::stitch_seams`]).
+    pub(crate) stitch: bool,
+}
+
+impl Raster<'_> {
+    /// [`seams::stitch_seams`] on `map`, a rasterization of this atlas.
+    pub(crate) fn stitch_seams(&self, map: &mut Lightmap) -> seams::SeamStats {
+        seams::stitch_seams(map, self.scene, self.vis, self.atlas, self.stitch)
+    }
 }
 
 /// A visible sub-sample of a texel, as [`rasterize_with`] asks for its value.
@@ -340,37 +348,28 @@ pub(crate) struct SubSample {
 /// hint that it may keep between calls: see [`Locator::value_near`]); a texel holds the mean
 /// over its visible sub-samples, and the rest is dilated.
 pub(crate) fn rasterize_with(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    mesh_of_polygon: &[usize],
-    atlas: &Atlas,
-    supersample: u32,
+    r: &Raster,
     value: &(dyn Fn(&SubSample, &mut Option<u32>) -> DVec3 + Sync),
 ) -> Lightmap {
-    let [map] = rasterize_many(
-        scene,
-        vis,
-        meshes,
-        mesh_of_polygon,
-        atlas,
-        supersample,
-        &|at, hint| [value(at, hint)],
-    );
+    let [map] = rasterize_many(r, &|at, hint| [value(at, hint)]);
     map
 }
 
 /// [`rasterize_with`] of `K` quantities at once: `value` gives all `K` at a visible sub-sample,
 /// and each goes into its own map (the sub-samples, buried tests and dilation shared).
 pub(crate) fn rasterize_many<const K: usize>(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    mesh_of_polygon: &[usize],
-    atlas: &Atlas,
-    supersample: u32,
+    r: &Raster,
     value: &(dyn Fn(&SubSample, &mut Option<u32>) -> [DVec3; K] + Sync),
 ) -> [Lightmap; K] {
+    let Raster {
+        scene,
+        vis,
+        meshes,
+        mesh_of_polygon,
+        atlas,
+        supersample,
+        ..
+    } = *r;
     // The pages are rasterized as one tall image, page p's rows at p x height.
     let (w, page_h) = (atlas.width as usize, atlas.height as usize);
     let h = page_h * atlas.pages.max(1) as usize;
@@ -466,48 +465,61 @@ pub(crate) fn rasterize_many<const K: usize>(
                 // a buried patch smaller than the texel may lie between the corners (a thin
                 // wall standing on the ground, a neighbour's wall a few centimetres away); a
                 // texel whose corners differ (a contact line crosses it) or that has geometry
-                // in front tests every sub-sample. `front_box`: the box over the texels
-                // `[xa, xb] x [y0, y1]` and one texel in front of them.
+                // in front tests every sub-sample. The texel grid maps affinely onto the
+                // triangle's plane: texel corner `(x, y)` is `o + x du + y dv`.
+                let o = world(DVec2::ZERO);
+                let (du, dv) = (world(DVec2::X) - o, world(DVec2::Y) - o);
+                let front = poly.frame.n * (du + dv).length();
+                // The box over the texels `[xa, xb] x [y0, y1]` and one texel (its diagonal)
+                // in front of them.
                 let front_box = |xa: usize, xb: usize, y0: usize, y1: usize| {
-                    let c = [(xa, y0), (xb, y0), (xa, y1), (xb, y1)]
-                        .map(|(cx, cy)| world(DVec2::new(cx as f64, cy as f64)));
-                    let side = c[0].distance(world(DVec2::new(xa as f64 + 1.0, y0 as f64 + 1.0)));
-                    let front = poly.frame.n * side;
-                    let (mut lo, mut hi) = (c[0], c[0]);
-                    for p in c {
+                    let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+                    for (x, y) in [(xa, y0), (xb, y0), (xa, y1), (xb, y1)] {
+                        let p = o + du * x as f64 + dv * y as f64;
                         lo = lo.min(p).min(p + front);
                         hi = hi.max(p).max(p + front);
                     }
                     (lo, hi)
                 };
-                // Other geometry near the triangle's texels (not its own polygon's); when it
-                // is a short list, each texel checks it, else it asks the BVH.
+                // Other polygons' triangles whose boxes meet `(lo, hi)`, from the BVH.
                 let polygon = meshes[t.mesh].polygon;
-                let others = |nearby: &mut Vec<usize>, (lo, hi): (DVec3, DVec3)| {
-                    nearby.clear();
-                    vis.triangles_overlapping(lo, hi, nearby);
-                    nearby.retain(|&k| scene.triangles[k].polygon != Some(polygon));
+                let others = |out: &mut Vec<usize>, (lo, hi): (DVec3, DVec3)| {
+                    out.clear();
+                    vis.triangles_overlapping(lo, hi, out);
+                    out.retain(|&k| scene.triangles[k].polygon != Some(polygon));
                 };
-                others(&mut nearby, front_box(x0, x1 + 1, ya, yb + 1));
                 let pad = vis.epsilon();
-                // A triangle meets the box only if its box and its plane do.
-                let meets = |k: usize, (lo, hi): (DVec3, DVec3)| {
+                let plane_meets = |k: usize, (lo, hi): (DVec3, DVec3)| {
                     let tri = &scene.triangles[k];
-                    let p = tri.p;
-                    let (a, b) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
                     let (centre, half) = ((lo + hi) * 0.5, (hi - lo) * 0.5 + pad);
-                    a.cmple(hi + pad).all()
-                        && b.cmpge(lo - pad).all()
-                        && tri.normal.dot(centre - p[0]).abs() <= half.dot(tri.normal.abs())
+                    tri.normal.dot(centre - tri.p[0]).abs() <= half.dot(tri.normal.abs())
                 };
-                let short = nearby.len() <= 32;
+                // A triangle meets a texel's box if its box and its plane do. Those near the
+                // whole triangle, when few, with their boxes, each texel checks; else each
+                // texel asks the BVH.
+                others(&mut nearby, front_box(x0, x1 + 1, ya, yb + 1));
+                let few: Option<Vec<(usize, DVec3, DVec3)>> = (nearby.len() <= 32).then(|| {
+                    nearby
+                        .iter()
+                        .map(|&k| {
+                            let p = scene.triangles[k].p;
+                            (k, p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
+                        })
+                        .collect()
+                });
                 let mut crowded = |x: usize, y: usize| {
                     let texel = front_box(x, x + 1, y, y + 1);
-                    if !short {
-                        others(&mut near, texel);
+                    match &few {
+                        Some(few) => few.iter().any(|&(k, a, b)| {
+                            a.cmple(texel.1 + pad).all()
+                                && b.cmpge(texel.0 - pad).all()
+                                && plane_meets(k, texel)
+                        }),
+                        None => {
+                            others(&mut near, texel);
+                            near.iter().any(|&k| plane_meets(k, texel))
+                        }
                     }
-                    let candidates = if short { &nearby } else { &near };
-                    candidates.iter().any(|&k| meets(k, texel))
                 };
                 let mut hint = None;
                 let same = crate::scene::tolerance::COINCIDENT * scene.extent();
