@@ -274,16 +274,16 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
     };
     let t = &mut stats.timings_s;
     let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
-        lightmap_stage(&raster, &solution.irradiance, &solution.shadows)
+        lightmap_stage(&raster, &solution.irradiance, &solution.texel_lights)
     });
     stats.seams = seams;
     let layers = stage(&mut t.lightmap, "light groups", progress, || {
         solution
             .layers
             .iter()
-            .zip(&solution.layer_shadows)
-            .map(|((name, values), shadows)| {
-                let (map, _) = lightmap_stage(&raster, values, shadows);
+            .zip(&solution.layer_texel_lights)
+            .map(|((name, values), texel_lights)| {
+                let (map, _) = lightmap_stage(&raster, values, texel_lights);
                 (name.clone(), map)
             })
             .collect()
@@ -498,9 +498,9 @@ fn mesh_and_solve(
 fn lightmap_stage(
     raster: &lightmap::Raster,
     irradiance: &[Vec<DVec3>],
-    shadows: &solve::direct::PunctualShadows,
+    texel_lights: &solve::texel_lights::TexelLights,
 ) -> (Lightmap, lightmap::seams::SeamStats) {
-    let mut map = lightmap::rasterize(raster, irradiance, shadows);
+    let mut map = lightmap::rasterize(raster, irradiance, texel_lights);
     let seams = raster.stitch_seams(&mut map);
     (map, seams)
 }

@@ -45,16 +45,15 @@ pub(crate) fn ratio_maps(
         .zip(irradiance)
         .map(|(m, h)| Locator::new(m, h))
         .collect();
-    let mut maps = rasterize_many(
-        r,
-        &|at, hint| match locators[at.mesh].locate_near(at.q, hint) {
-            Some((t, l)) => {
-                let [x, y, z] = &axes[at.mesh];
-                [x, y, z, &irradiance[at.mesh]].map(|v| interpolate(v, t, l))
-            }
-            None => [DVec3::ZERO; 4],
-        },
-    );
+    let mut maps = rasterize_many(r, &|at, hint| match locators[at.mesh]
+        .locate_near(at.q, &mut hint.triangle)
+    {
+        Some((t, l)) => {
+            let [x, y, z] = &axes[at.mesh];
+            [x, y, z, &irradiance[at.mesh]].map(|v| interpolate(v, t, l))
+        }
+        None => [DVec3::ZERO; 4],
+    });
     for map in &mut maps {
         r.stitch_seams(map);
     }

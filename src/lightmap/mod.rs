@@ -11,8 +11,8 @@ use crate::atlas::Atlas;
 use crate::geometry::{BoxGrid, barycentric_2d, triangle_bounds};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
-use crate::solve::direct::PunctualShadows;
-use crate::solve::{SurfacePoint, punctual_irradiance};
+use crate::solve::texel_lights::{FAR, TexelLights};
+use crate::solve::{SurfacePoint, evaluation_points, punctual_irradiance};
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -277,13 +277,12 @@ pub(crate) fn interpolate(values: &[DVec3], t: [u32; 3], l: [f64; 3]) -> DVec3 {
 /// that other geometry comes within a texel of (a wall thinner than a texel may stand between
 /// agreeing corners), tests each of its sub-samples.
 ///
-/// With `shadows` ([`PunctualShadows`]; without lights: none), every sub-sample takes those
-/// punctual lights per point instead of from the vertices: the interpolated value minus the
-/// vertices' punctual part, plus each punctual light's irradiance at the point with one shadow
-/// ray. The vertices hold a hard shadow's edge only where the discontinuity mesh has it, up to
-/// the snapping of its lines, and not through a cut-out's holes; per point, the edge is where
-/// the shadow ray says, as in a texel baker.
-pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], shadows: &PunctualShadows) -> Lightmap {
+/// With `lights` ([`TexelLights`]), every sub-sample takes those lights per point instead of
+/// from the vertices: the interpolated value minus the vertices' part of those lights, plus
+/// each punctual light's irradiance at the point with one shadow ray, and the area emitters'
+/// unoccluded irradiance at the point times their visible fraction interpolated from the
+/// vertices.
+pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], lights: &TexelLights) -> Lightmap {
     let Raster {
         scene, vis, meshes, ..
     } = *r;
@@ -292,22 +291,77 @@ pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], shadows: &PunctualSha
         .zip(values)
         .map(|(m, v)| Locator::new(m, v))
         .collect();
+    // Per mesh with area light near an emitter: which of its elements are near one
+    // (`AreaLights::near`), and the emitters' unoccluded irradiance at its vertices.
+    let area = lights.area_lights(scene);
+    let near: Vec<(Vec<bool>, Vec<DVec3>)> = match &area {
+        Some(area) => meshes
+            .par_iter()
+            .zip(&lights.area)
+            .map(|(m, d)| {
+                if d.iter().all(|d| *d == DVec3::ZERO) {
+                    return Default::default();
+                }
+                let frame = &scene.polygons[m.polygon].frame;
+                let near: Vec<bool> = m
+                    .triangles
+                    .iter()
+                    .map(|t| area.near(&t.map(|i| frame.world_from_plane(m.vertices[i as usize]))))
+                    .collect();
+                if !near.contains(&true) {
+                    return Default::default();
+                }
+                let u = evaluation_points(scene, vis, m)
+                    .iter()
+                    .map(|q| area.unoccluded(q.p, q.n))
+                    .collect();
+                (near, u)
+            })
+            .collect(),
+        None => Vec::new(),
+    };
     rasterize_with(r, &|at, hint| {
-        let Some((t, l)) = locators[at.mesh].locate_near(at.q, hint) else {
+        let Some((t, l)) = locators[at.mesh].locate_near(at.q, &mut hint.triangle) else {
             return DVec3::ZERO;
         };
-        let value = interpolate(&values[at.mesh], t, l);
-        if shadows.lights.is_empty() {
+        let mut value = interpolate(&values[at.mesh], t, l);
+        let poly = meshes[at.mesh].polygon;
+        let n = scene.polygons[poly].frame.n;
+        if let Some(area) = &area
+            && let Some((near, unoccluded)) = near.get(at.mesh)
+            && hint
+                .triangle
+                .is_some_and(|k| near.get(k as usize) == Some(&true))
+        {
+            let d = interpolate(&lights.area[at.mesh], t, l);
+            if d != DVec3::ZERO {
+                let u = interpolate(unoccluded, t, l);
+                let visible = DVec3::select(u.cmpgt(DVec3::ZERO), d / u, DVec3::ZERO);
+                // The unoccluded light once per texel, at its centre, where the texel is far from
+                // the emitters for its size; else per sub-sample.
+                let per_texel = match hint.texel {
+                    Some((c, e)) if c == at.centre => e,
+                    _ => {
+                        let e = (!area.within(at.centre, at.centre, at.size * FAR))
+                            .then(|| area.unoccluded(at.centre, n));
+                        hint.texel = Some((at.centre, e));
+                        e
+                    }
+                };
+                let exact = per_texel.unwrap_or_else(|| area.unoccluded(at.p, n));
+                value = (value - d).max(DVec3::ZERO) + exact * visible;
+            }
+        }
+        if lights.lights.is_empty() {
             return value;
         }
-        let poly = meshes[at.mesh].polygon;
-        let point = SurfacePoint::new(at.p, scene.polygons[poly].frame.n, poly, vis);
-        let exact: DVec3 = shadows
+        let point = SurfacePoint::new(at.p, n, poly, vis);
+        let exact: DVec3 = lights
             .lights
             .iter()
             .map(|&k| punctual_irradiance(&scene.lights[k], vis, &point).0)
             .sum();
-        (value - interpolate(&shadows.punctual[at.mesh], t, l)).max(DVec3::ZERO) + exact
+        (value - interpolate(&lights.punctual[at.mesh], t, l)).max(DVec3::ZERO) + exact
     })
 }
 
@@ -342,14 +396,30 @@ pub(crate) struct SubSample {
     pub q: DVec2,
     /// Its point in world space.
     pub p: DVec3,
+    /// The texel's centre on the triangle's plane, world space: the same for the sub-samples of
+    /// one texel on one triangle.
+    pub centre: DVec3,
+    /// The texel's size there: the sum of its two sides' lengths (scene units).
+    pub size: f64,
+}
+
+/// What a value function of [`rasterize_with`] keeps between calls: the sub-samples of a
+/// texel come one after the other, then those of the next texel.
+#[derive(Default)]
+pub(crate) struct Hint {
+    /// The mesh triangle that held the last point ([`Locator::value_near`]).
+    pub triangle: Option<u32>,
+    /// A value computed once per texel: the [`SubSample::centre`] it was computed at, and
+    /// the value (`None`: none for this texel).
+    pub texel: Option<(DVec3, Option<DVec3>)>,
 }
 
 /// [`rasterize`] of any quantity: `value` gives the value at a visible sub-sample (with a
-/// hint that it may keep between calls: see [`Locator::value_near`]); a texel holds the mean
-/// over its visible sub-samples, and the rest is dilated.
+/// [`Hint`] that it may keep between calls); a texel holds the mean over its visible
+/// sub-samples, and the rest is dilated.
 pub(crate) fn rasterize_with(
     r: &Raster,
-    value: &(dyn Fn(&SubSample, &mut Option<u32>) -> DVec3 + Sync),
+    value: &(dyn Fn(&SubSample, &mut Hint) -> DVec3 + Sync),
 ) -> Lightmap {
     let [map] = rasterize_many(r, &|at, hint| [value(at, hint)]);
     map
@@ -359,7 +429,7 @@ pub(crate) fn rasterize_with(
 /// and each goes into its own map (the sub-samples, buried tests and dilation shared).
 pub(crate) fn rasterize_many<const K: usize>(
     r: &Raster,
-    value: &(dyn Fn(&SubSample, &mut Option<u32>) -> [DVec3; K] + Sync),
+    value: &(dyn Fn(&SubSample, &mut Hint) -> [DVec3; K] + Sync),
 ) -> [Lightmap; K] {
     let Raster {
         scene,
@@ -470,6 +540,7 @@ pub(crate) fn rasterize_many<const K: usize>(
                 let o = world(DVec2::ZERO);
                 let (du, dv) = (world(DVec2::X) - o, world(DVec2::Y) - o);
                 let front = poly.frame.n * (du + dv).length();
+                let size = du.length() + dv.length();
                 // The box over the texels `[xa, xb] x [y0, y1]` and one texel (its diagonal)
                 // in front of them.
                 let front_box = |xa: usize, xb: usize, y0: usize, y1: usize| {
@@ -521,7 +592,7 @@ pub(crate) fn rasterize_many<const K: usize>(
                         }
                     }
                 };
-                let mut hint = None;
+                let mut hint = Hint::default();
                 let same = crate::scene::tolerance::COINCIDENT * scene.extent();
                 let mut corner_buried = |cx: usize, cy: usize| {
                     let p = world(DVec2::new(cx as f64, cy as f64));
@@ -538,6 +609,7 @@ pub(crate) fn rasterize_many<const K: usize>(
                 for y in ya..=yb {
                     for x in x0..=x1 {
                         let idx = (y - y_lo) * w + x;
+                        let centre = world(DVec2::new(x as f64 + 0.5, y as f64 + 0.5));
                         let mut corners: Option<[bool; 4]> = None;
                         let mut crowd: Option<bool> = None;
                         for s in 0..n * n {
@@ -573,6 +645,8 @@ pub(crate) fn rasterize_many<const K: usize>(
                                 mesh: t.mesh,
                                 q: poly.frame.plane_from_world(p),
                                 p,
+                                centre,
+                                size,
                             };
                             for (s, v) in sum[idx].iter_mut().zip(value(&at, &mut hint)) {
                                 *s += v;

@@ -10,9 +10,10 @@
 //! Irradiance in W/m² per linear RGB channel.
 
 use super::lightcuts::LightTree;
-pub use super::punctual::{PunctualShadows, punctual_irradiance};
+pub use super::punctual::punctual_irradiance;
 use super::punctual::{punctual_over_fans, towards};
 use super::sky::Sky;
+use super::texel_lights::TexelLights;
 use super::{DirectMethod, SolveOptions, evaluation_points};
 use crate::light::{AreaEmitter, LightVector, SurfacePoint, add_light, slant};
 use crate::mesh::ReceiverMesh;
@@ -220,7 +221,7 @@ impl<'a> Direct<'a> {
     /// Irradiance H (W/m²) at a receiving point.
     pub fn irradiance(&self, at: &SurfacePoint) -> DVec3 {
         match self.method {
-            DirectMethod::Sampled => self.irradiance_sampled(at, true, None),
+            DirectMethod::Sampled => self.irradiance_sampled(at, true, None).0,
             DirectMethod::Exact => self.irradiance_points(std::slice::from_ref(at))[0],
         }
     }
@@ -230,24 +231,24 @@ impl<'a> Direct<'a> {
     /// neighbouring points. The result of each point does not depend on the others, up to
     /// rounding in rare near-degenerate cases; it is deterministic for given `points`.
     pub fn irradiance_points(&self, points: &[SurfacePoint]) -> Vec<DVec3> {
-        self.evaluate(points, true, None)
+        self.evaluate(points, true, None).0
     }
 
     /// Irradiance H (W/m²) at the vertices of `mesh`, evaluated at `points` (one per vertex,
     /// [`evaluation_points`]): area emitters and the sky at the points, as
     /// [`Direct::irradiance_points`]; punctual lights unoccluded at the points times their
     /// visibility averaged over each vertex's fan ([`punctual_over_fans`]). Also the punctual
-    /// lights' part of it (empty without punctual lights), which the lightmap takes per
-    /// sub-sample ([`PunctualShadows`]).
+    /// lights' part of it (empty without punctual lights) and the area emitters' part, which
+    /// the lightmap takes per sub-sample ([`TexelLights`]): `(all, punctual, area)`.
     pub(crate) fn irradiance_vertices(
         &self,
         mesh: &ReceiverMesh,
         points: &[SurfacePoint],
         mut light: Option<&mut [LightVector]>,
-    ) -> (Vec<DVec3>, Vec<DVec3>) {
-        let mut h = self.evaluate(points, false, light.as_deref_mut());
+    ) -> (Vec<DVec3>, Vec<DVec3>, Vec<DVec3>) {
+        let (mut h, area) = self.evaluate(points, false, light.as_deref_mut());
         if self.lights.is_empty() {
-            return (h, Vec::new());
+            return (h, Vec::new(), area);
         }
         let before = h.clone();
         let rays = punctual_over_fans(
@@ -261,10 +262,11 @@ impl<'a> Direct<'a> {
         );
         self.rays.fetch_add(rays, Ordering::Relaxed);
         let punctual = h.iter().zip(&before).map(|(a, b)| *a - *b).collect();
-        (h, punctual)
+        (h, punctual, area)
     }
 
-    /// [`Direct::irradiance_points`], with the punctual lights at the points or left out; with
+    /// [`Direct::irradiance_points`], with the punctual lights at the points or left out, and
+    /// the area emitters' part of it; with
     /// `light`, each point's light vector ([`LightVector`]) is added to it: an area emitter's
     /// light takes the slant of its unoccluded part above the horizon
     /// ([`EmitterShape::slant`]), a punctual light's and a sky ray's their direction.
@@ -273,7 +275,7 @@ impl<'a> Direct<'a> {
         points: &[SurfacePoint],
         punctual: bool,
         mut light: Option<&mut [LightVector]>,
-    ) -> Vec<DVec3> {
+    ) -> (Vec<DVec3>, Vec<DVec3>) {
         if self.method == DirectMethod::Sampled {
             return points
                 .iter()
@@ -282,7 +284,7 @@ impl<'a> Direct<'a> {
                     let q = light.as_deref_mut().map(|l| &mut l[i]);
                     self.irradiance_sampled(p, punctual, q)
                 })
-                .collect();
+                .unzip();
         }
         let mut h = vec![DVec3::ZERO; points.len()];
         let mut tally = Tally::default();
@@ -374,6 +376,7 @@ impl<'a> Direct<'a> {
             c.nanos
                 .fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
         }
+        let area = h.clone();
         for (i, (pt, h)) in points.iter().zip(&mut h).enumerate() {
             if !punctual {
                 break;
@@ -402,7 +405,7 @@ impl<'a> Direct<'a> {
             .fetch_max(tally.occluders_max, Ordering::Relaxed);
         self.pieces_max
             .fetch_max(tally.pieces_max, Ordering::Relaxed);
-        h
+        (h, area)
     }
 
     /// Exact light of one emitter at the points of cluster `node` that see it: culls
@@ -580,7 +583,7 @@ impl<'a> Direct<'a> {
         at: &SurfacePoint,
         punctual: bool,
         mut light: Option<&mut LightVector>,
-    ) -> DVec3 {
+    ) -> (DVec3, DVec3) {
         let mut h = DVec3::ZERO;
         let mut rays = 0u64;
         let (p, n) = (at.p, at.n);
@@ -610,6 +613,7 @@ impl<'a> Direct<'a> {
                 add_light(light, e.radiance * (visible * (PI * f)), u);
             }
         }
+        let area = h;
         for l in self.lights.iter().map(|&l| &self.scene.lights[l]) {
             if !punctual {
                 break;
@@ -631,7 +635,7 @@ impl<'a> Direct<'a> {
         }
         self.evaluations.fetch_add(evaluations, Ordering::Relaxed);
         self.rays.fetch_add(rays, Ordering::Relaxed);
-        h
+        (h, area)
     }
 
     /// The counters so far (all calls since [`Direct::new`]); `seconds` is left at 0.
@@ -816,7 +820,8 @@ pub fn direct_light(
     direct_light_shadows(scene, vis, direct, meshes, false, progress).0
 }
 
-/// [`direct_light`], and its punctual lights' [`PunctualShadows`]; with `directional`, the light vector
+/// [`direct_light`], and the part of it the lightmap takes per sub-sample ([`TexelLights`]);
+/// with `directional`, the light vector
 /// at every vertex too ([`LightVector`]; empty without).
 pub(crate) fn direct_light_shadows(
     scene: &Scene,
@@ -825,34 +830,46 @@ pub(crate) fn direct_light_shadows(
     meshes: &[ReceiverMesh],
     directional: bool,
     progress: &crate::progress::Progress<'_>,
-) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>, PunctualShadows) {
+) -> (Vec<Vec<DVec3>>, Vec<Vec<LightVector>>, TexelLights) {
     let total_vertices: u64 = meshes.iter().map(|m| m.vertices.len() as u64).sum();
     let done = AtomicU64::new(0);
-    let per_mesh: Vec<(Vec<DVec3>, Vec<LightVector>, Vec<DVec3>)> = meshes
+    // Per mesh: all the direct light, its light vectors, the punctual and the area part.
+    type PerMesh = (Vec<DVec3>, Vec<LightVector>, Vec<DVec3>, Vec<DVec3>);
+    let per_mesh: Vec<PerMesh> = meshes
         .par_iter()
         .map(|m| {
             let pts = evaluation_points(scene, vis, m);
             let mut light = vec![LightVector::default(); if directional { pts.len() } else { 0 }];
-            let (out, shadows) =
+            let (out, punctual, area) =
                 direct.irradiance_vertices(m, &pts, directional.then_some(&mut light[..]));
             let d = done.fetch_add(m.vertices.len() as u64, Ordering::Relaxed);
             progress("direct light", d + m.vertices.len() as u64, total_vertices);
-            (out, light, shadows)
+            (out, light, punctual, area)
         })
         .collect();
-    let (mut h, mut light, mut punctual) = (Vec::new(), Vec::new(), Vec::new());
-    for (a, b, c) in per_mesh {
+    let (mut h, mut light) = (Vec::new(), Vec::new());
+    let (mut punctual, mut area) = (Vec::new(), Vec::new());
+    for (a, b, c, d) in per_mesh {
         h.push(a);
         light.push(b);
         punctual.push(c);
+        area.push(d);
     }
-    let shadows = if direct.lights.is_empty() {
-        PunctualShadows::default()
-    } else {
-        PunctualShadows {
-            lights: direct.lights.clone(),
-            punctual,
-        }
-    };
-    (h, if directional { light } else { Vec::new() }, shadows)
+    let mut texel_lights = TexelLights::default();
+    if !direct.lights.is_empty() {
+        texel_lights.lights = direct.lights.clone();
+        texel_lights.punctual = punctual;
+    }
+    if !direct.emitters.is_empty() {
+        texel_lights.emitters = direct.emitters.iter().map(|e| e.polygon).collect();
+        texel_lights.emitters.sort_unstable();
+        texel_lights.area = area;
+        texel_lights.light_error =
+            (direct.method == DirectMethod::Exact).then_some(direct.light_error);
+    }
+    (
+        h,
+        if directional { light } else { Vec::new() },
+        texel_lights,
+    )
 }

@@ -307,10 +307,73 @@ impl LightTree {
         epsilon: f64,
     ) -> Cut {
         let mut out = Cut::default();
+        let p = at.p;
+        let done = self.traverse(at.p, at.n, epsilon, &mut out.exact);
+        for e in done {
+            let node = &self.nodes[e.node as usize];
+            if e.estimate <= 0.0 {
+                continue;
+            }
+            out.bounded_nodes += 1;
+            out.rays += 1;
+            let target = emitters[node.emitter as usize].center;
+            if !vis.occluded(at.ray_origin, target) {
+                let h = node.power * (e.estimate / node.scalar);
+                out.bounded += h;
+                let u = crate::light::slant((target - p).normalize_or_zero(), at.n);
+                crate::light::add_light(&mut out.bounded_light, h, u);
+            }
+        }
+        out.exact.sort_unstable();
+        out
+    }
+
+    /// The unoccluded irradiance at `(p, n)` (W/m² per channel) as [`LightTree::cut`] divides
+    /// it: the exact form factor of each emitter it evaluates, each bounded node's estimate.
+    /// Where nothing occludes, the same as the cut's total with its exact evaluations.
+    pub fn unoccluded(&self, emitters: &[AreaEmitter], p: DVec3, n: DVec3, epsilon: f64) -> DVec3 {
+        let mut exact = Vec::new();
+        let done = self.traverse(p, n, epsilon, &mut exact);
+        exact.sort_unstable();
+        let mut h: DVec3 = exact
+            .iter()
+            .map(|&e| {
+                let e = &emitters[e as usize];
+                e.radiance * (std::f64::consts::PI * e.form_factor(p, n))
+            })
+            .sum();
+        for e in done.iter().filter(|e| e.estimate > 0.0) {
+            let node = &self.nodes[e.node as usize];
+            h += node.power * (e.estimate / node.scalar);
+        }
+        h
+    }
+
+    /// Whether any emitter's box (of its hull) meets the box `[lo, hi]`.
+    pub fn any_in_box(&self, lo: DVec3, hi: DVec3) -> bool {
         let Some(root) = self.nodes.len().checked_sub(1) else {
-            return out;
+            return false;
         };
-        let (p, n) = (at.p, at.n);
+        let mut stack = vec![root as u32];
+        while let Some(i) = stack.pop() {
+            let node = &self.nodes[i as usize];
+            if node.min.cmpgt(hi).any() || node.max.cmplt(lo).any() {
+                continue;
+            }
+            match node.kids {
+                Some(kids) => stack.extend(kids),
+                None => return true,
+            }
+        }
+        false
+    }
+
+    /// Refines the cut from the root (see the module doc): the single emitters to evaluate
+    /// exactly go into `exact`; returns the bounded nodes.
+    fn traverse(&self, p: DVec3, n: DVec3, epsilon: f64, exact: &mut Vec<u32>) -> Vec<Entry> {
+        let Some(root) = self.nodes.len().checked_sub(1) else {
+            return Vec::new();
+        };
         let mut heap = BinaryHeap::new();
         let (bound, estimate) = self.bound_and_estimate(root as u32, p, n);
         let mut total = estimate;
@@ -341,26 +404,10 @@ impl LightTree {
                         }
                     }
                 }
-                None => out.exact.push(self.nodes[top.node as usize].emitter),
+                None => exact.push(self.nodes[top.node as usize].emitter),
             }
         }
-        for e in done {
-            let node = &self.nodes[e.node as usize];
-            if e.estimate <= 0.0 {
-                continue;
-            }
-            out.bounded_nodes += 1;
-            out.rays += 1;
-            let target = emitters[node.emitter as usize].center;
-            if !vis.occluded(at.ray_origin, target) {
-                let h = node.power * (e.estimate / node.scalar);
-                out.bounded += h;
-                let u = crate::light::slant((target - p).normalize_or_zero(), n);
-                crate::light::add_light(&mut out.bounded_light, h, u);
-            }
-        }
-        out.exact.sort_unstable();
-        out
+        done
     }
 }
 

@@ -53,6 +53,7 @@ pub mod progressive;
 pub mod punctual;
 pub(crate) mod reflected;
 pub mod sky;
+pub mod texel_lights;
 
 pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
 pub use form_factors::{FormFactors, point_patch_form_factor};
@@ -209,11 +210,11 @@ pub struct Solution {
     /// With [`SolveOptions::directional`], the light vector ([`LightVector`]) of `irradiance`
     /// at every vertex, same layout; empty without.
     pub light: Vec<Vec<LightVector>>,
-    /// The punctual lights in `irradiance`'s direct light and their part of it
-    /// ([`direct::PunctualShadows`]), which the lightmap takes per sub-sample.
-    pub shadows: direct::PunctualShadows,
+    /// The lights in `irradiance`'s direct light that the lightmap takes per sub-sample, and
+    /// their part of it ([`texel_lights::TexelLights`]).
+    pub texel_lights: texel_lights::TexelLights,
     /// The same for each of `layers`.
-    pub layer_shadows: Vec<direct::PunctualShadows>,
+    pub layer_texel_lights: Vec<texel_lights::TexelLights>,
     pub stats: SolveStats,
 }
 
@@ -395,10 +396,10 @@ pub fn radiosity(
         _ if options.directional => sum_of(parts.iter().map(|(_, _, l, _)| l), meshes),
         _ => Vec::new(),
     };
-    // The punctual lights whose direct light each lightmap holds: all but the `indirect` ones,
-    // the main lightmap's and each group's layer's.
-    let shadows_of = |keep: &dyn Fn(&LightRule) -> bool| {
-        let mut out = direct::PunctualShadows::default();
+    // The lights whose direct light each lightmap holds: all but the `indirect` ones, the main
+    // lightmap's and each group's layer's.
+    let texel_lights_of = |keep: &dyn Fn(&LightRule) -> bool| {
+        let mut out = texel_lights::TexelLights::default();
         for (_, _, _, s) in parts
             .iter()
             .filter(|(r, ..)| r.bake == BakeMode::All && keep(r))
@@ -407,11 +408,11 @@ pub fn radiosity(
         }
         out
     };
-    let shadows = shadows_of(&|_| true);
+    let texel_lights = texel_lights_of(&|_| true);
     let groups = scene.mixed.groups();
-    let layer_shadows = groups
+    let layer_texel_lights = groups
         .iter()
-        .map(|g| shadows_of(&|r| r.group.as_ref() == Some(g)))
+        .map(|g| texel_lights_of(&|r| r.group.as_ref() == Some(g)))
         .collect();
     let layers_direct: Vec<Vec<Vec<DVec3>>> = groups
         .iter()
@@ -492,19 +493,20 @@ pub fn radiosity(
         direct: direct_h,
         layers: groups.into_iter().zip(layers).collect(),
         light,
-        shadows,
-        layer_shadows,
+        texel_lights,
+        layer_texel_lights,
         stats,
     }
 }
 
 /// The direct light of a set of lights that share a rule: the rule, the irradiance at the
-/// vertices, and their light vectors (empty without [`SolveOptions::directional`]).
+/// vertices, their light vectors (empty without [`SolveOptions::directional`]), and the part
+/// the lightmap takes per sub-sample.
 type DirectPart = (
     LightRule,
     Vec<Vec<DVec3>>,
     Vec<Vec<LightVector>>,
-    direct::PunctualShadows,
+    texel_lights::TexelLights,
 );
 
 /// The direct light at the vertices of each set of lights that share a rule

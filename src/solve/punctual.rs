@@ -9,41 +9,6 @@ use crate::scene::{LightKind, PunctualLight, Scene};
 use crate::visibility::Visibility;
 use glam::DVec3;
 
-/// The punctual lights that a lightmap takes per sub-sample, and their part of the direct
-/// light at the vertices. The lightmap takes that part out of the interpolated value and puts
-/// each light's exact irradiance at every sub-sample in its place
-/// ([`crate::lightmap::rasterize`]), as a texel baker does: the vertices hold a shadow edge
-/// only where the discontinuity mesh has it, up to the snapping of its lines, and not through
-/// a cut-out's holes. Empty (no lights) for a scene without punctual lights.
-#[derive(Clone, Debug, Default)]
-pub struct PunctualShadows {
-    /// Indices into [`Scene::lights`].
-    pub lights: Vec<usize>,
-    /// Per mesh and vertex: these lights' part of the direct irradiance (W/m²).
-    pub punctual: Vec<Vec<DVec3>>,
-}
-
-impl PunctualShadows {
-    /// `self` and `other` together: the lights of both, their parts summed.
-    pub(crate) fn add(&mut self, other: &PunctualShadows) {
-        if other.lights.is_empty() {
-            return;
-        }
-        if self.lights.is_empty() {
-            *self = other.clone();
-            return;
-        }
-        self.lights.extend(&other.lights);
-        self.lights.sort_unstable();
-        self.lights.dedup();
-        for (mine, theirs) in self.punctual.iter_mut().zip(&other.punctual) {
-            for (a, b) in mine.iter_mut().zip(theirs) {
-                *a += *b;
-            }
-        }
-    }
-}
-
 /// Irradiance from one punctual light at a receiving point, and the rays it cast: the
 /// unoccluded irradiance of [`punctual_unoccluded`] if one shadow ray towards the light is free.
 pub fn punctual_irradiance(

@@ -701,7 +701,7 @@ fn past_the_slats(p: DVec3) -> bool {
 
 /// Bakes `glb` to a file (2 threads) and reads it back: the reference's layout of its texels
 /// (each texel's visible sub-samples) and the irradiance of each texel of its lightmap.
-fn baked_texels(
+pub(crate) fn baked_texels(
     glb: &[u8],
     name: &str,
     options: &penumbra::BakeOptions,
