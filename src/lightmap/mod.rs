@@ -11,8 +11,8 @@ use crate::atlas::Atlas;
 use crate::geometry::{BoxGrid, barycentric_2d, triangle_bounds};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
-use crate::solve::texel_lights::{FAR, TexelLights};
-use crate::solve::{SurfacePoint, evaluation_points, punctual_irradiance};
+use crate::solve::texel_lights::{FAR_TEXEL, TexelLights};
+use crate::solve::{SurfacePoint, punctual_irradiance};
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
 use rayon::prelude::*;
@@ -291,31 +291,22 @@ pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], lights: &TexelLights)
         .zip(values)
         .map(|(m, v)| Locator::new(m, v))
         .collect();
-    // Per mesh with area light near an emitter: which of its elements are near one
-    // (`AreaLights::near`), and the emitters' unoccluded irradiance at its vertices.
+    // Per mesh with area light near an emitter (`TexelLights::unoccluded`): which of its
+    // elements are near one (`AreaLights::near`).
     let area = lights.area_lights(scene);
-    let near: Vec<(Vec<bool>, Vec<DVec3>)> = match &area {
+    let near: Vec<Vec<bool>> = match &area {
         Some(area) => meshes
             .par_iter()
-            .zip(&lights.area)
-            .map(|(m, d)| {
-                if d.iter().all(|d| *d == DVec3::ZERO) {
-                    return Default::default();
+            .zip(&lights.unoccluded)
+            .map(|(m, u)| {
+                if u.is_empty() {
+                    return Vec::new();
                 }
                 let frame = &scene.polygons[m.polygon].frame;
-                let near: Vec<bool> = m
-                    .triangles
+                m.triangles
                     .iter()
                     .map(|t| area.near(&t.map(|i| frame.world_from_plane(m.vertices[i as usize]))))
-                    .collect();
-                if !near.contains(&true) {
-                    return Default::default();
-                }
-                let u = evaluation_points(scene, vis, m)
-                    .iter()
-                    .map(|q| area.unoccluded(q.p, q.n))
-                    .collect();
-                (near, u)
+                    .collect()
             })
             .collect(),
         None => Vec::new(),
@@ -328,21 +319,21 @@ pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], lights: &TexelLights)
         let poly = meshes[at.mesh].polygon;
         let n = scene.polygons[poly].frame.n;
         if let Some(area) = &area
-            && let Some((near, unoccluded)) = near.get(at.mesh)
+            && let Some(near) = near.get(at.mesh)
             && hint
                 .triangle
                 .is_some_and(|k| near.get(k as usize) == Some(&true))
         {
             let d = interpolate(&lights.area[at.mesh], t, l);
             if d != DVec3::ZERO {
-                let u = interpolate(unoccluded, t, l);
+                let u = interpolate(&lights.unoccluded[at.mesh], t, l);
                 let visible = DVec3::select(u.cmpgt(DVec3::ZERO), d / u, DVec3::ZERO);
                 // The unoccluded light once per texel, at its centre, where the texel is far from
                 // the emitters for its size; else per sub-sample.
                 let per_texel = match hint.texel {
                     Some((c, e)) if c == at.centre => e,
                     _ => {
-                        let e = (!area.within(at.centre, at.centre, at.size * FAR))
+                        let e = (!area.within(at.centre, at.centre, at.size * FAR_TEXEL))
                             .then(|| area.unoccluded(at.centre, n));
                         hint.texel = Some((at.centre, e));
                         e

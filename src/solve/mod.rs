@@ -365,7 +365,7 @@ pub fn radiosity(
     // one rule ([`crate::scene::mixed`]) on its own.
     let start = Instant::now();
     let parts = if scene.mixed.is_plain() {
-        let (direct_h, light, shadows) = direct::direct_light_shadows(
+        let (mut direct_h, mut light, mut shadows) = direct::direct_light_shadows(
             scene,
             vis,
             &direct,
@@ -373,6 +373,7 @@ pub fn radiosity(
             options.directional,
             progress,
         );
+        shadows.conserve(scene, vis, meshes, &mut direct_h, &mut light);
         stats.direct = direct.stats();
         vec![(LightRule::default(), direct_h, light, shadows)]
     } else {
@@ -545,7 +546,7 @@ fn direct_by_rule(
                 |l| mixed.light(l) == rule,
                 rule == LightRule::default(),
             );
-            let (d, l, shadows) = direct::direct_light_shadows(
+            let (mut d, mut l, mut shadows) = direct::direct_light_shadows(
                 scene,
                 vis,
                 &direct,
@@ -553,6 +554,7 @@ fn direct_by_rule(
                 options.directional,
                 progress,
             );
+            shadows.conserve(scene, vis, meshes, &mut d, &mut l);
             let s = direct.stats();
             stats.direct.evaluations += s.evaluations;
             stats.direct.fallbacks += s.fallbacks;

@@ -18,16 +18,24 @@
 //!
 //! `U` per point is the light tree's cut without its shadow rays ([`LightTree::unoccluded`]):
 //! the same emitters exactly, the same bounded nodes by their estimates, as the vertices' `D`.
+//! The vertices' values are scaled so that the light they give the solve is the light that
+//! falls ([`TexelLights::conserve`]): a linear element over a convex falloff holds more light
+//! than falls on it, and the solve would bounce it.
+//!
 //! An element farther than [`FAR`] of its diameters from every emitter keeps the interpolated
-//! light: there the chord of `1/d²` errs by at most `0.75 (h/d)²`, under 1%. By the same rule
-//! a texel farther than [`FAR`] of its diagonals takes `U` once, at its centre, for all its
-//! sub-samples; a nearer one per sub-sample.
+//! light: there the chord of `1/d²` errs by at most `0.75 (h/d)²`, under 1%. A texel farther
+//! than [`FAR_TEXEL`] of its sizes takes `U` once, at its centre, for all its sub-samples; a
+//! nearer one per sub-sample.
 //! Irradiance in W/m² per linear RGB channel.
 
+use super::evaluation_points;
 use super::lightcuts::LightTree;
 use crate::light::AreaEmitter;
+use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
+use crate::visibility::Visibility;
 use glam::DVec3;
+use rayon::prelude::*;
 use std::f64::consts::PI;
 
 /// Elements farther than this many of their diameters (longest edges) from every emitter's
@@ -35,6 +43,12 @@ use std::f64::consts::PI;
 /// across an element of diameter `h` at distance `d` errs by at most `h² / 8 · 6 / d⁴`, a
 /// fraction `0.75 (h/d)²` of the light, 0.75% here (dimensionless).
 pub(crate) const FAR: f64 = 10.0;
+
+/// Texels farther than this many of their sizes (the sum of their sides) from every emitter's
+/// box take the unoccluded light at their centre for all their sub-samples: the centre of a
+/// texel of size `t` misses the mean of `1/d²` over it by about `(t/d)² / 4`, 1% here
+/// (dimensionless).
+pub(crate) const FAR_TEXEL: f64 = 5.0;
 
 /// The lights that a lightmap takes per sub-sample, and their part of the direct light at the
 /// vertices, which the lightmap takes out of the interpolated value (see the module doc).
@@ -49,6 +63,9 @@ pub struct TexelLights {
     pub emitters: Vec<usize>,
     /// Per mesh and vertex: these emitters' part of the direct irradiance (W/m², occluded).
     pub area: Vec<Vec<DVec3>>,
+    /// Per mesh and vertex: these emitters' unoccluded irradiance (W/m²), scaled as `area` by
+    /// [`TexelLights::conserve`]; empty for a mesh with no element near an emitter.
+    pub unoccluded: Vec<Vec<DVec3>>,
     /// How the vertices' `area` part divided the emitters: the light tree's cut with this
     /// [`super::SolveOptions::light_error`] (the exact method), or every emitter on its own
     /// (`None`: the sampled method).
@@ -66,7 +83,68 @@ impl TexelLights {
             (&mut self.emitters, &mut self.area),
             (&other.emitters, &other.area),
         );
+        // Per mesh, empty where no element is near an emitter: the sum of those there are.
+        self.unoccluded
+            .resize_with(self.unoccluded.len().max(other.unoccluded.len()), Vec::new);
+        for (a, b) in self.unoccluded.iter_mut().zip(&other.unoccluded) {
+            if a.is_empty() {
+                a.clone_from(b);
+            } else if !b.is_empty() {
+                for (a, b) in a.iter_mut().zip(b) {
+                    *a += *b;
+                }
+            }
+        }
         self.light_error = self.light_error.or(other.light_error);
+    }
+
+    /// Scales the area part at the vertices, and `all` (the whole direct light at the vertices,
+    /// per mesh, which holds it) with it, so that what the elements hold by linear
+    /// interpolation is the unoccluded light that falls on them, times their visible fraction:
+    /// vertex `v` is scaled by `∫ φ_v U / (U_v ∫ φ_v)` over its fan (`φ_v` its hat function,
+    /// `U` the unoccluded light), so that its unoccluded value becomes the mean of `U` over its
+    /// fan weighted by `φ_v` (the lumped L² projection of `U`, whose interpolation holds `∫ U`). Only vertices whose whole fan lies within [`FAR`]
+    /// of its elements' diameters of an emitter are scaled (elsewhere the scale is 1 within
+    /// 1%). Fills [`TexelLights::unoccluded`] with `U` at the vertices, scaled the same way.
+    /// The light vectors `light` (per mesh and vertex; empty without) are scaled with `all`,
+    /// so that their ratio to the irradiance, the direction, stays as evaluated.
+    ///
+    /// The numerator is integrated over each element by a three-point rule (exact for
+    /// quadratics) on pieces split in four while within [`SPLIT`] of their diameter of an
+    /// emitter, at most [`DEPTH`] times; the denominator exactly.
+    pub(crate) fn conserve(
+        &mut self,
+        scene: &Scene,
+        vis: &Visibility,
+        meshes: &[ReceiverMesh],
+        all: &mut [Vec<DVec3>],
+        light: &mut [Vec<crate::light::LightVector>],
+    ) {
+        let Some(lights) = self.area_lights(scene) else {
+            return;
+        };
+        let scaled: Vec<(Vec<DVec3>, Vec<DVec3>)> = meshes
+            .par_iter()
+            .zip(&self.area)
+            .map(|(m, d)| conserve_mesh(&lights, scene, vis, m, d))
+            .collect();
+        self.unoccluded = Vec::with_capacity(meshes.len());
+        for (m, (u, scale)) in scaled.into_iter().enumerate() {
+            for (v, s) in scale.iter().enumerate() {
+                let (a, h) = (&mut self.area[m][v], &mut all[m][v]);
+                let before = (*a, *h);
+                *a *= *s;
+                *h += *a - before.0;
+                if let Some(l) = light.get_mut(m).and_then(|l| l.get_mut(v)) {
+                    for (c, l) in l.iter_mut().enumerate() {
+                        if before.1[c] > 0.0 {
+                            *l *= h[c] / before.1[c];
+                        }
+                    }
+                }
+            }
+            self.unoccluded.push(u);
+        }
     }
 
     /// The area emitters, ready for [`AreaLights::unoccluded`]; `None` without any.
@@ -84,6 +162,130 @@ impl TexelLights {
             tree,
             light_error: self.light_error,
         })
+    }
+}
+
+/// Most times [`TexelLights::conserve`] splits an element in four to integrate the unoccluded
+/// light over it (64 pieces).
+const DEPTH: usize = 3;
+
+/// [`TexelLights::conserve`] splits a piece of an element while an emitter's box is within
+/// this many of its diameters: the three-point rule is exact for quadratics, and its error on
+/// `1/d²` over a piece of diameter `h` is of the order of `(h/d)³`, a few percent of the
+/// piece's light at most, on the pieces nearest the emitter only (dimensionless).
+const SPLIT: f64 = 4.0;
+
+/// [`TexelLights::conserve`] of one mesh with area light `area` at its vertices: `U` at the
+/// vertices, scaled, and the scale of each vertex (both empty where nothing is near an
+/// emitter).
+fn conserve_mesh(
+    lights: &AreaLights,
+    scene: &Scene,
+    vis: &Visibility,
+    m: &ReceiverMesh,
+    area: &[DVec3],
+) -> (Vec<DVec3>, Vec<DVec3>) {
+    if area.iter().all(|d| *d == DVec3::ZERO) {
+        return Default::default();
+    }
+    let frame = &scene.polygons[m.polygon].frame;
+    let corners = |t: &[u32; 3]| t.map(|i| frame.world_from_plane(m.vertices[i as usize]));
+    let near: Vec<bool> = m
+        .triangles
+        .iter()
+        .map(|t| lights.near(&corners(t)))
+        .collect();
+    if !near.contains(&true) {
+        return Default::default();
+    }
+    let u: Vec<DVec3> = evaluation_points(scene, vis, m)
+        .iter()
+        .map(|q| lights.unoccluded(q.p, q.n))
+        .collect();
+    // The vertices whose whole fan is near.
+    let mut whole = vec![false; m.vertices.len()];
+    for t in &m.triangles {
+        for &v in t {
+            whole[v as usize] = true;
+        }
+    }
+    for (t, &near) in m.triangles.iter().zip(&near) {
+        if !near {
+            for &v in t {
+                whole[v as usize] = false;
+            }
+        }
+    }
+    let (mut num, mut den) = (vec![DVec3::ZERO; u.len()], vec![DVec3::ZERO; u.len()]);
+    for (t, _) in m.triangles.iter().zip(&near).filter(|(_, near)| **near) {
+        if !t.iter().any(|&v| whole[v as usize]) {
+            continue;
+        }
+        // ∫ φ_v = A / 3 over each element of the fan.
+        let a = m.triangle_area(t);
+        for &v in t {
+            den[v as usize] += u[v as usize] * (a / 3.0);
+        }
+        let mut out = [DVec3::ZERO; 3];
+        let bary = [DVec3::X, DVec3::Y, DVec3::Z];
+        integrate(lights, frame.n, corners(t), bary, a, 0, &mut out);
+        for (k, &v) in t.iter().enumerate() {
+            num[v as usize] += out[k];
+        }
+    }
+    let scale: Vec<DVec3> = (0..u.len())
+        .map(|v| {
+            if !whole[v] {
+                return DVec3::ONE;
+            }
+            DVec3::select(den[v].cmpgt(DVec3::ZERO), num[v] / den[v], DVec3::ONE)
+        })
+        .collect();
+    let u = u.iter().zip(&scale).map(|(u, s)| *u * *s).collect();
+    (u, scale)
+}
+
+/// Adds `∫ λ_k U` over the piece with world corners `w` (barycentric coordinates `b` in its
+/// element, area `area`) to `out[k]`: the three-point rule at `(2/3, 1/6, 1/6)` and its
+/// turns (Strang, Fix 1973; exact for quadratics), on four half-sized pieces while an
+/// emitter is within [`SPLIT`] of the piece's diameter, down to [`DEPTH`].
+fn integrate(
+    lights: &AreaLights,
+    n: DVec3,
+    w: [DVec3; 3],
+    b: [DVec3; 3],
+    area: f64,
+    depth: usize,
+    out: &mut [DVec3; 3],
+) {
+    let mid = |x: &[DVec3; 3], i: usize| (x[i] + x[(i + 1) % 3]) * 0.5;
+    let h = (0..3)
+        .map(|k| w[k].distance(w[(k + 1) % 3]))
+        .fold(0.0, f64::max);
+    let (lo, hi) = (w[0].min(w[1]).min(w[2]), w[0].max(w[1]).max(w[2]));
+    if depth == DEPTH || !lights.within(lo, hi, h * SPLIT) {
+        // Inside the piece, off its edges: a point on the polygon's outline lies in the plane
+        // of a surface that meets it there, which gives it no light.
+        let inner = |x: &[DVec3; 3], i: usize| {
+            x[i] * (2.0 / 3.0) + (x[(i + 1) % 3] + x[(i + 2) % 3]) * (1.0 / 6.0)
+        };
+        for i in 0..3 {
+            let u = lights.unoccluded(inner(&w, i), n) * (area / 3.0);
+            let l = inner(&b, i);
+            for (k, o) in out.iter_mut().enumerate() {
+                *o += u * l[k];
+            }
+        }
+        return;
+    }
+    let (mw, mb) = ([0, 1, 2].map(|i| mid(&w, i)), [0, 1, 2].map(|i| mid(&b, i)));
+    for (pw, pb) in [
+        ([w[0], mw[0], mw[2]], [b[0], mb[0], mb[2]]),
+        ([mw[0], w[1], mw[1]], [mb[0], b[1], mb[1]]),
+        ([mw[2], mw[1], w[2]], [mb[2], mb[1], b[2]]),
+        (mw, mb),
+    ] {
+        integrate(lights, n, pw, pb, area / 4.0, depth + 1, out);
     }
 }
 
