@@ -328,18 +328,25 @@ pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], lights: &TexelLights)
             if d != DVec3::ZERO {
                 let u = interpolate(&lights.unoccluded[at.mesh], t, l);
                 let visible = DVec3::select(u.cmpgt(DVec3::ZERO), d / u, DVec3::ZERO);
-                // The unoccluded light once per texel, at its centre, where the texel is far from
-                // the emitters for its size; else per sub-sample.
-                let per_texel = match hint.texel {
-                    Some((c, e)) if c == at.centre => e,
-                    _ => {
-                        let e = (!area.within(at.centre, at.centre, at.size * FAR_TEXEL))
-                            .then(|| area.unoccluded(at.centre, n));
-                        hint.texel = Some((at.centre, e));
-                        e
-                    }
-                };
-                let exact = per_texel.unwrap_or_else(|| area.unoccluded(at.p, n));
+                // The unoccluded light once per texel, at its centre, but that of the emitters
+                // near the texel for its size (`hint.list`), which each sub-sample takes.
+                if hint.texel != Some(at.centre) {
+                    hint.texel = Some(at.centre);
+                    area.emitters_near(at.centre, at.size * FAR_TEXEL, &mut hint.list);
+                    hint.value = area.unoccluded(at.centre, n)
+                        - hint
+                            .list
+                            .iter()
+                            .map(|&e| area.one(e, at.centre, n))
+                            .sum::<DVec3>();
+                }
+                let exact = (hint.value
+                    + hint
+                        .list
+                        .iter()
+                        .map(|&e| area.one(e, at.p, n))
+                        .sum::<DVec3>())
+                .max(DVec3::ZERO);
                 value = (value - d).max(DVec3::ZERO) + exact * visible;
             }
         }
@@ -400,9 +407,12 @@ pub(crate) struct SubSample {
 pub(crate) struct Hint {
     /// The mesh triangle that held the last point ([`Locator::value_near`]).
     pub triangle: Option<u32>,
-    /// A value computed once per texel: the [`SubSample::centre`] it was computed at, and
-    /// the value (`None`: none for this texel).
-    pub texel: Option<(DVec3, Option<DVec3>)>,
+    /// The texel (its [`SubSample::centre`]) that `value` and `list` were computed for.
+    pub texel: Option<DVec3>,
+    /// A value computed once per texel.
+    pub value: DVec3,
+    /// A list computed once per texel.
+    pub list: Vec<u32>,
 }
 
 /// [`rasterize`] of any quantity: `value` gives the value at a visible sub-sample (with a

@@ -351,6 +351,23 @@ impl LightTree {
 
     /// Whether any emitter's box (of its hull) meets the box `[lo, hi]`.
     pub fn any_in_box(&self, lo: DVec3, hi: DVec3) -> bool {
+        self.in_box(lo, hi, &mut |_| true)
+    }
+
+    /// The emitters (indices into the emitter list) whose boxes meet the box `[lo, hi]`, in
+    /// `out` (cleared first), ascending.
+    pub fn emitters_in_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
+        out.clear();
+        self.in_box(lo, hi, &mut |e| {
+            out.push(e);
+            false
+        });
+        out.sort_unstable();
+    }
+
+    /// Calls `found` with each emitter whose box meets `[lo, hi]` until it returns true;
+    /// returns whether it did.
+    fn in_box(&self, lo: DVec3, hi: DVec3, found: &mut dyn FnMut(u32) -> bool) -> bool {
         let Some(root) = self.nodes.len().checked_sub(1) else {
             return false;
         };
@@ -362,7 +379,8 @@ impl LightTree {
             }
             match node.kids {
                 Some(kids) => stack.extend(kids),
-                None => return true,
+                None if found(node.emitter) => return true,
+                None => {}
             }
         }
         false
