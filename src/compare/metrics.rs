@@ -176,7 +176,7 @@ const MESH_POINTS: [([f64; 3], f64); 7] = {
     ]
 };
 
-/// One point of a mesh where [`mesh_samples`] compared the light the lightmap shows with the
+/// One point of a mesh where [`mesh_samples`] compared the light its vertices show with the
 /// exact direct light.
 #[derive(Clone, Copy, Debug)]
 pub struct MeshSample {
@@ -184,7 +184,7 @@ pub struct MeshSample {
     pub polygon: usize,
     /// The area it stands for (scene units²).
     pub weight: f64,
-    /// What linear interpolation between the element's exact vertex values shows there (W/m²,
+    /// What linear interpolation between the element's vertex values shows there (W/m²,
     /// channel mean).
     pub shown: f64,
     /// The exact direct irradiance there (W/m², channel mean).
@@ -192,9 +192,11 @@ pub struct MeshSample {
 }
 
 /// How well a mesh shows the direct light, with no Monte Carlo reference: at seven points per
-/// element ([`MESH_POINTS`]), what the lightmap's linear interpolation of the exact vertex
-/// values of `bake.solution.direct` shows, against the exact direct light there (`direct`, the
-/// bake's own direct-light evaluator). Points buried under other geometry are left out (no one
+/// element ([`MESH_POINTS`]), what linear interpolation of the vertex values of
+/// `bake.solution.direct` shows, against the exact direct light there (`direct`, the bake's own
+/// direct-light evaluator). The vertex values are exact, but near an area emitter, where they
+/// are the fans' means ([`crate::solve::Solution::direct`]) and the lightmap takes the
+/// emitter's light per texel instead. Points buried under other geometry are left out (no one
 /// sees them, as the reference leaves out buried texels). It isolates the mesh: every error it
 /// measures is what interpolation between exact values cannot show (a shadow edge across an
 /// element, a pool of light between vertices).

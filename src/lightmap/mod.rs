@@ -11,7 +11,7 @@ use crate::atlas::Atlas;
 use crate::geometry::{BoxGrid, barycentric_2d, triangle_bounds};
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
-use crate::solve::texel_lights::{FAR_TEXEL, TexelLights};
+use crate::solve::texel_lights::{AreaLights, FAR_TEXEL, TexelLights};
 use crate::solve::{SurfacePoint, punctual_irradiance};
 use crate::visibility::Visibility;
 use glam::{DVec2, DVec3};
@@ -48,8 +48,9 @@ impl Lightmap {
 
     /// 8-bit RGB of every page (page-major, then rows top first), each channel `v = H / scale`
     /// (0..1) encoded by `encoding` and quantized: sRGB to the nearest code, linear with a 4x4
-    /// ordered (Bayer) dither so slow gradients in dark regions do not band; `scale` is the returned factor
-    /// (W/m², the `MOZ_lightmap` intensity: the brightest channel of all pages): H =
+    /// ordered (Bayer) dither so slow gradients in dark regions do not band; `scale` is the
+    /// returned factor (W/m², the `MOZ_lightmap` intensity: the brightest channel of all
+    /// pages): H =
     /// `encoding.decode(code / 255)` x scale, within one code.
     pub fn to_rgb8(&self, encoding: Encoding) -> (Vec<u8>, f64) {
         const BAYER: [f64; 16] = [
@@ -292,23 +293,28 @@ pub(crate) fn rasterize(r: &Raster, values: &[Vec<DVec3>], lights: &TexelLights)
         .map(|(m, v)| Locator::new(m, v))
         .collect();
     // Per mesh with area light near an emitter (`TexelLights::unoccluded`): which of its
-    // elements are near one (`AreaLights::near`).
+    // elements are near one of the scene's (`AreaLights::near`).
     let area = lights.area_lights(scene);
     let near: Vec<Vec<bool>> = match &area {
-        Some(area) => meshes
-            .par_iter()
-            .zip(&lights.unoccluded)
-            .map(|(m, u)| {
-                if u.is_empty() {
-                    return Vec::new();
-                }
-                let frame = &scene.polygons[m.polygon].frame;
-                m.triangles
-                    .iter()
-                    .map(|t| area.near(&t.map(|i| frame.world_from_plane(m.vertices[i as usize]))))
-                    .collect()
-            })
-            .collect(),
+        Some(_) => {
+            let every = AreaLights::every(scene);
+            meshes
+                .par_iter()
+                .zip(&lights.unoccluded)
+                .map(|(m, u)| {
+                    if u.is_empty() {
+                        return Vec::new();
+                    }
+                    let frame = &scene.polygons[m.polygon].frame;
+                    m.triangles
+                        .iter()
+                        .map(|t| {
+                            every.near(&t.map(|i| frame.world_from_plane(m.vertices[i as usize])))
+                        })
+                        .collect()
+                })
+                .collect()
+        }
         None => Vec::new(),
     };
     rasterize_with(r, &|at, hint| {

@@ -433,7 +433,9 @@ fn vertex_reference(
             );
         }
     };
-    // The direct light alone (both bakes share it), against the reference without bounces.
+    // The direct light alone (both bakes share it), against the reference without bounces. Near
+    // an area emitter a vertex holds its fan's mean ([`crate::solve::Solution::direct`]), not
+    // its point value, and differs from the reference by the falloff's curvature there.
     let direct = reference_with(
         scene,
         &vis,

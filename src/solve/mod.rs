@@ -202,7 +202,9 @@ pub struct Solution {
     /// `irradiance[m][v]`: irradiance H (W/m², linear RGB) at vertex `v` of mesh `m`, direct plus
     /// indirect, without the surface's own emission.
     pub irradiance: Vec<Vec<DVec3>>,
-    /// Direct part of `irradiance`, same layout.
+    /// Direct part of `irradiance`, same layout: each light's irradiance at the vertex, but
+    /// near an area emitter the fan's mean of it, weighted by the vertex's hat function
+    /// ([`texel_lights::TexelLights::conserve`]), so that the elements hold the light that falls.
     pub direct: Vec<Vec<DVec3>>,
     /// Per light group ([`crate::scene::mixed`], sorted by name): the group's name and its
     /// lights' part of `irradiance`, same layout. Empty without groups.

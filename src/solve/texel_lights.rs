@@ -8,7 +8,7 @@
 //! * **Area emitters**: the vertices' direct light `D` (occluded, exact) is kept as the visible
 //!   fraction, and the unoccluded irradiance `U` is evaluated exactly per sub-sample: the
 //!   sub-sample takes `U(p) · I(D) / I(U)`, with `I` the linear interpolation from the
-//!   vertices and `U` at the vertices evaluated the same way (Heitz, Hill, McGuire, "Combining
+//!   vertices and `U` at the vertices conserved as `D` is (Heitz, Hill, McGuire, "Combining
 //!   analytic direct illumination and stochastic shadows", I3D 2018: the analytic unshadowed
 //!   light times a ratio of shadowed to unshadowed estimates). `U` is smooth but not linear:
 //!   near a lamp it falls as `1/d²`, convex, so a chord between two vertices lies above it, and
@@ -103,9 +103,11 @@ impl TexelLights {
     /// interpolation is the unoccluded light that falls on them, times their visible fraction:
     /// vertex `v` is scaled by `∫ φ_v U / (U_v ∫ φ_v)` over its fan (`φ_v` its hat function,
     /// `U` the unoccluded light), so that its unoccluded value becomes the mean of `U` over its
-    /// fan weighted by `φ_v` (the lumped L² projection of `U`, whose interpolation holds `∫ U`). Only vertices whose whole fan lies within [`FAR`]
-    /// of its elements' diameters of an emitter are scaled (elsewhere the scale is 1 within
-    /// 1%). Fills [`TexelLights::unoccluded`] with `U` at the vertices, scaled the same way.
+    /// fan weighted by `φ_v` (the lumped L² projection of `U`; the sum over the vertices of
+    /// `∫ φ_v` times it is `∫ U`). Only vertices whose whole fan lies within [`FAR`] of its
+    /// elements' diameters of an emitter are scaled (elsewhere the scale is 1 within 1%).
+    /// Fills [`TexelLights::unoccluded`] with `U` at the vertices, scaled the same way, on
+    /// every mesh near an emitter of the scene.
     /// The light vectors `light` (per mesh and vertex; empty without) are scaled with `all`,
     /// so that their ratio to the irradiance, the direction, stays as evaluated.
     ///
@@ -123,22 +125,26 @@ impl TexelLights {
         let Some(lights) = self.area_lights(scene) else {
             return;
         };
-        let scaled: Vec<(Vec<DVec3>, Vec<DVec3>)> = meshes
+        // Every part of the direct light measures `U` on the meshes near any emitter of the
+        // scene, so that the parts' sums (`add`) hold `U` of each part where they hold its
+        // `D`, whichever part's emitters the mesh is near.
+        let every = AreaLights::every(scene);
+        let conserved: Vec<(Vec<DVec3>, Vec<DVec3>)> = meshes
             .par_iter()
             .zip(&self.area)
-            .map(|(m, d)| conserve_mesh(&lights, scene, vis, m, d))
+            .map(|(m, d)| conserve_mesh(&lights, &every, scene, vis, m, d))
             .collect();
         self.unoccluded = Vec::with_capacity(meshes.len());
-        for (m, (u, scale)) in scaled.into_iter().enumerate() {
-            for (v, s) in scale.iter().enumerate() {
-                let (a, h) = (&mut self.area[m][v], &mut all[m][v]);
-                let before = (*a, *h);
-                *a *= *s;
-                *h += *a - before.0;
+        for (m, (u, area)) in conserved.into_iter().enumerate() {
+            for (v, a) in area.into_iter().enumerate() {
+                let (mine, h) = (&mut self.area[m][v], &mut all[m][v]);
+                let before = *h;
+                *h += a - *mine;
+                *mine = a;
                 if let Some(l) = light.get_mut(m).and_then(|l| l.get_mut(v)) {
                     for (c, l) in l.iter_mut().enumerate() {
-                        if before.1[c] > 0.0 {
-                            *l *= h[c] / before.1[c];
+                        if before[c] > 0.0 {
+                            *l *= h[c] / before[c];
                         }
                     }
                 }
@@ -156,12 +162,7 @@ impl TexelLights {
             .into_iter()
             .filter(|e| self.emitters.binary_search(&e.polygon).is_ok())
             .collect();
-        let tree = LightTree::new(&emitters);
-        Some(AreaLights {
-            emitters,
-            tree,
-            light_error: self.light_error,
-        })
+        Some(AreaLights::new(emitters, self.light_error))
     }
 }
 
@@ -176,32 +177,35 @@ const DEPTH: usize = 3;
 /// 40% of the time, 0 (no split) differs by 1.35% (dimensionless).
 const SPLIT: f64 = 2.0;
 
-/// [`TexelLights::conserve`] of one mesh with area light `area` at its vertices: `U` at the
-/// vertices, scaled, and the scale of each vertex (both empty where nothing is near an
-/// emitter).
+/// [`TexelLights::conserve`] of one mesh with the area light `area` of `lights` at its
+/// vertices: `U` of `lights` at the vertices and their area light, both conserved (both empty
+/// where no element is near an emitter of `every`, the scene's).
+///
+/// A vertex where `U` is zero (in an emitter's plane, or at the receiver's horizon, as where a
+/// lamp pierces a wall) while light falls on its fan cannot be scaled: it takes the fan's mean
+/// `∫ φ_v U / ∫ φ_v` as `U`, and as its visible fraction that of its fan's other vertices
+/// (`Σ D / Σ U`, area-weighted), or none if none of them has light.
 fn conserve_mesh(
     lights: &AreaLights,
+    every: &AreaLights,
     scene: &Scene,
     vis: &Visibility,
     m: &ReceiverMesh,
     area: &[DVec3],
 ) -> (Vec<DVec3>, Vec<DVec3>) {
-    if area.iter().all(|d| *d == DVec3::ZERO) {
-        return Default::default();
-    }
     let frame = &scene.polygons[m.polygon].frame;
     let corners = |t: &[u32; 3]| t.map(|i| frame.world_from_plane(m.vertices[i as usize]));
-    let near: Vec<bool> = m
-        .triangles
-        .iter()
-        .map(|t| lights.near(&corners(t)))
-        .collect();
-    if !near.contains(&true) {
+    if !m.triangles.iter().any(|t| every.near(&corners(t))) {
         return Default::default();
     }
     let u: Vec<DVec3> = evaluation_points(scene, vis, m)
         .iter()
         .map(|q| lights.unoccluded(q.p, q.n))
+        .collect();
+    let near: Vec<bool> = m
+        .triangles
+        .iter()
+        .map(|t| lights.near(&corners(t)))
         .collect();
     // The vertices whose whole fan is near.
     let mut whole = vec![false; m.vertices.len()];
@@ -217,33 +221,52 @@ fn conserve_mesh(
             }
         }
     }
-    let (mut num, mut den) = (vec![DVec3::ZERO; u.len()], vec![DVec3::ZERO; u.len()]);
+    let n = u.len();
+    // Per vertex: ∫ φ_v U over its fan, ∫ φ_v, and its neighbours' D and U weighted by area.
+    let (mut num, mut mass) = (vec![DVec3::ZERO; n], vec![0.0; n]);
+    let (mut around_d, mut around_u) = (vec![DVec3::ZERO; n], vec![DVec3::ZERO; n]);
     for (t, _) in m.triangles.iter().zip(&near).filter(|(_, near)| **near) {
         if !t.iter().any(|&v| whole[v as usize]) {
             continue;
         }
         // ∫ φ_v = A / 3 over each element of the fan.
         let a = m.triangle_area(t);
-        for &v in t {
-            den[v as usize] += u[v as usize] * (a / 3.0);
-        }
         let mut out = [DVec3::ZERO; 3];
         let bary = [DVec3::X, DVec3::Y, DVec3::Z];
         integrate(lights, frame.n, corners(t), bary, a, 0, &mut out);
         for (k, &v) in t.iter().enumerate() {
-            num[v as usize] += out[k];
+            let v = v as usize;
+            num[v] += out[k];
+            mass[v] += a / 3.0;
+            for &w in t.iter().filter(|&&w| w as usize != v) {
+                around_d[v] += area[w as usize] * a;
+                around_u[v] += u[w as usize] * a;
+            }
         }
     }
-    let scale: Vec<DVec3> = (0..u.len())
+    (0..n)
         .map(|v| {
-            if !whole[v] {
-                return DVec3::ONE;
+            if !whole[v] || mass[v] <= 0.0 {
+                return (u[v], area[v]);
             }
-            DVec3::select(den[v].cmpgt(DVec3::ZERO), num[v] / den[v], DVec3::ONE)
+            let (mut uv, mut dv) = (u[v], area[v]);
+            for c in 0..3 {
+                if u[v][c] > 0.0 {
+                    let s = num[v][c] / (u[v][c] * mass[v]);
+                    uv[c] *= s;
+                    dv[c] *= s;
+                } else if num[v][c] > 0.0 {
+                    uv[c] = num[v][c] / mass[v];
+                    dv[c] = if around_u[v][c] > 0.0 {
+                        uv[c] * around_d[v][c] / around_u[v][c]
+                    } else {
+                        0.0
+                    };
+                }
+            }
+            (uv, dv)
         })
-        .collect();
-    let u = u.iter().zip(&scale).map(|(u, s)| *u * *s).collect();
-    (u, scale)
+        .unzip()
 }
 
 /// Adds `∫ λ_k U` over the piece with world corners `w` (barycentric coordinates `b` in its
@@ -318,6 +341,22 @@ pub(crate) struct AreaLights {
 }
 
 impl AreaLights {
+    /// All the scene's area emitters, which decide where the light is taken per point: a
+    /// group's layer takes it where the main lightmap does, so that the layers add up to it.
+    pub(crate) fn every(scene: &Scene) -> AreaLights {
+        AreaLights::new(AreaEmitter::all(scene, 1), None)
+    }
+
+    /// `emitters` with their light tree, divided as [`AreaLights::unoccluded`] says.
+    fn new(emitters: Vec<AreaEmitter>, light_error: Option<f64>) -> AreaLights {
+        let tree = LightTree::new(&emitters);
+        AreaLights {
+            emitters,
+            tree,
+            light_error,
+        }
+    }
+
     /// Whether the element with world corners `t` is within [`FAR`] of its diameters of an
     /// emitter, where it takes the area light per point.
     pub(crate) fn near(&self, t: &[DVec3; 3]) -> bool {
