@@ -332,6 +332,11 @@ impl AreaEmitter {
     pub fn form_factor(&self, p: DVec3, n: DVec3) -> f64 {
         self.shape.form_factor(p, n)
     }
+
+    /// Unoccluded irradiance at `(p, n)` from the emitter, `L π F` (W/m² per channel).
+    pub fn irradiance(&self, p: DVec3, n: DVec3) -> DVec3 {
+        self.radiance * (std::f64::consts::PI * self.form_factor(p, n))
+    }
 }
 
 // ---------------------------------------------------------------------------------------------

@@ -337,10 +337,7 @@ impl LightTree {
         exact.sort_unstable();
         let mut h: DVec3 = exact
             .iter()
-            .map(|&e| {
-                let e = &emitters[e as usize];
-                e.radiance * (std::f64::consts::PI * e.form_factor(p, n))
-            })
+            .map(|&e| emitters[e as usize].irradiance(p, n))
             .sum();
         for e in done.iter().filter(|e| e.estimate > 0.0) {
             let node = &self.nodes[e.node as usize];

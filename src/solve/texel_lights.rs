@@ -36,7 +36,6 @@ use crate::scene::Scene;
 use crate::visibility::Visibility;
 use glam::DVec3;
 use rayon::prelude::*;
-use std::f64::consts::PI;
 
 /// Elements farther than this many of their diameters (longest edges) from every emitter's
 /// box take the area light interpolated from their vertices: the interpolation of `1/d²`
@@ -283,11 +282,7 @@ fn integrate(
     out: &mut [DVec3; 3],
 ) {
     let mid = |x: &[DVec3; 3], i: usize| (x[i] + x[(i + 1) % 3]) * 0.5;
-    let h = (0..3)
-        .map(|k| w[k].distance(w[(k + 1) % 3]))
-        .fold(0.0, f64::max);
-    let (lo, hi) = (w[0].min(w[1]).min(w[2]), w[0].max(w[1]).max(w[2]));
-    if depth == DEPTH || !lights.within(lo, hi, h * SPLIT) {
+    if depth == DEPTH || !lights.within(&w, SPLIT) {
         // Inside the piece, off its edges: a point on the polygon's outline lies in the plane
         // of a surface that meets it there, which gives it no light.
         let inner = |x: &[DVec3; 3], i: usize| {
@@ -360,16 +355,17 @@ impl AreaLights {
     /// Whether the element with world corners `t` is within [`FAR`] of its diameters of an
     /// emitter, where it takes the area light per point.
     pub(crate) fn near(&self, t: &[DVec3; 3]) -> bool {
-        let h = (0..3)
-            .map(|k| t[k].distance(t[(k + 1) % 3]))
-            .fold(0.0, f64::max);
-        self.within(t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]), h * FAR)
+        self.within(t, FAR)
     }
 
-    /// Whether an emitter's box comes within `reach` (scene units, per axis) of the box
-    /// `[lo, hi]`.
-    pub(crate) fn within(&self, lo: DVec3, hi: DVec3, reach: f64) -> bool {
-        let reach = DVec3::splat(reach);
+    /// Whether an emitter's box comes within `k` diameters (longest edges) of the triangle
+    /// with world corners `t`, per axis of its box.
+    fn within(&self, t: &[DVec3; 3], k: f64) -> bool {
+        let h = (0..3)
+            .map(|i| t[i].distance(t[(i + 1) % 3]))
+            .fold(0.0, f64::max);
+        let reach = DVec3::splat(h * k);
+        let (lo, hi) = (t[0].min(t[1]).min(t[2]), t[0].max(t[1]).max(t[2]));
         self.tree.any_in_box(lo - reach, hi + reach)
     }
 
@@ -383,8 +379,7 @@ impl AreaLights {
     /// Emitter `e`'s (an index into this set) unoccluded irradiance at `p` with unit normal
     /// `n`, W/m² per channel.
     pub(crate) fn one(&self, e: u32, p: DVec3, n: DVec3) -> DVec3 {
-        let e = &self.emitters[e as usize];
-        e.radiance * (PI * e.form_factor(p, n))
+        self.emitters[e as usize].irradiance(p, n)
     }
 
     /// The emitters' unoccluded irradiance at `p` with unit normal `n`, W/m² per channel,
@@ -395,7 +390,7 @@ impl AreaLights {
             None => self
                 .emitters
                 .iter()
-                .map(|e| e.radiance * (PI * e.form_factor(p, n)))
+                .map(|e| e.irradiance(p, n))
                 .sum(),
         }
     }
