@@ -21,11 +21,11 @@ use std::collections::BTreeMap;
 /// A pinhole camera in world space.
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
-    pub eye: DVec3,
+    pub(crate) eye: DVec3,
     /// Unit vectors: forward (view direction), up and right.
     pub(crate) forward: DVec3,
-    pub up: DVec3,
-    pub right: DVec3,
+    pub(crate) up: DVec3,
+    pub(crate) right: DVec3,
     /// Vertical field of view, radians.
     pub(crate) yfov: f64,
 }

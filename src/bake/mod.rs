@@ -3,7 +3,6 @@
 mod budget;
 mod output;
 
-pub use budget::Budget;
 pub(crate) use budget::element_budget;
 pub(crate) use output::exr_page_path;
 pub use output::{OutputFiles, bake_file, glb_bytes};
@@ -78,7 +77,7 @@ pub enum DoubleSided {
 
 impl DoubleSided {
     /// `separate` or `shared`, as on the command line.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             DoubleSided::Separate => "separate",
             DoubleSided::Shared => "shared",
@@ -130,7 +129,7 @@ pub struct Bake {
     pub atlas: Atlas,
     pub lightmap: Lightmap,
     /// The ambient occlusion, in the lightmap's layout (`--ao`).
-    pub ao: Option<Lightmap>,
+    pub(crate) ao: Option<Lightmap>,
     /// Per light group, its name and its lights' part of `lightmap`, in the same layout
     /// ([`scene::mixed`]).
     pub layers: Vec<(String, Lightmap)>,
@@ -138,7 +137,7 @@ pub struct Bake {
     pub probes: Option<crate::probes::Probes>,
     /// The directional lightmap's ratio pages `r` (`x`, `y`, `z`), in the lightmap's layout
     /// (`--directional`, [`lightmap::directional`]).
-    pub directional: Option<[Lightmap; 3]>,
+    pub(crate) directional: Option<[Lightmap; 3]>,
     pub stats: Stats,
 }
 
