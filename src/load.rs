@@ -277,23 +277,25 @@ impl Gltf {
         files
     }
 
-    /// Names an instance's glTF item: `mesh 2 "chair" primitive 0 (node 7)`, or
-    /// `mesh 2 "chair" primitive 0 (back side) (node 7)` for the back of a double-sided one.
-    pub fn instance_item(&self, instance: &Instance) -> String {
-        let name = self
-            .document
-            .meshes()
-            .nth(instance.mesh)
-            .and_then(|m| m.name().map(|n| format!(" \"{n}\"")))
-            .unwrap_or_default();
-        let side = match instance.side {
-            Side::Front => "",
-            Side::Back => " (back side)",
-        };
-        format!(
-            "mesh {}{name} primitive {}{side} (node {})",
-            instance.mesh, instance.primitive, instance.node
-        )
+    internal! {
+        /// Names an instance's glTF item: `mesh 2 "chair" primitive 0 (node 7)`, or
+        /// `mesh 2 "chair" primitive 0 (back side) (node 7)` for the back of a double-sided one.
+        pub fn instance_item(&self, instance: &Instance) -> String {
+            let name = self
+                .document
+                .meshes()
+                .nth(instance.mesh)
+                .and_then(|m| m.name().map(|n| format!(" \"{n}\"")))
+                .unwrap_or_default();
+            let side = match instance.side {
+                Side::Front => "",
+                Side::Back => " (back side)",
+            };
+            format!(
+                "mesh {}{name} primitive {}{side} (node {})",
+                instance.mesh, instance.primitive, instance.node
+            )
+        }
     }
 
     fn bad(&self, item: impl Into<String>, reason: impl Into<String>) -> Error {

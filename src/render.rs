@@ -110,20 +110,22 @@ impl Camera {
         })
     }
 
-    /// A camera that frames the scene's bounding box from the front-above diagonal.
-    pub fn auto(scene: &Scene) -> Camera {
-        let center = (scene.bounds_min + scene.bounds_max) * 0.5;
-        let radius = scene.extent() * 0.5;
-        let yfov: f64 = 0.8;
-        let dir = DVec3::new(0.6, -0.45, -1.0).normalize();
-        let eye = center - dir * (radius / (yfov * 0.5).sin());
-        let right = dir.cross(DVec3::Y).normalize();
-        Camera {
-            eye,
-            forward: dir,
-            up: right.cross(dir),
-            right,
-            yfov,
+    internal! {
+        /// A camera that frames the scene's bounding box from the front-above diagonal.
+        pub fn auto(scene: &Scene) -> Camera {
+            let center = (scene.bounds_min + scene.bounds_max) * 0.5;
+            let radius = scene.extent() * 0.5;
+            let yfov: f64 = 0.8;
+            let dir = DVec3::new(0.6, -0.45, -1.0).normalize();
+            let eye = center - dir * (radius / (yfov * 0.5).sin());
+            let right = dir.cross(DVec3::Y).normalize();
+            Camera {
+                eye,
+                forward: dir,
+                up: right.cross(dir),
+                right,
+                yfov,
+            }
         }
     }
 }

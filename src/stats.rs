@@ -1,6 +1,16 @@
 //! Run statistics (`--stats FILE`): per-stage wall times and the counts of every stage.
 //! Field names are stable; later stages add fields.
 
+pub use crate::discontinuity::DmStats;
+pub use crate::lightmap::seams::SeamStats;
+pub use crate::scene::cut::Cut;
+pub use crate::solve::direct::EmitterCost;
+pub use crate::solve::form_factors::HemicubeStats;
+pub use crate::solve::hierarchical::HierStats;
+pub use crate::solve::matrix::MatrixStats;
+pub use crate::solve::sky::SkyStats;
+pub use crate::solve::{DirectStats, SolveStats};
+
 use crate::atlas::Atlas;
 use crate::mesh::{self, ReceiverMesh};
 use crate::progress::Progress;

@@ -166,7 +166,7 @@ const SIZING_PACK_ATTEMPTS: i32 = 256;
 /// ([`AtlasError::DoesNotFit`]) instead of halving on to [`MAX_PACK_ATTEMPTS`].
 const MIN_CHART_SIDE: f32 = 1.0;
 
-/// What can go wrong in [`pack`].
+/// What can go wrong in packing the atlas ([`pack_estimating`]).
 #[derive(Debug, thiserror::Error)]
 pub enum AtlasError {
     /// An input mesh is malformed; `mesh` is its index in the inputs.

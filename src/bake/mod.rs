@@ -119,14 +119,31 @@ impl Default for BakeOptions {
     }
 }
 
-/// The result of a bake, every stage's output kept for inspection and tests.
+/// The result of a bake, every stage's output kept for inspection and tests (the stages'
+/// outputs are public with the feature `internals`).
 pub struct Bake {
+    #[cfg(feature = "internals")]
     pub scene: Scene,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) scene: Scene,
     /// Discontinuity segments per polygon (empty for the other meshers).
+    #[cfg(feature = "internals")]
     pub segments: Vec<Vec<Segment>>,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) segments: Vec<Vec<Segment>>,
+    #[cfg(feature = "internals")]
     pub meshes: Vec<ReceiverMesh>,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) meshes: Vec<ReceiverMesh>,
+    #[cfg(feature = "internals")]
     pub solution: Solution,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) solution: Solution,
+    #[cfg(feature = "internals")]
     pub atlas: Atlas,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) atlas: Atlas,
+    /// The lightmap: irradiance `H` per texel, linear, without albedo.
     pub lightmap: Lightmap,
     /// The ambient occlusion, in the lightmap's layout (`--ao`).
     pub(crate) ao: Option<Lightmap>,
