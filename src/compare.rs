@@ -26,9 +26,9 @@
 //! `d` is below [`CompareOptions::contact_texels`] texel widths; otherwise *lit* `V > 0.995`,
 //! *umbra* `V < 0.005`, *penumbra* between; *indirect* where no emitter faces the texel at all.
 
-pub mod chart;
+pub(crate) mod chart;
 mod metrics;
-pub mod pictures;
+pub(crate) mod pictures;
 mod report;
 mod runs;
 
@@ -92,14 +92,14 @@ impl Default for CompareOptions {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Run {
     pub method: String,
-    pub mesher: Mesher,
-    pub direct: DirectMethod,
-    pub solver: Solver,
-    pub form_factors: FormFactors,
+    pub(crate) mesher: Mesher,
+    pub(crate) direct: DirectMethod,
+    pub(crate) solver: Solver,
+    pub(crate) form_factors: FormFactors,
     /// See [`Method::hr_scale`].
-    pub hr_scale: u32,
+    pub(crate) hr_scale: u32,
     pub budget: usize,
-    pub elements: usize,
+    pub(crate) elements: usize,
     /// Coarse patches of the patch solvers (0 for hierarchical).
     pub patches: usize,
     /// Wall time of the indirect solve proper (the patch solve, or the hierarchical solve),
@@ -111,7 +111,7 @@ pub struct Run {
     pub hemicubes: Option<u64>,
     /// Wall time of the stages that depend on the method (discontinuity, mesh, solve,
     /// lightmap), seconds.
-    pub seconds: f64,
+    pub(crate) seconds: f64,
     /// Wall time of the whole in-memory bake (adds scene, BVH and atlas), seconds.
     pub(crate) total_seconds: f64,
     pub error: ErrorStats,
@@ -121,13 +121,13 @@ pub struct Run {
 /// The comparison on one scene.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SceneReport {
-    pub scene: String,
+    pub(crate) scene: String,
     /// What the scene is (failure sweep: and which method it is built to break).
-    pub description: String,
-    pub lightmap_width: u32,
-    pub lightmap_height: u32,
-    pub texels_per_unit: f32,
-    pub covered_texels: usize,
+    pub(crate) description: String,
+    pub(crate) lightmap_width: u32,
+    pub(crate) lightmap_height: u32,
+    pub(crate) texels_per_unit: f32,
+    pub(crate) covered_texels: usize,
     pub region_texels: BTreeMap<Region, usize>,
     /// `E_lit`, W/m²: the errors are relative to it.
     pub(crate) mean_lit_irradiance: f64,
@@ -177,9 +177,9 @@ pub struct FailureInput {
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Report {
     pub(crate) penumbra_version: &'static str,
-    pub command: String,
-    pub options: CompareOptions,
-    pub threads: usize,
+    pub(crate) command: String,
+    pub(crate) options: CompareOptions,
+    pub(crate) threads: usize,
     pub scene: SceneReport,
     pub failure_sweep: Vec<SceneReport>,
     /// Files written, relative to the output directory.

@@ -8,7 +8,7 @@ use glam::DVec2;
 use std::fmt::Write;
 
 /// Colour of each segment kind in the SVG.
-pub fn colour(kind: Kind) -> &'static str {
+pub(crate) fn colour(kind: Kind) -> &'static str {
     match kind {
         Kind::D0 => "#d62728",
         Kind::Ve => "#1f77b4",

@@ -51,7 +51,7 @@ pub enum Error {
 impl Error {
     /// Places an item error inside an enclosing item (`mesh 0 primitive 1: POSITION`), so a
     /// message names the file once and the item from the outside in. Other errors pass through.
-    pub fn within(self, outer: &str) -> Error {
+    pub(crate) fn within(self, outer: &str) -> Error {
         match self {
             Error::BadItem { path, item, reason } => Error::BadItem {
                 path,

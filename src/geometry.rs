@@ -204,7 +204,7 @@ pub(crate) fn clip_polygon_to_plane(poly: &[DVec3], n: DVec3, o: DVec3, out: &mu
 /// (corner `k` of triangle `t`), and the piece each triangle went into (`usize::MAX` for a
 /// degenerate triangle, which is left out). Vertices where a piece's boundary runs straight on
 /// are removed.
-pub fn convex_pieces(tris: &[[DVec2; 3]]) -> (Vec<Vec<usize>>, Vec<usize>) {
+pub(crate) fn convex_pieces(tris: &[[DVec2; 3]]) -> (Vec<Vec<usize>>, Vec<usize>) {
     // -0.0 and 0.0 are the same point.
     let key = |q: DVec2| [(q.x + 0.0).to_bits(), (q.y + 0.0).to_bits()];
     let corner = |c: usize| tris[c / 3][c % 3];
@@ -387,7 +387,7 @@ pub(crate) fn signed_area(poly: &[DVec2]) -> f64 {
 }
 
 /// Area of a 3D triangle, scene units².
-pub fn triangle_area(p: &[DVec3; 3]) -> f64 {
+pub(crate) fn triangle_area(p: &[DVec3; 3]) -> f64 {
     0.5 * (p[1] - p[0]).cross(p[2] - p[0]).length()
 }
 

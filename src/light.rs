@@ -91,7 +91,7 @@ impl SurfacePoint {
 /// turns towards or away from. Half of it is the L1 band of the irradiance's spherical
 /// harmonics (Ramamoorthi, Hanrahan, "An efficient representation for irradiance environment
 /// maps", SIGGRAPH 2001), which [`crate::lightmap::directional`] writes.
-pub type LightVector = [DVec3; 3];
+pub(crate) type LightVector = [DVec3; 3];
 
 /// The smallest cosine to the normal that [`slant`] divides by: light arriving more grazing
 /// than about 84° counts as arriving at 84°, so a sliver of light along the horizon cannot
@@ -126,16 +126,16 @@ pub struct EmitterShape {
     /// The pieces in world space.
     pub(crate) pieces_world: Vec<Vec<DVec3>>,
     /// Convex hull of all pieces, counter-clockwise.
-    pub hull: Vec<DVec2>,
+    pub(crate) hull: Vec<DVec2>,
     /// Area, scene units².
-    pub area: f64,
+    pub(crate) area: f64,
     /// Diameter of the hull's bounding box: the length scale of the emitter's tolerances.
-    pub size: f64,
+    pub(crate) size: f64,
 }
 
 impl EmitterShape {
     /// From the triangles of a planar polygon, in the plane coordinates of `frame`.
-    pub fn new(frame: Frame, triangles_plane: &[[DVec2; 3]]) -> EmitterShape {
+    pub(crate) fn new(frame: Frame, triangles_plane: &[[DVec2; 3]]) -> EmitterShape {
         let pieces: Vec<Vec<DVec2>> = convex_pieces(triangles_plane)
             .0
             .into_iter()
@@ -235,11 +235,11 @@ impl EmitterShape {
 /// An area emitter: one emitting polygon with a fixed, stratified set of sample points.
 pub struct AreaEmitter {
     /// Index into [`Scene::polygons`].
-    pub polygon: usize,
+    pub(crate) polygon: usize,
     /// Emitted radiance (front face), W/(m² sr).
     pub radiance: DVec3,
     /// Front normal.
-    pub normal: DVec3,
+    pub(crate) normal: DVec3,
     /// The polygon's triangles, world space.
     pub triangles: Vec<[DVec3; 3]>,
     /// The polygon merged into convex pieces in its plane, for the form factors and the
@@ -247,10 +247,9 @@ pub struct AreaEmitter {
     pub shape: EmitterShape,
     /// Sample sets, each a stratified set of points with their area (the areas of a set sum to
     /// the emitter's area): `samples[0]` has the full count, each next set half as many.
-    pub samples: Vec<Vec<(DVec3, f64)>>,
-    /// Bounding sphere (centre, radius) for culling.
-    pub center: DVec3,
-    pub radius: f64,
+    pub(crate) samples: Vec<Vec<(DVec3, f64)>>,
+    /// The mean of the triangles' corners, for the light tree.
+    pub(crate) center: DVec3,
 }
 
 /// The radical inverse in base 2 (van der Corput), the second Hammersley coordinate, in [0, 1).
@@ -268,7 +267,7 @@ fn square_to_triangle(t: &[DVec3; 3], u: f64, v: f64) -> DVec3 {
 impl AreaEmitter {
     /// The emitters of a scene with `samples` points each: a Hammersley set spread over the
     /// polygon's triangles by area.
-    pub fn all(scene: &Scene, samples: usize) -> Vec<AreaEmitter> {
+    pub(crate) fn all(scene: &Scene, samples: usize) -> Vec<AreaEmitter> {
         scene
             .emitters()
             .map(|id| {
@@ -308,11 +307,6 @@ impl AreaEmitter {
                 }
                 let center = triangles.iter().flatten().copied().sum::<DVec3>()
                     / (3 * triangles.len()) as f64;
-                let radius = triangles
-                    .iter()
-                    .flatten()
-                    .map(|q| q.distance(center))
-                    .fold(0.0, f64::max);
                 AreaEmitter {
                     polygon: id,
                     radiance: scene.materials[poly.material].radiance,
@@ -321,7 +315,6 @@ impl AreaEmitter {
                     triangles,
                     samples: sets,
                     center,
-                    radius,
                 }
             })
             .collect()

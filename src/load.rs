@@ -28,12 +28,12 @@ mod limits;
 mod materials;
 pub(crate) mod meshopt;
 mod primitive;
-pub mod uri;
+pub(crate) mod uri;
 mod validate;
 
 pub use limits::{
     DEFAULT_IMAGE_MIB, DEFAULT_IMAGE_SIDE, DEFAULT_INPUT_MIB, DEFAULT_INSTANCES, DEFAULT_NODES,
-    DEFAULT_POLYGONS, DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, IMAGES_TOGETHER, Limits, MIB,
+    DEFAULT_POLYGONS, DEFAULT_PRIMITIVES, DEFAULT_TRIANGLES, Limits, MIB,
 };
 use materials::{Textures, material};
 use primitive::{Walk, add_primitive, triangles_at_most};
@@ -51,7 +51,7 @@ pub struct LoadOptions {
 /// A parsed glTF file with its buffer data, kept whole so the writer can preserve everything.
 pub struct Gltf {
     /// The file it came from (for messages and relative URIs).
-    pub path: PathBuf,
+    pub(crate) path: PathBuf,
     /// The parsed document.
     pub document: gltf::Document,
     /// The data of every buffer, in buffer order (the GLB binary chunk, a data URI, or a file;
@@ -63,7 +63,7 @@ pub struct Gltf {
     /// does not touch (extensions, extras, unknown properties) survives as it was.
     pub json: serde_json::Value,
     /// The limits and folders it was read with; its images are read and decoded with them too.
-    pub options: LoadOptions,
+    pub(crate) options: LoadOptions,
 }
 
 /// Reads and parses a `.glb` or `.gltf` file and all of its buffers, with the default
@@ -277,23 +277,25 @@ impl Gltf {
         files
     }
 
-    /// Names an instance's glTF item: `mesh 2 "chair" primitive 0 (node 7)`, or
-    /// `mesh 2 "chair" primitive 0 (back side) (node 7)` for the back of a double-sided one.
-    pub fn instance_item(&self, instance: &Instance) -> String {
-        let name = self
-            .document
-            .meshes()
-            .nth(instance.mesh)
-            .and_then(|m| m.name().map(|n| format!(" \"{n}\"")))
-            .unwrap_or_default();
-        let side = match instance.side {
-            Side::Front => "",
-            Side::Back => " (back side)",
-        };
-        format!(
-            "mesh {}{name} primitive {}{side} (node {})",
-            instance.mesh, instance.primitive, instance.node
-        )
+    internal! {
+        /// Names an instance's glTF item: `mesh 2 "chair" primitive 0 (node 7)`, or
+        /// `mesh 2 "chair" primitive 0 (back side) (node 7)` for the back of a double-sided one.
+        pub fn instance_item(&self, instance: &Instance) -> String {
+            let name = self
+                .document
+                .meshes()
+                .nth(instance.mesh)
+                .and_then(|m| m.name().map(|n| format!(" \"{n}\"")))
+                .unwrap_or_default();
+            let side = match instance.side {
+                Side::Front => "",
+                Side::Back => " (back side)",
+            };
+            format!(
+                "mesh {}{name} primitive {}{side} (node {})",
+                instance.mesh, instance.primitive, instance.node
+            )
+        }
     }
 
     fn bad(&self, item: impl Into<String>, reason: impl Into<String>) -> Error {

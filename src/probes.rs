@@ -52,7 +52,7 @@ pub struct ProbeOptions {
 pub const DEFAULT_RAYS: usize = 4096;
 
 /// The most probes a bake makes.
-pub const MAX_PROBES: usize = 1_000_000;
+pub(crate) const MAX_PROBES: usize = 1_000_000;
 
 /// The probe grid: `counts[0] x counts[1] x counts[2]` probes at `origin + spacing (i, j, k)`,
 /// numbered with x fastest, then y, then z.
@@ -118,7 +118,7 @@ pub fn sh_irradiance(sh: &[DVec3; 9], n: DVec3) -> DVec3 {
 
 /// The grid of probes of `scene` at `spacing` (scene units): its first probe and its counts
 /// along x, y and z; an error, which names the counts, when it has more than [`MAX_PROBES`].
-pub fn grid(scene: &Scene, spacing: f64) -> Result<(DVec3, [usize; 3]), String> {
+pub(crate) fn grid(scene: &Scene, spacing: f64) -> Result<(DVec3, [usize; 3]), String> {
     let extent = scene.bounds_max - scene.bounds_min;
     let s = spacing;
     // Cells of side `s` over the bounds, a probe at each cell's centre (none on the bounds,
@@ -147,7 +147,7 @@ pub fn grid(scene: &Scene, spacing: f64) -> Result<(DVec3, [usize; 3]), String> 
 
 /// Bakes the probes of `scene` from its solved `meshes` (`irradiance` at their vertices) on a
 /// grid of `options.spacing`; an error when the grid would have more than [`MAX_PROBES`].
-pub fn bake(
+pub(crate) fn bake(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],

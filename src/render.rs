@@ -21,11 +21,11 @@ use std::collections::BTreeMap;
 /// A pinhole camera in world space.
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
-    pub eye: DVec3,
+    pub(crate) eye: DVec3,
     /// Unit vectors: forward (view direction), up and right.
     pub(crate) forward: DVec3,
-    pub up: DVec3,
-    pub right: DVec3,
+    pub(crate) up: DVec3,
+    pub(crate) right: DVec3,
     /// Vertical field of view, radians.
     pub(crate) yfov: f64,
 }
@@ -110,20 +110,22 @@ impl Camera {
         })
     }
 
-    /// A camera that frames the scene's bounding box from the front-above diagonal.
-    pub fn auto(scene: &Scene) -> Camera {
-        let center = (scene.bounds_min + scene.bounds_max) * 0.5;
-        let radius = scene.extent() * 0.5;
-        let yfov: f64 = 0.8;
-        let dir = DVec3::new(0.6, -0.45, -1.0).normalize();
-        let eye = center - dir * (radius / (yfov * 0.5).sin());
-        let right = dir.cross(DVec3::Y).normalize();
-        Camera {
-            eye,
-            forward: dir,
-            up: right.cross(dir),
-            right,
-            yfov,
+    internal! {
+        /// A camera that frames the scene's bounding box from the front-above diagonal.
+        pub fn auto(scene: &Scene) -> Camera {
+            let center = (scene.bounds_min + scene.bounds_max) * 0.5;
+            let radius = scene.extent() * 0.5;
+            let yfov: f64 = 0.8;
+            let dir = DVec3::new(0.6, -0.45, -1.0).normalize();
+            let eye = center - dir * (radius / (yfov * 0.5).sin());
+            let right = dir.cross(DVec3::Y).normalize();
+            Camera {
+                eye,
+                forward: dir,
+                up: right.cross(dir),
+                right,
+                yfov,
+            }
         }
     }
 }

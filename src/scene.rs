@@ -8,17 +8,17 @@ use glam::{DVec2, DVec3};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
-pub mod cut;
-pub mod emission;
+pub(crate) mod cut;
+pub(crate) mod emission;
 pub mod mixed;
-pub mod surface;
-pub mod texture;
+pub(crate) mod surface;
+pub(crate) mod texture;
 
-pub use surface::{AlbedoOver, Base, Passes};
+pub(crate) use surface::{AlbedoOver, Base, Passes};
 
 /// The geometric tolerances of every stage, as fractions of [`Scene::extent`] (times it: scene
 /// units), so a scene bakes alike at any size. Three levels, by the rounding each must absorb:
-pub mod tolerance {
+pub(crate) mod tolerance {
     /// Points computed along different paths that stand for the same point (a texel corner
     /// found again, a box flat in one axis): f64 rounds each operation to about 1e-16 of the
     /// magnitudes involved, so 1e-9 leaves room for millions of operations and is still far
@@ -46,7 +46,7 @@ pub struct Material {
     pub radiance: DVec3,
     /// Where the colour varies over the surface (a base-colour texture, an alpha test): how.
     /// `None`: `rho` everywhere.
-    pub base: Option<Base>,
+    pub(crate) base: Option<Base>,
 }
 
 impl Material {
@@ -64,9 +64,9 @@ pub struct Triangle {
     /// Unit geometric normal (front side).
     pub normal: DVec3,
     /// Index into [`Scene::materials`].
-    pub material: usize,
+    pub(crate) material: usize,
     /// Index into [`Scene::instances`].
-    pub instance: usize,
+    pub(crate) instance: usize,
     /// Index of the triangle within its instance's index list (`indices[3k..3k+3]`).
     pub(crate) local_index: usize,
     /// Index into [`Scene::polygons`], or `None` for degenerate triangles, which receive nothing.
@@ -75,7 +75,7 @@ pub struct Triangle {
 
 impl Triangle {
     /// Area in square scene units.
-    pub fn area(&self) -> f64 {
+    pub(crate) fn area(&self) -> f64 {
         crate::geometry::triangle_area(&self.p)
     }
 }
@@ -84,15 +84,15 @@ impl Triangle {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Frame {
     pub origin: DVec3,
-    pub u: DVec3,
-    pub v: DVec3,
+    pub(crate) u: DVec3,
+    pub(crate) v: DVec3,
     pub n: DVec3,
 }
 
 impl Frame {
     /// A frame through `origin` with normal `n` and first axis along `u_hint` projected into the
     /// plane (any perpendicular axis when `u_hint` is parallel to `n`).
-    pub fn new(origin: DVec3, n: DVec3, u_hint: DVec3) -> Frame {
+    pub(crate) fn new(origin: DVec3, n: DVec3, u_hint: DVec3) -> Frame {
         let n = n.normalize();
         let mut u = u_hint - n * n.dot(u_hint);
         if u.length_squared() < 1e-20 {
@@ -130,7 +130,7 @@ pub struct Polygon {
     pub triangles_plane: Vec<[DVec2; 3]>,
     /// Boundary edges (edges used by one triangle only) in plane coordinates, oriented with the
     /// polygon on their left.
-    pub boundary: Vec<[DVec2; 2]>,
+    pub(crate) boundary: Vec<[DVec2; 2]>,
     /// Area in square scene units.
     pub area: f64,
 }
@@ -156,7 +156,7 @@ pub(crate) fn point_in_triangle(q: DVec2, t: &[DVec2; 3]) -> bool {
 
 /// The kind of a punctual light (KHR_lights_punctual).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum LightKind {
+pub(crate) enum LightKind {
     /// Omnidirectional point light; intensity in W/sr (glTF: candela).
     Point,
     /// Spot light with cone angles in radians (glTF defaults: inner 0, outer pi/4).
@@ -168,9 +168,9 @@ pub enum LightKind {
 /// A punctual light in world space.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PunctualLight {
-    pub kind: LightKind,
+    pub(crate) kind: LightKind,
     /// Name (or `light N`), for messages.
-    pub name: String,
+    pub(crate) name: String,
     /// Position in world space (unused for directional lights).
     pub position: DVec3,
     /// Unit direction the light points to (spot and directional; the node's -z axis).
@@ -178,10 +178,10 @@ pub struct PunctualLight {
     /// colour x intensity: W/sr per channel for point and spot, W/m² for directional.
     pub intensity: DVec3,
     /// Range in scene units beyond which the light has no effect (glTF `range`), if any.
-    pub range: Option<f64>,
+    pub(crate) range: Option<f64>,
     /// The glTF node that places it, and its index in `KHR_lights_punctual.lights`.
-    pub node: usize,
-    pub index: usize,
+    pub(crate) node: usize,
+    pub(crate) index: usize,
 }
 
 /// Which side of a glTF primitive an [`Instance`] is.
@@ -244,13 +244,14 @@ pub struct Instance {
 #[derive(Clone, Debug, PartialEq)]
 pub struct Derived {
     /// (glTF vertex index, weight) pairs, ascending by vertex.
-    pub weights: Vec<(u32, f64)>,
+    pub(crate) weights: Vec<(u32, f64)>,
 }
 
 impl Instance {
     /// The front side of node 0's mesh 0 primitive 0, nothing mirrored or cut: a triangle list
     /// over world positions, for scenes built in code.
-    pub fn new(positions_world: Vec<DVec3>, indices: Vec<u32>) -> Instance {
+    #[cfg(test)]
+    pub(crate) fn new(positions_world: Vec<DVec3>, indices: Vec<u32>) -> Instance {
         Instance {
             node: 0,
             gpu_instance: None,
@@ -344,12 +345,12 @@ pub struct Scene {
     pub warnings: Vec<Warning>,
     /// The decoded base-colour images that materials' [`Base::texture`] index (shared with
     /// the ray queries' alpha test).
-    pub images: Arc<Vec<texture::Image>>,
+    pub(crate) images: Arc<Vec<texture::Image>>,
     /// The material of each (material, vertex-colour tint) made so far ([`Scene::add_instance`]).
     tints: BTreeMap<Tint, usize>,
     /// How each light is baked and into which layer ([`mixed`]): all lights fully into the
     /// one lightmap unless the bake's rules say otherwise.
-    pub mixed: mixed::Mixed,
+    pub(crate) mixed: mixed::Mixed,
 }
 
 impl Default for Scene {

@@ -1,6 +1,16 @@
 //! Run statistics (`--stats FILE`): per-stage wall times and the counts of every stage.
 //! Field names are stable; later stages add fields.
 
+pub use crate::discontinuity::DmStats;
+pub use crate::lightmap::seams::SeamStats;
+pub use crate::scene::cut::Cut;
+pub use crate::solve::direct::EmitterCost;
+pub use crate::solve::form_factors::HemicubeStats;
+pub use crate::solve::hierarchical::HierStats;
+pub use crate::solve::matrix::MatrixStats;
+pub use crate::solve::sky::SkyStats;
+pub use crate::solve::{DirectStats, SolveStats};
+
 use crate::atlas::Atlas;
 use crate::mesh::{self, ReceiverMesh};
 use crate::progress::Progress;
@@ -21,34 +31,34 @@ pub struct Timings {
     pub mesh: f64,
     pub solve: f64,
     pub lightmap: f64,
-    pub write: f64,
+    pub(crate) write: f64,
     pub total: f64,
 }
 
 /// `--stats`: `probes`.
 #[derive(Clone, Debug, Default, Serialize)]
-pub struct ProbeStats {
+pub(crate) struct ProbeStats {
     /// Probes baked, and of those the ones inside geometry.
-    pub probes: usize,
-    pub inside: usize,
+    pub(crate) probes: usize,
+    pub(crate) inside: usize,
     /// Wall time, s.
-    pub seconds: f64,
+    pub(crate) seconds: f64,
 }
 
 /// Everything `--stats` reports.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Stats {
-    pub input: String,
-    pub mesher: String,
-    pub threads: usize,
+    pub(crate) input: String,
+    pub(crate) mesher: String,
+    pub(crate) threads: usize,
     /// Input triangles (before any cut).
     pub triangles: usize,
     /// Triangles too long for one atlas page, cut before the bake (`scene::cut`).
     pub cut: crate::scene::cut::Cut,
     pub polygons: usize,
-    pub instances: usize,
+    pub(crate) instances: usize,
     pub area_emitters: usize,
-    pub punctual_lights: usize,
+    pub(crate) punctual_lights: usize,
     /// The back sides of double-sided primitives: instances and triangles (included in
     /// `instances` and `triangles`), and how the output writes them (`separate` or `shared`).
     pub double_sided: DoubleSidedStats,
@@ -57,7 +67,7 @@ pub struct Stats {
     pub budget: usize,
     pub(crate) budget_from: String,
     pub elements: usize,
-    pub vertices: usize,
+    pub(crate) vertices: usize,
     /// Discontinuity meshing counters (only with `--mesher discontinuity`).
     pub discontinuity: Option<crate::discontinuity::DmStats>,
     pub solve: crate::solve::SolveStats,
@@ -71,7 +81,7 @@ pub struct Stats {
     pub lightmap_pages: u32,
     /// Transfer curve of the 8-bit lightmap images: `srgb` or `linear`.
     pub(crate) lightmap_encoding: String,
-    pub texels_per_unit: f32,
+    pub(crate) texels_per_unit: f32,
     /// `MOZ_lightmap` intensity: H (W/m²) of a full-scale texel.
     pub(crate) lightmap_intensity: f64,
     /// Seam edges, samples, stitched texels, and the seam mismatch before and after
@@ -79,10 +89,10 @@ pub struct Stats {
     pub seams: crate::lightmap::seams::SeamStats,
     /// Ambient occlusion (`--ao`); its time is in `timings_s.lightmap`.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub ao: Option<crate::lightmap::ao::AoStats>,
+    pub(crate) ao: Option<crate::lightmap::ao::AoStats>,
     /// Light probes (`--probes`).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub probes: Option<ProbeStats>,
+    pub(crate) probes: Option<ProbeStats>,
     pub timings_s: Timings,
     pub warnings: Vec<String>,
 }
@@ -91,7 +101,7 @@ impl Stats {
     /// The counts of a finished bake (scene, meshes, solve, atlas) and its warnings: the
     /// scene's, a mesh over its budget, the solve's, no light anywhere, an unconverged solve.
     /// The fields set before the stages (input, options, budget, cut, timings) stay.
-    pub fn gather(
+    pub(crate) fn gather(
         &mut self,
         scene: &Scene,
         meshes: &[ReceiverMesh],
@@ -164,7 +174,12 @@ impl Stats {
 }
 
 /// Measures the wall time of one stage into `slot` and reports its start and end as progress.
-pub fn stage<T>(slot: &mut f64, name: &str, progress: &Progress<'_>, f: impl FnOnce() -> T) -> T {
+pub(crate) fn stage<T>(
+    slot: &mut f64,
+    name: &str,
+    progress: &Progress<'_>,
+    f: impl FnOnce() -> T,
+) -> T {
     progress(name, 0, 1);
     let start = Instant::now();
     let out = f();

@@ -75,7 +75,7 @@ pub struct Hit {
     /// Distance along the (unit) ray direction, scene units.
     pub t: f64,
     /// Index into [`Scene::triangles`].
-    pub triangle: usize,
+    pub(crate) triangle: usize,
 }
 
 impl Visibility {
@@ -448,7 +448,7 @@ impl Visibility {
     /// grown by `epsilon` (so f32 storage never loses one), then sorts `out` and removes
     /// duplicates. Conservative: every triangle that meets the box is listed, and some that do
     /// not.
-    pub fn triangles_overlapping(&self, min: DVec3, max: DVec3, out: &mut Vec<usize>) {
+    pub(crate) fn triangles_overlapping(&self, min: DVec3, max: DVec3, out: &mut Vec<usize>) {
         if RECORDING.load(Ordering::Relaxed) {
             COUNTS[Query::Box as usize].fetch_add(1, Ordering::Relaxed);
         }
@@ -552,9 +552,6 @@ pub enum Query {
 }
 
 impl Query {
-    /// Every query kind, in the order of [`RayCounts::by_query`].
-    pub const ALL: [Query; 4] = [Query::FirstHit, Query::Segment, Query::Towards, Query::Box];
-
     /// True for the closest-hit query; the others stop at any hit.
     pub fn closest_hit(self) -> bool {
         self == Query::FirstHit
@@ -581,7 +578,7 @@ pub struct RecordedRay {
 /// the recorder's cap).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct RayCounts {
-    /// Indexed like [`Query::ALL`].
+    /// Indexed by [`Query`] (`q as usize`).
     pub(crate) by_query: [u64; 4],
 }
 

@@ -47,44 +47,44 @@ use std::collections::BTreeMap;
 
 /// How a directional lightmap's ratio pages decode, as written into their textures' extras
 /// ([`crate::lightmap::directional`]).
-pub const DIRECTIONAL_DECODE: &str = "r = code / 255 * 2 - 1 per channel and axis; \
+pub(crate) const DIRECTIONAL_DECODE: &str = "r = code / 255 * 2 - 1 per channel and axis; \
      H(n) = H * (0.5 + 2 * (r_x n_x + r_y n_y + r_z n_z)) for a unit world-space normal n";
 
 /// The lightmap as it goes into the file.
-pub struct LightmapImage {
+pub(crate) struct LightmapImage {
     /// PNG bytes (8-bit RGB in `encoding`), one per atlas page, in page order.
     pub(crate) pngs: Vec<Vec<u8>>,
     /// `MOZ_lightmap` intensity, W/m²: irradiance H = decoded texel value (0..1) x intensity.
-    pub intensity: f64,
+    pub(crate) intensity: f64,
     /// Transfer curve of the PNGs' 8-bit values.
-    pub encoding: Encoding,
+    pub(crate) encoding: Encoding,
     /// The ambient occlusion (`--ao`), same pages.
-    pub ao: Option<AoImage>,
+    pub(crate) ao: Option<AoImage>,
     /// The light groups' layers ([`crate::scene::mixed`]), same pages and encoding.
-    pub layers: Vec<LayerImage>,
+    pub(crate) layers: Vec<LayerImage>,
     /// The light probes (`--probes`), written in the root's `extras`.
-    pub probes: Option<crate::probes::Probes>,
+    pub(crate) probes: Option<crate::probes::Probes>,
     /// The directional lightmap's ratio pages (`--directional`): per axis `x`, `y`, `z`, PNG
     /// bytes ([`crate::lightmap::directional::to_rgb8`]) per page.
-    pub directional: Option<[Vec<Vec<u8>>; 3]>,
+    pub(crate) directional: Option<[Vec<Vec<u8>>; 3]>,
 }
 
 /// One light group's layer as it goes into the file.
-pub struct LayerImage {
+pub(crate) struct LayerImage {
     /// The group's name.
-    pub name: String,
+    pub(crate) name: String,
     /// PNG bytes as [`LightmapImage::pngs`], one per page.
     pub(crate) pngs: Vec<Vec<u8>>,
     /// Irradiance H (W/m²) of a full-scale texel of this layer.
-    pub intensity: f64,
+    pub(crate) intensity: f64,
 }
 
 /// The ambient occlusion as it goes into the file.
-pub struct AoImage {
+pub(crate) struct AoImage {
     /// PNG bytes (8-bit grey, linear: AO = value / 255), one per atlas page, in page order.
     pub(crate) pngs: Vec<Vec<u8>>,
     /// The occlusion distance, scene units.
-    pub distance: f64,
+    pub(crate) distance: f64,
 }
 
 const ARRAY_BUFFER: u64 = 34962;
@@ -194,7 +194,12 @@ fn number(ct: u64, x: f64) -> Value {
 }
 
 /// Builds the output glb bytes.
-pub fn build(gltf: &Gltf, scene: &Scene, atlas: &Atlas, image: &LightmapImage) -> Result<Vec<u8>> {
+pub(crate) fn build(
+    gltf: &Gltf,
+    scene: &Scene,
+    atlas: &Atlas,
+    image: &LightmapImage,
+) -> Result<Vec<u8>> {
     let mut root = gltf.json.clone();
     if !root.is_object() {
         return Err(Error::NotGltf {

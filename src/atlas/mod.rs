@@ -115,7 +115,7 @@ const BOUNDARY_MARGIN: f64 = 0.8;
 pub(crate) const MAX_RESOLUTION: u32 = 16384;
 
 /// Atlas side used when neither `texels_per_unit` nor `resolution` is given.
-pub const DEFAULT_RESOLUTION: u32 = 1024;
+pub(crate) const DEFAULT_RESOLUTION: u32 = 1024;
 
 /// Page side, in texels, used with a fixed `texels_per_unit` when no `page_size` is given: 2048
 /// is the largest size every WebGL2 / GLES3 device must support as a texture (4096 is common,
@@ -166,7 +166,7 @@ const SIZING_PACK_ATTEMPTS: i32 = 256;
 /// ([`AtlasError::DoesNotFit`]) instead of halving on to [`MAX_PACK_ATTEMPTS`].
 const MIN_CHART_SIDE: f32 = 1.0;
 
-/// What can go wrong in [`pack`].
+/// What can go wrong in packing the atlas ([`pack_estimating`]).
 #[derive(Debug, thiserror::Error)]
 pub enum AtlasError {
     /// An input mesh is malformed; `mesh` is its index in the inputs.
@@ -248,12 +248,12 @@ pub enum AtlasError {
 /// One mesh to chart: world-space positions (so texel density is uniform in the scene's units) and
 /// triangle indices.
 #[derive(Debug, Clone, Copy)]
-pub struct AtlasInput<'a> {
+pub(crate) struct AtlasInput<'a> {
     /// Vertex positions in scene units. All must be finite.
-    pub positions: &'a [[f32; 3]],
+    pub(crate) positions: &'a [[f32; 3]],
     /// Triangle list: three indices into `positions` per triangle. An empty list is allowed (the
     /// output mesh is then empty).
-    pub indices: &'a [u32],
+    pub(crate) indices: &'a [u32],
 }
 
 /// How to size the atlas.
@@ -268,16 +268,16 @@ pub struct AtlasInput<'a> {
 ///   density, [`pack`] retries with a smaller density until they do, and [`Atlas::texels_per_unit`]
 ///   reports the one used.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AtlasOptions {
+pub(crate) struct AtlasOptions {
     /// Texels per scene unit (metre). None: derived from `resolution`.
-    pub texels_per_unit: Option<f32>,
+    pub(crate) texels_per_unit: Option<f32>,
     /// Target atlas width and height in texels. None with texels_per_unit None: 1024.
-    pub resolution: Option<u32>,
+    pub(crate) resolution: Option<u32>,
     /// Texels of padding between charts (>= 2).
-    pub padding: u32,
+    pub(crate) padding: u32,
     /// Largest page side, in texels, with `texels_per_unit` given and `resolution` not; more
     /// pages are used when the charts need them. Ignored otherwise.
-    pub page_size: u32,
+    pub(crate) page_size: u32,
 }
 
 impl Default for AtlasOptions {
@@ -308,7 +308,7 @@ pub struct AtlasMesh {
     pub indices: Vec<u32>,
     /// For each triangle, the page it lies on (0..[`Atlas::pages`]). Triangles left out of
     /// every chart get the page of the mesh's first charted triangle.
-    pub page: Vec<u32>,
+    pub(crate) page: Vec<u32>,
 }
 
 /// The packed atlas: `pages` pages of `width` x `height` texels each.

@@ -31,10 +31,10 @@ pub(crate) const LINES_BUDGET_MAX: usize = 1_000_000;
 
 /// The element budget of a bake, and what chose it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Budget {
-    pub elements: usize,
+pub(crate) struct Budget {
+    pub(crate) elements: usize,
     /// `--budget`, `lightmap texels`, `input triangles`, `geometry`, `minimum` or `maximum`.
-    pub from: &'static str,
+    pub(crate) from: &'static str,
 }
 
 /// The element budget: `requested` (`--budget`) if given, else the largest of

@@ -3,7 +3,6 @@
 mod budget;
 mod output;
 
-pub use budget::Budget;
 pub(crate) use budget::element_budget;
 pub(crate) use output::exr_page_path;
 pub use output::{OutputFiles, bake_file, glb_bytes};
@@ -78,7 +77,7 @@ pub enum DoubleSided {
 
 impl DoubleSided {
     /// `separate` or `shared`, as on the command line.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             DoubleSided::Separate => "separate",
             DoubleSided::Shared => "shared",
@@ -120,17 +119,34 @@ impl Default for BakeOptions {
     }
 }
 
-/// The result of a bake, every stage's output kept for inspection and tests.
+/// The result of a bake, every stage's output kept for inspection and tests (the stages'
+/// outputs are public with the feature `internals`).
 pub struct Bake {
+    #[cfg(feature = "internals")]
     pub scene: Scene,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) scene: Scene,
     /// Discontinuity segments per polygon (empty for the other meshers).
+    #[cfg(feature = "internals")]
     pub segments: Vec<Vec<Segment>>,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) segments: Vec<Vec<Segment>>,
+    #[cfg(feature = "internals")]
     pub meshes: Vec<ReceiverMesh>,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) meshes: Vec<ReceiverMesh>,
+    #[cfg(feature = "internals")]
     pub solution: Solution,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) solution: Solution,
+    #[cfg(feature = "internals")]
     pub atlas: Atlas,
+    #[cfg(not(feature = "internals"))]
+    pub(crate) atlas: Atlas,
+    /// The lightmap: irradiance `H` per texel, linear, without albedo.
     pub lightmap: Lightmap,
     /// The ambient occlusion, in the lightmap's layout (`--ao`).
-    pub ao: Option<Lightmap>,
+    pub(crate) ao: Option<Lightmap>,
     /// Per light group, its name and its lights' part of `lightmap`, in the same layout
     /// ([`scene::mixed`]).
     pub layers: Vec<(String, Lightmap)>,
@@ -138,7 +154,7 @@ pub struct Bake {
     pub probes: Option<crate::probes::Probes>,
     /// The directional lightmap's ratio pages `r` (`x`, `y`, `z`), in the lightmap's layout
     /// (`--directional`, [`lightmap::directional`]).
-    pub directional: Option<[Lightmap; 3]>,
+    pub(crate) directional: Option<[Lightmap; 3]>,
     pub stats: Stats,
 }
 

@@ -9,22 +9,22 @@ use plotters::prelude::*;
 #[derive(Clone, Debug)]
 pub(crate) struct Series {
     pub(crate) label: String,
-    pub colour: (u8, u8, u8),
+    pub(crate) colour: (u8, u8, u8),
     /// Dashed (e.g. sampled direct light) rather than solid.
     pub(crate) dashed: bool,
     /// (x, y) points, both positive (log axes); others are skipped.
-    pub points: Vec<(f64, f64)>,
+    pub(crate) points: Vec<(f64, f64)>,
 }
 
 /// One panel: log-log axes with its own ranges.
 #[derive(Clone, Debug)]
-pub struct Panel {
-    pub title: String,
+pub(crate) struct Panel {
+    pub(crate) title: String,
     pub(crate) x_label: String,
     pub(crate) y_label: String,
     pub(crate) series: Vec<Series>,
     /// A horizontal reference line (e.g. the reference's own noise), with its legend label.
-    pub floor: Option<(f64, String)>,
+    pub(crate) floor: Option<(f64, String)>,
 }
 
 /// The reference line's colour (and its legend sample's).
@@ -38,7 +38,7 @@ fn chart_error<E: std::fmt::Debug>(e: E) -> Error {
 }
 
 /// The panels as an SVG, `columns` panels per row.
-pub fn svg(panels: &[Panel], columns: usize) -> Result<String> {
+pub(crate) fn svg(panels: &[Panel], columns: usize) -> Result<String> {
     let size = grid_size(panels.len(), columns);
     let mut out = String::new();
     {
@@ -50,7 +50,7 @@ pub fn svg(panels: &[Panel], columns: usize) -> Result<String> {
 }
 
 /// The panels as a PNG (text in DejaVu Sans, bundled), `columns` panels per row.
-pub fn png(panels: &[Panel], columns: usize) -> Result<Vec<u8>> {
+pub(crate) fn png(panels: &[Panel], columns: usize) -> Result<Vec<u8>> {
     let (w, h) = grid_size(panels.len(), columns);
     let mut rgb = vec![255u8; (w * h * 3) as usize];
     {

@@ -32,7 +32,7 @@ impl Region {
         Region::Indirect,
     ];
 
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Region::Lit => "lit",
             Region::Penumbra => "penumbra",
@@ -78,7 +78,7 @@ pub struct ErrorStats {
     /// The reference's RMS standard error over the same texels.
     pub noise: f64,
     /// Largest texel error beyond three reference standard errors.
-    pub max: f64,
+    pub(crate) max: f64,
 }
 
 #[derive(Default)]
@@ -181,14 +181,14 @@ const MESH_POINTS: [([f64; 3], f64); 7] = {
 #[derive(Clone, Copy, Debug)]
 pub struct MeshSample {
     /// The receiver polygon.
-    pub polygon: usize,
+    pub(crate) polygon: usize,
     /// The area it stands for (scene units²).
-    pub weight: f64,
+    pub(crate) weight: f64,
     /// What linear interpolation between the element's vertex values shows there (W/m²,
     /// channel mean).
-    pub shown: f64,
+    pub(crate) shown: f64,
     /// The exact direct irradiance there (W/m², channel mean).
-    pub exact: f64,
+    pub(crate) exact: f64,
 }
 
 /// How well a mesh shows the direct light, with no Monte Carlo reference: at seven points per

@@ -110,9 +110,9 @@ fn filled(reference: &ReferenceMap, texels: Vec<DVec3>) -> Lightmap {
 /// A square window of one polygon's plane, scene units.
 #[derive(Clone, Copy, Debug, serde::Serialize)]
 pub(crate) struct Window {
-    pub polygon: usize,
-    pub min: [f64; 2],
-    pub side: f64,
+    pub(crate) polygon: usize,
+    pub(crate) min: [f64; 2],
+    pub(crate) side: f64,
 }
 
 impl Window {
@@ -301,10 +301,10 @@ pub(crate) fn locate(polygon: &Polygon, q: DVec2) -> Option<(usize, [f64; 3])> {
 
 /// One column of the strip: a title, caption lines, and its cells top to bottom (all cells of a
 /// row the same size).
-pub struct Column {
-    pub title: String,
+pub(crate) struct Column {
+    pub(crate) title: String,
     pub(crate) caption: Vec<String>,
-    pub cells: Vec<RgbImage>,
+    pub(crate) cells: Vec<RgbImage>,
 }
 
 const HEADER: u32 = 58;
@@ -312,7 +312,7 @@ const GAP: u32 = 6;
 
 /// The columns side by side, each under its title and caption, with `footer` lines of
 /// explanation below.
-pub fn strip(columns: &[Column], footer: &[String]) -> Result<RgbImage> {
+pub(crate) fn strip(columns: &[Column], footer: &[String]) -> Result<RgbImage> {
     register_font()?;
     let rows = columns.iter().map(|c| c.cells.len()).max().unwrap_or(0);
     let row_heights: Vec<u32> = (0..rows)
@@ -368,7 +368,7 @@ pub fn strip(columns: &[Column], footer: &[String]) -> Result<RgbImage> {
 }
 
 /// Encodes an RGB image as PNG.
-pub fn png(img: &RgbImage) -> Result<Vec<u8>> {
+pub(crate) fn png(img: &RgbImage) -> Result<Vec<u8>> {
     crate::write::png_bytes(img.as_raw(), img.width(), img.height())
 }
 

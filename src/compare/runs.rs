@@ -66,7 +66,7 @@ impl Method {
     }
 
     /// Every mesher with exact and with sampled direct light (progressive, closed form).
-    pub fn all() -> Vec<Method> {
+    pub(crate) fn all() -> Vec<Method> {
         let meshers = [Mesher::Uniform, Mesher::Adaptive, Mesher::Discontinuity];
         meshers
             .iter()
@@ -82,7 +82,7 @@ impl Method {
     /// (`-matrix`), hierarchical radiosity at its default tolerance and at ten times it (its
     /// speed/accuracy dial), hemicube form factors with either patch solver; and the whole
     /// classic 1985 pipeline, `uniform-matrix-hemicube`.
-    pub fn classic() -> Vec<Method> {
+    pub(crate) fn classic() -> Vec<Method> {
         let d = Method::new(Mesher::Discontinuity, DirectMethod::Exact);
         vec![
             Method {

@@ -106,7 +106,7 @@ pub struct DmStats {
     /// Wedge pieces kept as constraints.
     pub kept: usize,
     /// Wedge pieces whose generator was hidden.
-    pub hidden: usize,
+    pub(crate) hidden: usize,
     /// Wedges whose generator the light does not see at any of [`GENERATOR_SAMPLES`](trace::GENERATOR_SAMPLES) points
     /// (an occluder behind a wall, in another room): not intersected with any receiver, as
     /// every piece of them would be hidden.

@@ -77,7 +77,7 @@ pub(crate) fn ratios(irradiance: &Lightmap, light: &[Lightmap; 3]) -> [Lightmap;
 
 /// The irradiance for a unit world-space normal `n` (W/m², per channel) from the lightmap's
 /// irradiance `h` and its ratios `r` (`x`, `y`, `z`): `H (1/2 + 2 r · n)`, at least zero.
-pub fn shade(h: DVec3, r: [DVec3; 3], n: DVec3) -> DVec3 {
+pub(crate) fn shade(h: DVec3, r: [DVec3; 3], n: DVec3) -> DVec3 {
     let dot = r[0] * n.x + r[1] * n.y + r[2] * n.z;
     (h * (DVec3::splat(0.5) + 2.0 * dot)).max(DVec3::ZERO)
 }

@@ -89,7 +89,7 @@ impl Lightmap {
     }
 
     /// The texels of page `p` (row-major, top row first).
-    pub fn page(&self, p: usize) -> &[DVec3] {
+    pub(crate) fn page(&self, p: usize) -> &[DVec3] {
         let n = self.width as usize * self.height as usize;
         &self.texels[p * n..(p + 1) * n]
     }
@@ -112,7 +112,7 @@ pub enum Encoding {
 
 impl Encoding {
     /// The name written into the file (`extras.penumbra.encoding`).
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             Encoding::Srgb => "srgb",
             Encoding::Linear => "linear",
@@ -395,16 +395,16 @@ impl Raster<'_> {
 /// A visible sub-sample of a texel, as [`rasterize_with`] asks for its value.
 pub(crate) struct SubSample {
     /// The receiver mesh it lies on (an index into `meshes`).
-    pub mesh: usize,
+    pub(crate) mesh: usize,
     /// Its point in the polygon's plane coordinates (scene units).
-    pub q: DVec2,
+    pub(crate) q: DVec2,
     /// Its point in world space.
-    pub p: DVec3,
+    pub(crate) p: DVec3,
     /// The texel's centre on the triangle's plane, world space: the same for the sub-samples of
     /// one texel on one triangle.
-    pub centre: DVec3,
+    pub(crate) centre: DVec3,
     /// The texel's size there: the sum of its two sides' lengths (scene units).
-    pub size: f64,
+    pub(crate) size: f64,
 }
 
 /// What a value function of [`rasterize_with`] keeps between calls: the sub-samples of a
@@ -412,13 +412,13 @@ pub(crate) struct SubSample {
 #[derive(Default)]
 pub(crate) struct Hint {
     /// The mesh triangle that held the last point ([`Locator::value_near`]).
-    pub triangle: Option<u32>,
+    pub(crate) triangle: Option<u32>,
     /// The texel (its [`SubSample::centre`]) that `value` and `list` were computed for.
-    pub texel: Option<DVec3>,
+    pub(crate) texel: Option<DVec3>,
     /// A value computed once per texel.
-    pub value: DVec3,
+    pub(crate) value: DVec3,
     /// A list computed once per texel.
-    pub list: Vec<u32>,
+    pub(crate) list: Vec<u32>,
 }
 
 /// [`rasterize`] of any quantity: `value` gives the value at a visible sub-sample (with a

@@ -69,21 +69,21 @@ const CG_TOLERANCE: f64 = 1e-10;
 
 /// One side of a seam edge: where the edge lies in the lightmap.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Side {
+pub(crate) struct Side {
     /// Lightmap page.
-    pub page: u32,
+    pub(crate) page: u32,
     /// UV of the edge's two ends, texels within the page (the same end first on both sides).
-    pub ends: [DVec2; 2],
+    pub(crate) ends: [DVec2; 2],
 }
 
 /// A scene edge whose two sides lie at different places of the lightmap.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SeamEdge {
     /// World positions of the edge's two ends (in the order of [`Side::ends`]).
-    pub ends: [DVec3; 2],
+    pub(crate) ends: [DVec3; 2],
     /// Unit front normal of the first side's triangle.
-    pub normal: DVec3,
-    pub sides: [Side; 2],
+    pub(crate) normal: DVec3,
+    pub(crate) sides: [Side; 2],
 }
 
 /// The seam edges of a scene's atlas, and the UV seams left alone at creases.
@@ -93,7 +93,7 @@ pub struct Seams {
     pub edges: Vec<SeamEdge>,
     /// Edges whose two sides lie at different places of the lightmap but meet at a crease
     /// (normals further apart than [`SMOOTH_COS`]): not stitched.
-    pub creases: usize,
+    pub(crate) creases: usize,
 }
 
 /// The texels a bilinear lookup reads and their weights.
@@ -110,7 +110,7 @@ impl Footprint {
     /// `(x + 0.5, y + 0.5)`) on page `page` of a map of `width` x `height` pages, with linear
     /// filtering and clamp-to-edge wrapping, as the output's sampler asks of a client.
     /// `width` and `height` must be at least 1.
-    pub fn at(width: u32, height: u32, page: usize, uv: DVec2) -> Footprint {
+    pub(crate) fn at(width: u32, height: u32, page: usize, uv: DVec2) -> Footprint {
         let (w, h) = (width as usize, height as usize);
         let x = (uv.x - 0.5).clamp(0.0, w as f64 - 1.0);
         let y = (uv.y - 0.5).clamp(0.0, h as f64 - 1.0);
@@ -135,7 +135,7 @@ impl Footprint {
     }
 
     /// The lookup's value in `texels`.
-    pub fn sample(&self, texels: &[DVec3]) -> DVec3 {
+    pub(crate) fn sample(&self, texels: &[DVec3]) -> DVec3 {
         (0..4)
             .map(|k| texels[self.texels[k]] * self.weights[k])
             .sum()
@@ -146,7 +146,7 @@ impl Footprint {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SeamSample {
     /// The scene point (world space).
-    pub point: DVec3,
+    pub(crate) point: DVec3,
     pub sides: [Footprint; 2],
 }
 
@@ -270,7 +270,7 @@ pub struct Mismatch {
     pub mean: f64,
     pub max: f64,
     /// The sample with the largest (the first of equals), if any.
-    pub worst: Option<usize>,
+    pub(crate) worst: Option<usize>,
 }
 
 /// The mismatch of `texels` at `samples`, relative to `scale`; zero without samples or when
@@ -310,9 +310,9 @@ pub fn mean_covered(map: &Lightmap) -> f64 {
 
 /// What [`stitch`] moved.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Stitched {
+pub(crate) struct Stitched {
     /// The texels that were unknowns (in some footprint), sorted.
-    pub texels: Vec<usize>,
+    pub(crate) texels: Vec<usize>,
     /// Connected groups solved.
     pub(crate) groups: usize,
     /// Most conjugate-gradient iterations any group took.
@@ -320,7 +320,7 @@ pub struct Stitched {
 }
 
 /// Least-squares stitching of `texels` along `samples` (module documentation).
-pub fn stitch(texels: &mut [DVec3], samples: &[SeamSample]) -> Stitched {
+pub(crate) fn stitch(texels: &mut [DVec3], samples: &[SeamSample]) -> Stitched {
     // Equations: (texel, coefficient) runs, side A positive, side B negative, merged.
     let mut starts = vec![0];
     let mut terms: Vec<(usize, f64)> = Vec::new();
@@ -526,7 +526,7 @@ pub struct SeamStats {
     pub mismatch_max_before: f64,
     /// Where the largest mismatch before stitching is: the world point of its sample (`null`
     /// without samples).
-    pub worst_before_at: Option<[f64; 3]>,
+    pub(crate) worst_before_at: Option<[f64; 3]>,
     /// The same after stitching (equal to the before values with `--seams off`).
     pub mismatch_mean: f64,
     pub mismatch_max: f64,

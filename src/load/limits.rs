@@ -72,7 +72,7 @@ pub const DEFAULT_POLYGONS: usize = 200_000;
 const PIXEL_BYTES: u64 = 12;
 
 /// How many times [`Limits::image_bytes`] all the images of a bake may take together.
-pub const IMAGES_TOGETHER: u64 = 8;
+pub(crate) const IMAGES_TOGETHER: u64 = 8;
 
 /// Bytes a decoded `width` x `height` image is counted as against [`Limits::image_bytes`].
 pub(crate) fn decoded_bytes(width: u32, height: u32) -> u64 {

@@ -19,7 +19,7 @@ pub(crate) type Refusal = String;
 /// (`--allow-outside DIR`).
 pub(crate) struct Confinement<'a> {
     /// Folders allowed besides the input's own, as given.
-    pub allow: &'a [PathBuf],
+    pub(crate) allow: &'a [PathBuf],
 }
 
 impl Confinement<'_> {

@@ -19,7 +19,7 @@ use serde_json::Value;
 /// A problem found: the item's JSON path, and what is wrong with it.
 #[derive(Debug)]
 pub(crate) struct Invalid {
-    pub item: String,
+    pub(crate) item: String,
     pub(crate) reason: String,
 }
 

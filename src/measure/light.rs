@@ -21,7 +21,7 @@ pub struct LightError {
 
 impl LightError {
     /// Runs the bakes and prints one line per bake and one per error measured.
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub(crate) fn run(&self) -> anyhow::Result<()> {
         let gltf = super::read(&self.input)?;
         let errors: Vec<f64> = std::iter::once(0.0)
             .chain(self.light_error.iter().copied())
@@ -94,7 +94,7 @@ pub struct LightShown {
 
 impl LightShown {
     /// Runs the bake and prints the totals and the polygons.
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub(crate) fn run(&self) -> anyhow::Result<()> {
         let gltf = super::read(&self.input)?;
         let options = BakeOptions {
             budget: self.budget,

@@ -39,7 +39,7 @@ pub struct MeshError {
 
 impl MeshError {
     /// Runs one direct-light bake per mesher and prints its errors.
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub(crate) fn run(&self) -> anyhow::Result<()> {
         let gltf = super::read(&self.input)?;
         println!("{}", self.input.display());
         for &mesher in &self.meshers {
@@ -152,7 +152,7 @@ pub struct DmCoverage {
 
 impl DmCoverage {
     /// Meshes the scene and prints the followed length.
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub(crate) fn run(&self) -> anyhow::Result<()> {
         let gltf = super::read(&self.input)?;
         let (scene, segments, meshes) = meshes(&gltf, &BakeOptions::default())?;
         let (mut total, mut covered) = (0.0, 0.0);

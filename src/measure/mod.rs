@@ -21,9 +21,9 @@ mod light;
 mod mesh;
 mod solvers;
 
-pub use light::{LightError, LightShown};
-pub use mesh::{DmCoverage, MeshError};
-pub use solvers::{SolverDiff, SolverError};
+pub(crate) use light::{LightError, LightShown};
+pub(crate) use mesh::{DmCoverage, MeshError};
+pub(crate) use solvers::{SolverDiff, SolverError};
 
 use crate::load::{self, Gltf};
 use std::path::Path;

@@ -55,7 +55,7 @@ pub struct SolverError {
 
 impl SolverError {
     /// Runs the bakes and the reference; prints one line of errors and one of biases per bake.
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub(crate) fn run(&self) -> anyhow::Result<()> {
         let gltf = super::read(&self.input)?;
         let mut options = BakeOptions {
             resolution: Some(self.resolution),
@@ -218,7 +218,7 @@ pub struct SolverDiff {
 
 impl SolverDiff {
     /// Runs both bakes and prints their difference.
-    pub fn run(&self) -> anyhow::Result<()> {
+    pub(crate) fn run(&self) -> anyhow::Result<()> {
         let gltf = super::read(&self.input)?;
         let mut options = BakeOptions {
             budget: self.budget,

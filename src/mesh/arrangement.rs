@@ -12,9 +12,9 @@ use std::collections::BTreeMap;
 /// The planar graph: merged points and non-crossing edges, each with the tag of the first input
 /// segment that produced it.
 #[derive(Clone, Debug, Default)]
-pub struct Arrangement<T> {
-    pub points: Vec<DVec2>,
-    pub edges: Vec<(u32, u32, T)>,
+pub(crate) struct Arrangement<T> {
+    pub(crate) points: Vec<DVec2>,
+    pub(crate) edges: Vec<(u32, u32, T)>,
 }
 
 /// Merges points closer than `tol` (grid hashing, first point wins).
@@ -58,7 +58,7 @@ impl Snapper {
 }
 
 /// Builds the arrangement of `segments` (earlier segments' tags win on shared pieces).
-pub fn build<T: Copy>(segments: &[(DVec2, DVec2, T)], tol: f64) -> Arrangement<T> {
+pub(crate) fn build<T: Copy>(segments: &[(DVec2, DVec2, T)], tol: f64) -> Arrangement<T> {
     let tol = tol.max(f64::MIN_POSITIVE);
     let mut snapper = Snapper {
         tol,

@@ -6,7 +6,7 @@
 //! Delaunay refinement as implemented by spade (Shewchuk, "Delaunay refinement algorithms for
 //! triangular mesh generation", 2002).
 
-pub mod arrangement;
+pub(crate) mod arrangement;
 mod budget;
 mod cdt;
 mod lines;
@@ -19,7 +19,7 @@ use budget::{
 pub(crate) use budget::{BUDGET_SLACK, element_count, geometry_floor, lines_floor};
 pub use cdt::triangulate_with;
 pub(crate) use cdt::{ANGLE_LIMIT_DEG, triangulate, triangulate_points};
-pub use safe_frame::{MeshFailure, SAFE_EXTENT};
+pub(crate) use safe_frame::MeshFailure;
 
 use crate::discontinuity::{Kind, Segment};
 use crate::scene::Scene;
@@ -84,11 +84,11 @@ pub struct ReceiverMesh {
 /// A mesh edge on a discontinuity segment.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Constraint {
-    pub a: u32,
-    pub b: u32,
+    pub(crate) a: u32,
+    pub(crate) b: u32,
     pub kind: Kind,
     /// [`Segment::event`] of the segment.
-    pub event: u32,
+    pub(crate) event: u32,
 }
 
 impl ReceiverMesh {
@@ -167,7 +167,7 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 /// stays under where the rounds stop ([`rounds_stop`]) whenever the lines leave room there.
 /// Returns the meshes, what became of the segments passed to the triangulation and the wedge
 /// pieces dropped for the budget.
-pub fn discontinuity(
+pub(crate) fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],
     budget: usize,
@@ -327,7 +327,7 @@ pub fn discontinuity(
 /// longest edge at its midpoint; the error of `refine_by_light`), then solve and split again,
 /// until the budget is reached or no element's error is over [`LIGHT_TOLERANCE`] of the
 /// brightest vertex. `evaluate` gives the values (irradiance) at every mesh's vertices.
-pub fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) -> Vec<ReceiverMesh> {
+pub(crate) fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) -> Vec<ReceiverMesh> {
     let start = uniform(scene, (budget / 4).max(1));
     refine_by_light(
         &start,

@@ -11,14 +11,14 @@ use glam::DVec2;
 /// are. A polygon outside this range is scaled into it by a power of two first, which is exact,
 /// so its vertices map back bit for bit; the scenes in practical units keep their own frame,
 /// and their meshes stay the same to the last bit.
-pub const SAFE_EXTENT: std::ops::RangeInclusive<f64> = 1e-3..=1e4;
+pub(crate) const SAFE_EXTENT: std::ops::RangeInclusive<f64> = 1e-3..=1e4;
 
 /// A triangulation that panicked, as the payload it unwinds with: the polygon (index into
 /// [`crate::scene::Scene::polygons`]) and the panic's message. The bake turns it into an error.
 #[derive(Debug)]
-pub struct MeshFailure {
-    pub polygon: usize,
-    pub message: String,
+pub(crate) struct MeshFailure {
+    pub(crate) polygon: usize,
+    pub(crate) message: String,
 }
 
 /// Runs `triangulate` on the polygon in a frame scaled by a power of two when its extent is

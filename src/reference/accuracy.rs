@@ -34,15 +34,15 @@ pub(crate) const GROUND_BAND: f64 = 0.04;
 /// Error of one set of texels, relative to the mean reference irradiance of all covered texels.
 #[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize)]
 pub struct Accuracy {
-    pub texels: usize,
+    pub(crate) texels: usize,
     /// RMSE with the reference noise removed, as a fraction of the mean.
     pub rmse: f64,
     /// Mean of (bake - reference), as a fraction of the mean.
-    pub bias: f64,
+    pub(crate) bias: f64,
     /// The reference's RMS standard error, as a fraction of the mean.
-    pub noise: f64,
+    pub(crate) noise: f64,
     /// This set's part of the total squared error (0..1; 1 for all texels).
-    pub share: f64,
+    pub(crate) share: f64,
 }
 
 /// Accuracy over all covered texels and by region (`ground-lit`, `wall-shadow`, ...).

@@ -27,7 +27,7 @@ pub struct Cut {
     /// Input triangles that were split.
     pub triangles_cut: usize,
     /// Triangles the split ones became.
-    pub pieces: usize,
+    pub(crate) pieces: usize,
     /// Vertices added.
     pub(crate) vertices_added: usize,
 }

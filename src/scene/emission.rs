@@ -25,25 +25,25 @@ use glam::{DVec2, DVec3};
 use std::collections::BTreeMap;
 
 /// Texels of the emissive texture along a piece's edge that the split aims for.
-pub const TEXELS_PER_PIECE: f64 = 4.0;
+pub(crate) const TEXELS_PER_PIECE: f64 = 4.0;
 
 /// The most pieces along a triangle's edge (`MAX_SPLIT²` pieces per triangle).
-pub const MAX_SPLIT: usize = 16;
+pub(crate) const MAX_SPLIT: usize = 16;
 
 /// The most triangles a primitive's split may make: `n² x triangles` stays within it. A
 /// finely tessellated emitter (a sphere of a thousand triangles) is not split at all: each of
 /// its triangles already emits its own mean, and pieces smaller still would multiply the
 /// emitters that every shadow and wedge test goes through for light that only a receiver
 /// within a triangle's size of the surface could tell apart.
-pub const MAX_PIECES: usize = 1024;
+pub(crate) const MAX_PIECES: usize = 1024;
 
 /// How far (a fraction of the brightest piece's radiance, per channel) an edge-connected
 /// piece's radiance may be from its group's first piece's to join it ([`merge_similar`]).
-pub const MERGE: f64 = 0.125;
+pub(crate) const MERGE: f64 = 0.125;
 
 /// The most power (a fraction of the primitive's) that its dimmest pieces may lose
 /// ([`drop_dimmest`]).
-pub const DROPPED_POWER: f64 = 0.01;
+pub(crate) const DROPPED_POWER: f64 = 0.01;
 
 /// Points per piece side of the mean over a piece ([`triangle_grid`]): about one per texel
 /// along its longest edge, at least `SAMPLES` and at most `MAX_SAMPLES` (past it, the lookups

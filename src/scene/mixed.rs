@@ -33,7 +33,7 @@ use std::collections::BTreeMap;
 
 /// How a light goes into the bake (`penumbra_bake`, `--light-bake`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
-pub enum BakeMode {
+pub(crate) enum BakeMode {
     /// Direct light and bounces.
     #[default]
     All,
@@ -45,7 +45,7 @@ pub enum BakeMode {
 
 impl BakeMode {
     /// `all`, `indirect` or `none`.
-    pub fn from_name(name: &str) -> Option<BakeMode> {
+    pub(crate) fn from_name(name: &str) -> Option<BakeMode> {
         match name {
             "all" => Some(BakeMode::All),
             "indirect" => Some(BakeMode::Indirect),
@@ -57,26 +57,26 @@ impl BakeMode {
 
 /// One light's rule.
 #[derive(Clone, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
-pub struct LightRule {
-    pub bake: BakeMode,
+pub(crate) struct LightRule {
+    pub(crate) bake: BakeMode,
     /// The layer it is also written to; `None`: only the main lightmap.
-    pub group: Option<String>,
+    pub(crate) group: Option<String>,
 }
 
 /// The rules of a scene's lights: per punctual light (as [`Scene::lights`]) and per instance
 /// (for the area emitters among its polygons). Empty: every light `all`, in no group.
 #[derive(Clone, Debug, Default)]
-pub struct Mixed {
-    pub lights: Vec<LightRule>,
-    pub instances: Vec<LightRule>,
+pub(crate) struct Mixed {
+    pub(crate) lights: Vec<LightRule>,
+    pub(crate) instances: Vec<LightRule>,
 }
 
 /// A command-line rule: lights whose name matches `pattern` get `bake` or `group`.
 #[derive(Clone, Debug, PartialEq)]
 pub struct CliRule {
     pub(crate) pattern: String,
-    pub bake: Option<BakeMode>,
-    pub group: Option<String>,
+    pub(crate) bake: Option<BakeMode>,
+    pub(crate) group: Option<String>,
 }
 
 impl CliRule {
@@ -194,7 +194,7 @@ fn apply_cli(rules: &[CliRule], names: &[Option<&str>], rule: &mut LightRule) {
 /// then the lights with `bake: none` are taken out of the scene (punctual lights removed,
 /// emitting surfaces made non-emitting: they still reflect). An error names the item whose
 /// extras are not a rule.
-pub fn apply(gltf: &Gltf, scene: &mut Scene, cli: &[CliRule]) -> Result<()> {
+pub(crate) fn apply(gltf: &Gltf, scene: &mut Scene, cli: &[CliRule]) -> Result<()> {
     let json = &gltf.json;
     let node_name = |n: usize| json["nodes"][n]["name"].as_str();
     let mut lights = Vec::with_capacity(scene.lights.len());
@@ -277,12 +277,12 @@ impl Mixed {
     }
 
     /// The rule of punctual light `l`.
-    pub fn light(&self, l: usize) -> LightRule {
+    pub(crate) fn light(&self, l: usize) -> LightRule {
         self.lights.get(l).cloned().unwrap_or_default()
     }
 
     /// The rule of the area emitter on polygon `p`.
-    pub fn polygon(&self, scene: &Scene, p: usize) -> LightRule {
+    pub(crate) fn polygon(&self, scene: &Scene, p: usize) -> LightRule {
         self.instances
             .get(scene.polygons[p].instance)
             .cloned()
@@ -290,7 +290,7 @@ impl Mixed {
     }
 
     /// The groups some light is in, sorted.
-    pub fn groups(&self) -> Vec<String> {
+    pub(crate) fn groups(&self) -> Vec<String> {
         let mut g: Vec<String> = self
             .lights
             .iter()

@@ -16,23 +16,23 @@ use glam::{DVec2, DVec3};
 /// A material's colour where it varies over the surface: a base-colour texture, or an alpha
 /// test. Materials without either reflect [`super::Material::rho`] everywhere.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Base {
+pub(crate) struct Base {
     /// `baseColorFactor`'s RGB, linear.
-    pub factor: DVec3,
+    pub(crate) factor: DVec3,
     /// `baseColorFactor`'s alpha.
     pub(crate) opacity: f64,
     /// `baseColorTexture`.
-    pub texture: Option<TextureRef>,
+    pub(crate) texture: Option<TextureRef>,
     /// `alphaCutoff` under `alphaMode: MASK`: a point whose alpha (opacity x texture alpha) is
     /// under it is a hole, which neither occludes nor reflects.
     pub(crate) cutoff: Option<f64>,
     /// `emissiveTexture` and the radiance it multiplies (`emissiveFactor` x
     /// `emissiveStrength`, W/(m² sr)): the emitting triangles are split where it changes
     /// ([`super::emission`]).
-    pub emission: Option<(DVec3, TextureRef)>,
+    pub(crate) emission: Option<(DVec3, TextureRef)>,
     /// How light passes through the surface, if it does: `alphaMode: BLEND`, or
     /// `KHR_materials_transmission`.
-    pub passes: Option<Passes>,
+    pub(crate) passes: Option<Passes>,
     /// `KHR_materials_transmission`'s `transmissionTexture`: its red channel scales the
     /// transmission factor.
     pub(crate) transmission_texture: Option<TextureRef>,
@@ -40,7 +40,7 @@ pub struct Base {
 
 /// How light passes through a see-through surface ([`Pane`]).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Passes {
+pub(crate) enum Passes {
     /// `alphaMode: BLEND`: `1 - alpha` of the light passes, tinted by the base colour.
     Blend,
     /// `KHR_materials_transmission`: `transmissionFactor` of it passes, tinted by the base
@@ -176,7 +176,7 @@ impl Scene {
 
     /// True when polygon `p`'s albedo or alpha varies over it (a texture, a cut-out, vertex
     /// colours), so that [`AlbedoOver`] must sample it.
-    pub fn varies(&self, p: usize) -> bool {
+    pub(crate) fn varies(&self, p: usize) -> bool {
         let inst = &self.instances[self.polygons[p].instance];
         inst.colours.is_some() || self.materials[inst.material].base.is_some()
     }
@@ -320,7 +320,7 @@ impl Scene {
 }
 
 /// The mean albedo over parts of one polygon ([`AlbedoOver::mean`]).
-pub struct AlbedoOver<'a> {
+pub(crate) struct AlbedoOver<'a> {
     scene: &'a Scene,
     polygon: usize,
     /// The polygon's triangles in a grid, when it has many and its albedo varies.
@@ -328,7 +328,7 @@ pub struct AlbedoOver<'a> {
 }
 
 impl<'a> AlbedoOver<'a> {
-    pub fn new(scene: &'a Scene, polygon: usize) -> Self {
+    pub(crate) fn new(scene: &'a Scene, polygon: usize) -> Self {
         let poly = &scene.polygons[polygon];
         let grid = (scene.varies(polygon) && poly.triangles_plane.len() >= GRID_TRIANGLES)
             .then(|| grid_of_triangles(&poly.triangles_plane))
@@ -345,7 +345,7 @@ impl<'a> AlbedoOver<'a> {
     /// [`Scene::albedo_at`]'s mean over a stratified set of points
     /// ([`crate::geometry::triangle_grid`]), the texture read with a footprint of the points'
     /// spacing (trilinear mip lookup), holes counting as 0.
-    pub fn mean(&self, corners: &[DVec2; 3]) -> DVec3 {
+    pub(crate) fn mean(&self, corners: &[DVec2; 3]) -> DVec3 {
         let scene = self.scene;
         let poly = &scene.polygons[self.polygon];
         if !scene.varies(self.polygon) {

@@ -12,7 +12,7 @@ use std::sync::OnceLock;
 
 /// A glTF sampler's wrap mode along one texture axis.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Wrap {
+pub(crate) enum Wrap {
     /// 10497, the glTF default.
     #[default]
     Repeat,
@@ -49,20 +49,20 @@ impl Wrap {
 /// How a material reads one texture: which image, which `TEXCOORD_n`, the sampler's wrap
 /// modes and the `KHR_texture_transform` affine map (rows of `uv' = M (u, v, 1)`).
 #[derive(Clone, Debug, PartialEq)]
-pub struct TextureRef {
+pub(crate) struct TextureRef {
     /// Index into [`crate::scene::Scene::images`].
-    pub image: usize,
+    pub(crate) image: usize,
     /// The `TEXCOORD_n` set.
     pub(crate) tex_coord: u32,
     /// `wrapS`, `wrapT`.
-    pub wrap: [Wrap; 2],
+    pub(crate) wrap: [Wrap; 2],
     /// `KHR_texture_transform` as two rows of an affine map; identity without one.
-    pub transform: [DVec3; 2],
+    pub(crate) transform: [DVec3; 2],
 }
 
 impl TextureRef {
     /// The identity transform.
-    pub const IDENTITY: [DVec3; 2] = [DVec3::new(1.0, 0.0, 0.0), DVec3::new(0.0, 1.0, 0.0)];
+    pub(crate) const IDENTITY: [DVec3; 2] = [DVec3::new(1.0, 0.0, 0.0), DVec3::new(0.0, 1.0, 0.0)];
 
     /// `KHR_texture_transform`'s matrix, translation x rotation x scale (the extension's
     /// definition; rotation in radians, counter-clockwise in UV space).
@@ -75,14 +75,14 @@ impl TextureRef {
     }
 
     /// The texture coordinate that a mesh UV maps to.
-    pub fn apply(&self, uv: DVec2) -> DVec2 {
+    pub(crate) fn apply(&self, uv: DVec2) -> DVec2 {
         let h = DVec3::new(uv.x, uv.y, 1.0);
         DVec2::new(self.transform[0].dot(h), self.transform[1].dot(h))
     }
 }
 
 /// One decoded image and its mip chain.
-pub struct Image {
+pub(crate) struct Image {
     /// Level 0 first; each level half the size of the one above (at least 1 texel a side).
     levels: Vec<Level>,
 }
@@ -120,7 +120,7 @@ fn unit(v: f64) -> u16 {
 impl Image {
     /// An image of `width` x `height` RGBA8 texels (sRGB colour, linear alpha), row-major from
     /// the top-left. `None` when the size is 0 or does not match the texels.
-    pub fn new(width: usize, height: usize, texels: Vec<[u8; 4]>) -> Option<Image> {
+    pub(crate) fn new(width: usize, height: usize, texels: Vec<[u8; 4]>) -> Option<Image> {
         if width == 0 || height == 0 || texels.len() != width * height {
             return None;
         }
@@ -149,17 +149,12 @@ impl Image {
     }
 
     /// Width and height of level 0, texels.
-    pub fn size(&self) -> (usize, usize) {
+    pub(crate) fn size(&self) -> (usize, usize) {
         (self.levels[0].width, self.levels[0].height)
     }
 
-    /// Bytes held, every level together.
-    pub fn bytes(&self) -> usize {
-        self.levels.iter().map(|l| 8 * l.texels.len()).sum()
-    }
-
     /// Linear RGB and alpha at texture coordinate `uv`, bilinear on level 0.
-    pub fn bilinear(&self, uv: DVec2, wrap: [Wrap; 2]) -> (DVec3, f64) {
+    pub(crate) fn bilinear(&self, uv: DVec2, wrap: [Wrap; 2]) -> (DVec3, f64) {
         self.levels[0].bilinear(uv, wrap)
     }
 

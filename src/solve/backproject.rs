@@ -35,7 +35,8 @@ use glam::{DVec2, DVec3};
 
 // The convex decomposition and the emitter shape live in the shared modules; re-exported here
 // because the backprojection is where they are used.
-pub use crate::geometry::{convex_hull, convex_pieces};
+pub use crate::geometry::convex_hull;
+pub(crate) use crate::geometry::convex_pieces;
 pub use crate::light::EmitterShape;
 
 // ---------------------------------------------------------------------------------------------
@@ -43,11 +44,11 @@ pub use crate::light::EmitterShape;
 
 /// One convex piece of a scene polygon, as an occluder.
 #[derive(Clone, Debug)]
-pub struct OccluderPiece {
+pub(crate) struct OccluderPiece {
     /// Index into [`Scene::polygons`].
-    pub polygon: usize,
+    pub(crate) polygon: usize,
     /// Corners in world space (the scene's own triangle corners), convex, planar.
-    pub vertices: Vec<DVec3>,
+    pub(crate) vertices: Vec<DVec3>,
     /// True when the polygon is alpha-tested or see-through: its outline is not its shadow's
     /// (or its shadow is not black), so a point it may shadow takes shadow rays instead
     /// ([`crate::scene::Scene::cut_out_at`], [`crate::visibility::Visibility::transmitted_skipping`]).
@@ -56,14 +57,14 @@ pub struct OccluderPiece {
 
 /// Every polygon of a scene cut into convex pieces, for backprojection.
 #[derive(Clone, Debug, Default)]
-pub struct Occluders {
-    pub pieces: Vec<OccluderPiece>,
+pub(crate) struct Occluders {
+    pub(crate) pieces: Vec<OccluderPiece>,
     /// The piece each scene triangle belongs to (`u32::MAX`: none, a degenerate triangle).
     pub(crate) piece_of_triangle: Vec<u32>,
 }
 
 impl Occluders {
-    pub fn new(scene: &Scene) -> Occluders {
+    pub(crate) fn new(scene: &Scene) -> Occluders {
         let mut pieces = Vec::new();
         let mut piece_of_triangle = vec![u32::MAX; scene.triangles.len()];
         for (id, poly) in scene.polygons.iter().enumerate() {
@@ -188,7 +189,7 @@ pub struct Limits {
     /// Occluders whose clipped projection has area.
     pub(crate) max_occluders: usize,
     /// Convex pieces of the visible emitter part at any time.
-    pub max_pieces: usize,
+    pub(crate) max_pieces: usize,
 }
 
 impl Default for Limits {
@@ -207,9 +208,9 @@ pub struct Backprojection {
     pub form_factor: Option<f64>,
     /// Occluders whose clipped projection onto the emitter has area (counted up to the first
     /// one past the limit).
-    pub occluders: usize,
+    pub(crate) occluders: usize,
     /// Largest number of visible pieces held.
-    pub pieces: usize,
+    pub(crate) pieces: usize,
 }
 
 /// Convex polygons in the emitter's plane, stored flat, each with its bounding box.

@@ -37,7 +37,7 @@ pub struct DirectStats {
     /// Exact method: pairs that fell back to shadow rays (occluders over `occluder_cap`, or
     /// too many visible pieces).
     pub fallbacks: u64,
-    pub occluder_cap: usize,
+    pub(crate) occluder_cap: usize,
     /// Exact method: candidate occluders (convex pieces) left after the shaft culling, summed
     /// over pairs: what the per-point clipping looked at.
     pub candidates: u64,
@@ -61,13 +61,13 @@ pub struct DirectStats {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct EmitterCost {
     /// Index into [`Scene::polygons`].
-    pub polygon: usize,
+    pub(crate) polygon: usize,
     /// Triangles of the emitter polygon and the convex pieces they were merged into.
-    pub triangles: usize,
+    pub(crate) triangles: usize,
     pub convex_pieces: usize,
     pub evaluations: u64,
     pub occluders: u64,
-    pub fallbacks: u64,
+    pub(crate) fallbacks: u64,
     /// Time spent on this emitter, summed over threads, s.
     pub seconds: f64,
 }
@@ -102,19 +102,19 @@ struct Tally {
 /// hull) of each cluster and the emitter, down to clusters of a few points, so each point clips
 /// only the occluders near its own view of the emitter.
 pub struct Direct<'a> {
-    pub scene: &'a Scene,
-    pub vis: &'a Visibility,
+    pub(crate) scene: &'a Scene,
+    pub(crate) vis: &'a Visibility,
     pub emitters: Vec<AreaEmitter>,
-    pub rays: AtomicU64,
+    pub(crate) rays: AtomicU64,
     pub method: DirectMethod,
     /// Caps of the exact method, past which it falls back to shadow rays.
-    pub limits: Limits,
+    pub(crate) limits: Limits,
     /// The scene's polygons in convex pieces (exact method only; empty otherwise).
-    pub occluders: Occluders,
+    pub(crate) occluders: Occluders,
     /// The light tree over `emitters` (exact method only; empty otherwise).
     tree: LightTree,
     /// The sky (`--sky`), if any.
-    pub sky: Option<Sky>,
+    pub(crate) sky: Option<Sky>,
     /// The punctual lights it counts (indices into [`Scene::lights`]): all of them unless
     /// [`Direct::only`] kept fewer.
     lights: Vec<usize>,

@@ -69,7 +69,7 @@ fn culled(at: &SurfacePoint, patch: &Patch) -> bool {
 /// Form factor from a receiving surface point `(p, n)` to a patch, with visibility: exact unoccluded
 /// form factor of each piece times the visibility of its centroid; pieces near `p` are split in
 /// four, up to two levels. Returns the form factor and adds the rays cast to `rays`.
-pub fn point_patch_form_factor(
+pub(crate) fn point_patch_form_factor(
     vis: &Visibility,
     at: &SurfacePoint,
     patch: &Patch,
@@ -183,7 +183,7 @@ pub(crate) fn raycast_form_factor(
 }
 
 /// The form factors of one solve: the patches, the method, and the hemicube's counters.
-pub struct Kernel<'a> {
+pub(crate) struct Kernel<'a> {
     vis: &'a Visibility,
     patches: &'a [Patch],
     method: FormFactors,
@@ -196,7 +196,7 @@ pub struct Kernel<'a> {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct HemicubeStats {
     /// Cells across the top face.
-    pub resolution: usize,
+    pub(crate) resolution: usize,
     /// Cells of one hemicube, `3 R²`.
     pub cells: usize,
     /// Sum of the delta form factors (1 in the limit).
@@ -207,7 +207,7 @@ pub struct HemicubeStats {
 
 impl<'a> Kernel<'a> {
     /// Form factors to `patches` by `method`; `resolution` is the hemicube's.
-    pub fn new(
+    pub(crate) fn new(
         vis: &'a Visibility,
         patches: &'a [Patch],
         method: FormFactors,
@@ -221,10 +221,6 @@ impl<'a> Kernel<'a> {
             hemicube: (method == FormFactors::Hemicube).then(|| Hemicube::new(resolution)),
             hemicubes: AtomicU64::new(0),
         }
-    }
-
-    pub fn method(&self) -> FormFactors {
-        self.method
     }
 
     /// The hemicube's counters (`None` for the other methods).
@@ -265,7 +261,7 @@ impl<'a> Kernel<'a> {
 
     /// Form factors from the receiving point `at` to every patch `j` with `wanted(j)` (the
     /// others are 0 and, but for the hemicube, not evaluated), adding the rays cast.
-    pub fn gather(
+    pub(crate) fn gather(
         &self,
         at: &SurfacePoint,
         wanted: &dyn Fn(usize) -> bool,

@@ -98,12 +98,12 @@ impl Hemicube {
     }
 
     /// Cells across the top face.
-    pub fn resolution(&self) -> usize {
+    pub(crate) fn resolution(&self) -> usize {
         self.resolution
     }
 
     /// Cells in all five faces, `3 R²`.
-    pub fn cells(&self) -> usize {
+    pub(crate) fn cells(&self) -> usize {
         self.delta.len()
     }
 

@@ -83,24 +83,24 @@ struct Node {
 
 /// The light tree of a scene's area emitters.
 #[derive(Clone, Debug, Default)]
-pub struct LightTree {
+pub(crate) struct LightTree {
     nodes: Vec<Node>,
 }
 
 /// What the cut of one point decided.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Cut {
+pub(crate) struct Cut {
     /// Emitters (indices into the emitter list) to evaluate exactly.
-    pub exact: Vec<u32>,
+    pub(crate) exact: Vec<u32>,
     /// The bounded nodes' contribution, W/m² per channel (with their shadow rays).
-    pub bounded: DVec3,
+    pub(crate) bounded: DVec3,
     /// Its light vector ([`crate::light::LightVector`]), each node's light taken to come from
     /// its representative emitter's centre.
     pub(crate) bounded_light: crate::light::LightVector,
     /// Bounded nodes.
     pub(crate) bounded_nodes: u64,
     /// Shadow rays of the bounded nodes.
-    pub rays: u64,
+    pub(crate) rays: u64,
 }
 
 /// A node in the cut, ordered by its bound.
@@ -165,7 +165,7 @@ fn max_cosine(axis: DVec3, min: DVec3, max: DVec3, p: DVec3) -> f64 {
 
 impl LightTree {
     /// The tree over `emitters` (empty when there are none).
-    pub fn new(emitters: &[AreaEmitter]) -> LightTree {
+    pub(crate) fn new(emitters: &[AreaEmitter]) -> LightTree {
         let mut tree = LightTree { nodes: Vec::new() };
         if !emitters.is_empty() {
             let mut ids: Vec<u32> = (0..emitters.len() as u32).collect();
@@ -175,13 +175,8 @@ impl LightTree {
     }
 
     /// Number of nodes.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.nodes.len()
-    }
-
-    /// True when there is no emitter.
-    pub fn is_empty(&self) -> bool {
-        self.nodes.is_empty()
     }
 
     fn build(&mut self, emitters: &[AreaEmitter], ids: &mut [u32]) -> u32 {
@@ -299,7 +294,7 @@ impl LightTree {
     /// The cut of the point `at` (see the module doc): which emitters to evaluate exactly, and
     /// the bounded rest (one shadow ray each).
     /// `epsilon`: [`super::SolveOptions::light_error`].
-    pub fn cut(
+    pub(crate) fn cut(
         &self,
         emitters: &[AreaEmitter],
         vis: &Visibility,
@@ -331,7 +326,13 @@ impl LightTree {
     /// The unoccluded irradiance at `(p, n)` (W/m² per channel) as [`LightTree::cut`] divides
     /// it: the exact form factor of each emitter it evaluates, each bounded node's estimate.
     /// Where nothing occludes, the same as the cut's total with its exact evaluations.
-    pub fn unoccluded(&self, emitters: &[AreaEmitter], p: DVec3, n: DVec3, epsilon: f64) -> DVec3 {
+    pub(crate) fn unoccluded(
+        &self,
+        emitters: &[AreaEmitter],
+        p: DVec3,
+        n: DVec3,
+        epsilon: f64,
+    ) -> DVec3 {
         let mut exact = Vec::new();
         let done = self.traverse(p, n, epsilon, &mut exact);
         exact.sort_unstable();
@@ -347,13 +348,13 @@ impl LightTree {
     }
 
     /// Whether any emitter's box (of its hull) meets the box `[lo, hi]`.
-    pub fn any_in_box(&self, lo: DVec3, hi: DVec3) -> bool {
+    pub(crate) fn any_in_box(&self, lo: DVec3, hi: DVec3) -> bool {
         self.in_box(lo, hi, &mut |_| true)
     }
 
     /// The emitters (indices into the emitter list) whose boxes meet the box `[lo, hi]`, in
     /// `out` (cleared first), ascending.
-    pub fn emitters_in_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
+    pub(crate) fn emitters_in_box(&self, lo: DVec3, hi: DVec3, out: &mut Vec<u32>) {
         out.clear();
         self.in_box(lo, hi, &mut |e| {
             out.push(e);
@@ -454,7 +455,6 @@ mod tests {
             shape: EmitterShape::convex(&corners),
             samples: Vec::new(),
             center: c,
-            radius: h * 2f64.sqrt(),
         };
         assert!(e.shape.frame.n.dot(normal) > 0.99);
         e

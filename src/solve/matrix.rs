@@ -43,7 +43,7 @@ pub(crate) const MAX_SWEEPS: usize = 1000;
 const SWEEP_TOLERANCE: f64 = 1e-2;
 
 /// Bytes of the form-factor matrix of `n` patches.
-pub fn bytes(n: usize) -> u64 {
+pub(crate) fn bytes(n: usize) -> u64 {
     (n as u64)
         .saturating_mul(n as u64)
         .saturating_mul(BYTES_PER_ENTRY)
@@ -100,14 +100,14 @@ pub struct MatrixStats {
 }
 
 /// The dense form-factor matrix, row-major: `F_ij` from patch `i`'s centroid to patch `j`.
-pub struct FormFactorMatrix {
+pub(crate) struct FormFactorMatrix {
     n: usize,
     f: Vec<f64>,
 }
 
 impl FormFactorMatrix {
     /// Fills the `n x n` matrix by `kernel`, one row per task; returns it and the rays cast.
-    pub fn new(kernel: &Kernel<'_>, n: usize) -> (FormFactorMatrix, u64) {
+    pub(crate) fn new(kernel: &Kernel<'_>, n: usize) -> (FormFactorMatrix, u64) {
         let mut f = vec![0.0; n * n];
         let rays = AtomicU64::new(0);
         f.par_chunks_mut(n.max(1)).enumerate().for_each(|(i, row)| {
@@ -120,12 +120,12 @@ impl FormFactorMatrix {
     }
 
     /// Row `i`: the form factors from patch `i`'s centroid.
-    pub fn row(&self, i: usize) -> &[f64] {
+    pub(crate) fn row(&self, i: usize) -> &[f64] {
         &self.f[i * self.n..(i + 1) * self.n]
     }
 
     /// `H_i = D_i + sum_j F_ij B_j`.
-    pub fn irradiance(&self, system: &PatchSystem<'_>, b: &[DVec3]) -> Vec<DVec3> {
+    pub(crate) fn irradiance(&self, system: &PatchSystem<'_>, b: &[DVec3]) -> Vec<DVec3> {
         (0..self.n)
             .map(|i| {
                 let row = self.row(i);
@@ -139,7 +139,7 @@ impl FormFactorMatrix {
 /// `--bounces n`, exactly the light of `n` bounces by Jacobi iterations, as the progressive
 /// solver's generations). Returns each patch's irradiance `H`; fills `stats` (its
 /// `unshot_fraction` is the last sweep's relative change).
-pub fn solve(
+pub(crate) fn solve(
     kernel: &Kernel<'_>,
     system: &PatchSystem<'_>,
     options: &SolveOptions,
@@ -204,7 +204,7 @@ pub fn solve(
 /// starting from `b` and updating it in place, until the power changed by one sweep is at most
 /// `tolerance` of the source's power, or `max_sweeps`. Returns the sweeps done and the last
 /// sweep's relative change. Sequential sums in index order: deterministic.
-pub fn sweeps(
+pub(crate) fn sweeps(
     f: &FormFactorMatrix,
     system: &PatchSystem<'_>,
     b: &mut [DVec3],

@@ -41,28 +41,29 @@
 //! [`crate::light`].
 
 pub mod backproject;
-pub mod direct;
-pub mod form_factors;
+pub(crate) mod direct;
+pub(crate) mod form_factors;
 pub mod hemicube;
 pub mod hierarchical;
 pub mod light_vector;
 pub mod lightcuts;
 pub mod matrix;
-pub mod patches;
-pub mod progressive;
-pub mod punctual;
+pub(crate) mod patches;
+pub(crate) mod progressive;
+pub(crate) mod punctual;
 pub(crate) mod reflected;
 pub mod sky;
-pub mod texel_lights;
+pub(crate) mod texel_lights;
 
-pub use direct::{Direct, DirectStats, EmitterCost, direct_light, punctual_irradiance};
-pub use form_factors::{FormFactors, point_patch_form_factor};
+pub use direct::{Direct, DirectStats, direct_light, punctual_irradiance};
+pub use form_factors::FormFactors;
 pub use matrix::gauss_seidel;
-pub use patches::{Patch, patches};
+pub use patches::patches;
 pub use progressive::progressive;
 // The receiving point and the area emitter are shared physics; re-exported for the solver's
 // users.
-pub use crate::light::{AreaEmitter, LightVector, NO_POLYGON, SurfacePoint};
+pub(crate) use crate::light::LightVector;
+pub use crate::light::{NO_POLYGON, SurfacePoint};
 
 use crate::mesh::ReceiverMesh;
 use crate::scene::Scene;
@@ -208,26 +209,26 @@ pub struct Solution {
     pub direct: Vec<Vec<DVec3>>,
     /// Per light group ([`crate::scene::mixed`], sorted by name): the group's name and its
     /// lights' part of `irradiance`, same layout. Empty without groups.
-    pub layers: Vec<(String, Vec<Vec<DVec3>>)>,
+    pub(crate) layers: Vec<(String, Vec<Vec<DVec3>>)>,
     /// With [`SolveOptions::directional`], the light vector ([`LightVector`]) of `irradiance`
     /// at every vertex, same layout; empty without.
-    pub light: Vec<Vec<LightVector>>,
+    pub(crate) light: Vec<Vec<LightVector>>,
     /// The lights in `irradiance`'s direct light that the lightmap takes per sub-sample, and
     /// their part of it ([`texel_lights::TexelLights`]).
-    pub texel_lights: texel_lights::TexelLights,
+    pub(crate) texel_lights: texel_lights::TexelLights,
     /// The same for each of `layers`.
-    pub layer_texel_lights: Vec<texel_lights::TexelLights>,
-    pub stats: SolveStats,
+    pub(crate) layer_texel_lights: Vec<texel_lights::TexelLights>,
+    pub(crate) stats: SolveStats,
 }
 
 /// Counters of a solve, reported in `--stats`.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SolveStats {
     /// The indirect solver (`progressive`, `hierarchical`, `matrix`).
-    pub solver: Option<Solver>,
+    pub(crate) solver: Option<Solver>,
     /// The patch solvers' form factors (`closed-form`, `raycast`, `hemicube`).
-    pub form_factors: Option<FormFactors>,
-    pub patches: usize,
+    pub(crate) form_factors: Option<FormFactors>,
+    pub(crate) patches: usize,
     pub(crate) shots: usize,
     /// Wall time of the indirect solve (patches, their solve and the final gather; or the
     /// hierarchical solve), seconds.
@@ -237,7 +238,7 @@ pub struct SolveStats {
     /// Wall time of the indirect light's directions (`--directional`), seconds.
     #[serde(skip_serializing_if = "is_zero")]
     pub(crate) directional_seconds: f64,
-    pub rays: u64,
+    pub(crate) rays: u64,
     /// Unshot power left at the end, relative to the power first received.
     pub(crate) unshot_fraction: f64,
     /// Power emitted by area emitters, W (mean over RGB).
@@ -265,7 +266,7 @@ pub struct SolveStats {
     pub sky: Option<sky::SkyStats>,
     /// Caps that changed the result.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub warnings: Vec<String>,
+    pub(crate) warnings: Vec<String>,
 }
 
 /// Ray origins of receiving points from the BVH's offset (the pure constructors are
@@ -337,7 +338,7 @@ pub(crate) fn evaluation_points(
 }
 
 /// Solves direct and indirect light at every vertex of `meshes`.
-pub fn radiosity(
+pub(crate) fn radiosity(
     scene: &Scene,
     vis: &Visibility,
     meshes: &[ReceiverMesh],

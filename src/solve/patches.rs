@@ -12,13 +12,13 @@ use glam::DVec3;
 pub struct Patch {
     /// Index into [`Scene::polygons`].
     pub polygon: usize,
-    pub p: [DVec3; 3],
+    pub(crate) p: [DVec3; 3],
     pub normal: DVec3,
     pub centroid: DVec3,
-    pub area: f64,
-    pub rho: DVec3,
+    pub(crate) area: f64,
+    pub(crate) rho: DVec3,
     /// Bounding radius around the centroid.
-    pub radius: f64,
+    pub(crate) radius: f64,
 }
 
 impl Patch {
@@ -57,18 +57,18 @@ pub fn patches(scene: &Scene, target: usize) -> Vec<Patch> {
 /// The linear system of the patch solvers: `B_i = M_i + rho_i H_i`, `H_i = D_i + sum_j F_ij B_j`
 /// (Goral, Torrance, Greenberg, Battaile 1984), with `F_ij` the form factor from patch `i`'s
 /// centroid to patch `j`. W/m² per linear RGB channel.
-pub struct PatchSystem<'a> {
-    pub patches: &'a [Patch],
+pub(crate) struct PatchSystem<'a> {
+    pub(crate) patches: &'a [Patch],
     /// `D`: the irradiance the form factors do not carry (the direct light computed apart: all
     /// of it, or with hemicube form factors only the punctual lights').
-    pub direct: Vec<DVec3>,
+    pub(crate) direct: Vec<DVec3>,
     /// `M`: the emitted radiosity carried by the form factors (with hemicube form factors the
     /// area emitters', `pi L`; otherwise 0).
-    pub emission: Vec<DVec3>,
+    pub(crate) emission: Vec<DVec3>,
 }
 
 impl<'a> PatchSystem<'a> {
-    pub fn new(patches: &'a [Patch], direct: Vec<DVec3>, emission: Vec<DVec3>) -> Self {
+    pub(crate) fn new(patches: &'a [Patch], direct: Vec<DVec3>, emission: Vec<DVec3>) -> Self {
         PatchSystem {
             patches,
             direct,
@@ -77,7 +77,7 @@ impl<'a> PatchSystem<'a> {
     }
 
     /// The source of the system, `S_i = M_i + rho_i D_i`: `B = S + rho F B`.
-    pub fn source(&self) -> Vec<DVec3> {
+    pub(crate) fn source(&self) -> Vec<DVec3> {
         self.patches
             .iter()
             .zip(&self.direct)
@@ -88,12 +88,12 @@ impl<'a> PatchSystem<'a> {
 
     /// True when the form factors carry emitted light, whose first transfer is then the direct
     /// light rather than a bounce.
-    pub fn emits(&self) -> bool {
+    pub(crate) fn emits(&self) -> bool {
         self.emission.iter().any(|m| m.max_element() > 0.0)
     }
 
     /// Power of a radiosity (or irradiance) per patch, W (mean over RGB).
-    pub fn power(&self, b: &[DVec3]) -> f64 {
+    pub(crate) fn power(&self, b: &[DVec3]) -> f64 {
         self.patches
             .iter()
             .zip(b)

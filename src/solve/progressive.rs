@@ -40,7 +40,7 @@ pub fn progressive(
 /// the most unshot power shoots it to all others through `kernel`, until the unshot power is
 /// below `tolerance` of the initial source power, or `bounces` generations; returns each patch's
 /// irradiance `H`.
-pub fn refine(
+pub(crate) fn refine(
     kernel: &Kernel<'_>,
     system: &PatchSystem<'_>,
     bounces: Option<u32>,
@@ -129,7 +129,7 @@ pub fn refine(
 /// vertices is added to `direct_h` too. Fills the patch counters and powers of `stats` and adds
 /// the rays cast.
 #[allow(clippy::too_many_arguments)]
-pub fn indirect(
+pub(crate) fn indirect(
     scene: &Scene,
     vis: &Visibility,
     direct: &Direct<'_>,

@@ -70,7 +70,7 @@ pub struct SkyStats {
 /// The sky of a solve: its radiance, the fixed point set and the scene's bounds.
 pub struct Sky {
     /// `L_sky`, W/(m² sr), linear RGB; some channel is positive.
-    pub radiance: DVec3,
+    pub(crate) radiance: DVec3,
     /// The rays of every receiving point.
     rays_of: CosineRays,
     /// The scene's bounding-box corners.
@@ -150,7 +150,7 @@ impl Sky {
     }
 
     /// The rays of `at` ([`CosineRays::directions`]).
-    pub fn directions<'s>(&'s self, at: &SurfacePoint) -> impl Iterator<Item = DVec3> + 's {
+    pub(crate) fn directions<'s>(&'s self, at: &SurfacePoint) -> impl Iterator<Item = DVec3> + 's {
         self.rays_of.directions(at)
     }
 
@@ -202,7 +202,7 @@ impl Sky {
     }
 
     /// The counters so far.
-    pub fn stats(&self) -> SkyStats {
+    pub(crate) fn stats(&self) -> SkyStats {
         let load = |a: &AtomicU64| a.load(Ordering::Relaxed);
         SkyStats {
             radiance: self.radiance.to_array(),
@@ -215,7 +215,7 @@ impl Sky {
     }
 
     /// Sky shadow rays cast so far.
-    pub fn rays(&self) -> u64 {
+    pub(crate) fn rays(&self) -> u64 {
         self.rays.load(Ordering::Relaxed)
     }
 }

@@ -53,22 +53,22 @@ pub(crate) const FAR_TEXEL: f64 = 5.0;
 /// vertices, which the lightmap takes out of the interpolated value (see the module doc).
 /// Empty for a scene without lights of either kind.
 #[derive(Clone, Debug, Default)]
-pub struct TexelLights {
+pub(crate) struct TexelLights {
     /// Punctual lights: indices into [`Scene::lights`].
-    pub lights: Vec<usize>,
+    pub(crate) lights: Vec<usize>,
     /// Per mesh and vertex: these lights' part of the direct irradiance (W/m²).
-    pub punctual: Vec<Vec<DVec3>>,
+    pub(crate) punctual: Vec<Vec<DVec3>>,
     /// Area emitters: their polygons (indices into [`Scene::polygons`], ascending).
-    pub emitters: Vec<usize>,
+    pub(crate) emitters: Vec<usize>,
     /// Per mesh and vertex: these emitters' part of the direct irradiance (W/m², occluded).
-    pub area: Vec<Vec<DVec3>>,
+    pub(crate) area: Vec<Vec<DVec3>>,
     /// Per mesh and vertex: these emitters' unoccluded irradiance (W/m²), scaled as `area` by
     /// [`TexelLights::conserve`]; empty for a mesh with no element near an emitter.
-    pub unoccluded: Vec<Vec<DVec3>>,
+    pub(crate) unoccluded: Vec<Vec<DVec3>>,
     /// How the vertices' `area` part divided the emitters: the light tree's cut with this
     /// [`super::SolveOptions::light_error`] (the exact method), or every emitter on its own
     /// (`None`: the sampled method).
-    pub light_error: Option<f64>,
+    pub(crate) light_error: Option<f64>,
 }
 
 impl TexelLights {

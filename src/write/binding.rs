@@ -17,17 +17,17 @@ pub(crate) struct Binding {
     /// lightmaps conventionally use and the one the writer fills).
     pub(crate) tex_coord: u32,
     /// That set's UV per glTF vertex, normalized.
-    pub uv: Vec<DVec2>,
+    pub(crate) uv: Vec<DVec2>,
     /// The lightmap texture (`MOZ_lightmap.index`).
-    pub texture: usize,
+    pub(crate) texture: usize,
     /// Irradiance H (W/m²) of a full-scale texel (`MOZ_lightmap.intensity`, 1 when absent).
-    pub intensity: f64,
+    pub(crate) intensity: f64,
     /// The light groups' layers of this page (`MOZ_lightmap.extras.penumbra.layers`): per
     /// group, its texture and intensity.
-    pub layers: std::collections::BTreeMap<String, (usize, f64)>,
+    pub(crate) layers: std::collections::BTreeMap<String, (usize, f64)>,
     /// The directional lightmap's ratio pages of this page
     /// (`MOZ_lightmap.extras.penumbra.directional`): the textures of axes `x`, `y`, `z`.
-    pub directional: Option<[usize; 3]>,
+    pub(crate) directional: Option<[usize; 3]>,
 }
 
 /// The lightmap binding of a scene instance's primitive: `None` when its material has no

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 
 /// The gradient of an RGB quantity in space: per axis `x, y, z`, the change of each channel
 /// per scene unit.
-pub type Gradient = [DVec3; 3];
+pub(crate) type Gradient = [DVec3; 3];
 
 /// The change `g · d` over the displacement `d` (scene units).
 fn along(g: &Gradient, d: DVec3) -> DVec3 {

@@ -14,9 +14,9 @@
 //! `transfer.rs` (the estimate of one link, the visibility of its sample pairs, the geometric
 //! bounds), `refine.rs` (the oracle and the refinement passes), `gather.rs` (gather,
 //! push-pull, the sources' radiosity gradients), `vertex.rs` (the values at the vertices);
-//! [`indirect`] here runs the passes and the Jacobi iterations. What was tried and measured on
-//! the way is in `docs/decisions.md` ("Indirect light"); the accuracy and speed as they are, in
-//! `docs/accuracy.md` and `docs/performance.md`.
+//! [`indirect_with_layers`] here runs the passes and the Jacobi iterations. What was tried and
+//! measured on the way is in `docs/decisions.md` ("Indirect light"); the accuracy and speed as
+//! they are, in `docs/accuracy.md` and `docs/performance.md`.
 //!
 //! # Why
 //!
@@ -245,10 +245,8 @@ mod transfer;
 mod tree;
 mod vertex;
 
-pub use gather::Gradient;
-pub use refine::{Limits, Link, Linked, Sources};
-pub use transfer::Transfer;
-pub use tree::{Element, Hierarchy, Node};
+pub use refine::{Limits, Link};
+pub use tree::{Element, Hierarchy};
 
 use super::{DEFAULT_HR_TOLERANCE, SolveOptions, SolveStats};
 use crate::mesh::ReceiverMesh;
@@ -276,7 +274,7 @@ const SOURCE_VARIATION: f64 = 0.03;
 /// [`SOURCE_VARIATION`] sets for a lit one (dimensionless): a receiver's limit scales with its
 /// brightest element's direct irradiance against the scene's mean, down to this (see the
 /// module doc, "Source uniformity").
-pub const SHADOWED_SOURCE: f64 = 0.3;
+pub(crate) const SHADOWED_SOURCE: f64 = 0.3;
 
 /// The refinement oracle's bound on the irradiance a partially visible link may carry, as a
 /// fraction of the mean reflected direct radiosity `P / A` (dimensionless; see the module doc).
@@ -328,19 +326,19 @@ const MAX_ITERATIONS: usize = 1000;
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct HierStats {
     /// Nodes of the hierarchy (leaves, surface nodes, clusters).
-    pub nodes: usize,
+    pub(crate) nodes: usize,
     /// Leaves: mesh elements.
-    pub elements: usize,
+    pub(crate) elements: usize,
     /// Cluster nodes (spanning more than one polygon).
-    pub clusters: usize,
+    pub(crate) clusters: usize,
     /// Links of the last refinement pass.
     pub links: usize,
     /// Links refined (split), summed over the passes.
     pub(crate) refinements: u64,
     /// Jacobi iterations, summed over the passes.
-    pub iterations: usize,
+    pub(crate) iterations: usize,
     /// Shadow rays of the link estimates.
-    pub rays: u64,
+    pub(crate) rays: u64,
     /// The refinement tolerance in effect (after any cap), fraction of the reflected direct
     /// power.
     pub tolerance: f64,
@@ -356,23 +354,10 @@ pub struct HierStats {
 
 /// The indirect light at every vertex of `meshes`, added to their direct light `direct_h`, by
 /// hierarchical radiosity. Fills the powers, `unshot_fraction`, `hierarchical` and `warnings`
-/// of `stats` and adds the rays cast.
-pub fn indirect(
-    scene: &Scene,
-    vis: &Visibility,
-    meshes: &[ReceiverMesh],
-    direct_h: &[Vec<DVec3>],
-    options: &SolveOptions,
-    stats: &mut SolveStats,
-    progress: &crate::progress::Progress<'_>,
-) -> Vec<Vec<DVec3>> {
-    indirect_with_layers(scene, vis, meshes, direct_h, &[], options, stats, progress).0
-}
-
-/// [`indirect`], and the same for each of `layers` (direct irradiance at the vertices, as
-/// `direct_h`: the light of a group of lights alone, [`crate::scene::mixed`]) with the links
-/// refined for `direct_h`, so that the layers' light is linear in their direct light: layers
-/// whose direct light adds up to `direct_h` add up to its result, up to the iterations'
+/// of `stats` and adds the rays cast. The same for each of `layers` (direct irradiance at the
+/// vertices, as `direct_h`: the light of a group of lights alone, [`crate::scene::mixed`]) with
+/// the links refined for `direct_h`, so that the layers' light is linear in their direct light:
+/// layers whose direct light adds up to `direct_h` add up to its result, up to the iterations'
 /// tolerance and the clamp of the sources' gradients ([`Hierarchy::gather_linear`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn indirect_with_layers(

@@ -22,47 +22,47 @@ const PARALLEL_ELEMENTS: u32 = 2048;
 /// A link: `H[receiver] += k B[source]`.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Link {
-    pub receiver: u32,
-    pub source: u32,
+    pub(crate) receiver: u32,
+    pub(crate) source: u32,
     /// Transport coefficient (dimensionless): mean irradiance over the receiver per unit
     /// radiosity of the source.
-    pub k: f64,
+    pub(crate) k: f64,
     /// The oracle's power factor (scene units²): the link carries at most `B_s × power` (W);
     /// zero when neither end can be split. The oracle's factors are kept in f32 (links are
     /// the solver's memory: 48 bytes each), which only moves a threshold by 1e-7.
-    pub power: f32,
+    pub(crate) power: f32,
     /// The oracle's irradiance factor (dimensionless): `B_s × spread` bounds how much the
     /// link's irradiance varies across the receiver (or, for a straddling source, the
     /// disk estimate's error); zero when splitting cannot reduce it.
-    pub spread: f32,
+    pub(crate) spread: f32,
     /// The oracle's source factor (dimensionless): `ΔB_s × reach` bounds the error of treating
     /// the source as uniform (its radiosity spread `ΔB_s` times the most the receiver can see
     /// of it); zero when the source has no children.
-    pub reach: f32,
+    pub(crate) reach: f32,
     /// The oracle's visibility factor (dimensionless): the unoccluded `K` of a partially
     /// visible link (or of a wholly hidden one that another test would split), whose
     /// `B_s × shade` is the irradiance its visible fraction decides; zero when the link is
     /// wholly visible, or neither end can be split.
-    pub shade: f32,
+    pub(crate) shade: f32,
     /// Where in a surface source the receiver looks (scene units): the offset from the plain
     /// mean of the source's samples to their mean weighted by the point-to-point kernel from
     /// the receiver's samples. The link gathers the source's radiosity at its centre moved by
     /// this much along the source's radiosity gradient (see [`Hierarchy::gradients`]); zero
     /// for a cluster end.
-    pub toward: [f32; 3],
+    pub(crate) toward: [f32; 3],
     /// The colour of the see-through surfaces between the ends ([`Tint`]): the gather takes
     /// `k` per channel as `k x tinted(tint)`. [`WHITE`] for most links; three bytes that the
     /// struct's alignment would leave empty anyway.
-    pub tint: Tint,
+    pub(crate) tint: Tint,
 }
 
 /// The source radiosities the refinement oracle reads, per node (W/m², mean over RGB).
 #[derive(Clone, Debug)]
 pub struct Sources {
     /// Area-weighted mean radiosity.
-    pub b: Vec<f64>,
+    pub(crate) b: Vec<f64>,
     /// Largest minus smallest radiosity of the node's elements.
-    pub spread: Vec<f64>,
+    pub(crate) spread: Vec<f64>,
 }
 
 /// The oracle's limits: the most power one link may carry (W), the most a source's irradiance
@@ -181,9 +181,9 @@ pub struct Linked {
     /// Links split.
     pub(crate) refinements: u64,
     /// Shadow rays cast.
-    pub rays: u64,
+    pub(crate) rays: u64,
     /// True when the refinement stopped at [`Limits::max_links`] links.
-    pub overflow: bool,
+    pub(crate) overflow: bool,
 }
 
 /// The output of refining links: the links kept, the links split, the shadow rays cast.

@@ -1,4 +1,5 @@
 use super::transfer::{point_bound, projected_bound};
+use super::tree::Node;
 use super::*;
 use crate::geometry::point_polygon_form_factor;
 use crate::light::NO_POLYGON;

@@ -55,15 +55,15 @@ pub struct Transfer {
     /// With visibility.
     pub k: f64,
     /// Without visibility.
-    pub unoccluded: f64,
+    pub(crate) unoccluded: f64,
     /// Some tested sample pairs see each other and some do not.
-    pub partial: bool,
+    pub(crate) partial: bool,
     /// Shadow rays cast.
-    pub rays: u64,
+    pub(crate) rays: u64,
     /// The bound on `k` the refinement oracle uses.
-    pub bound: f64,
+    pub(crate) bound: f64,
     /// The colour of what passes (see [`Tint`]).
-    pub tint: Tint,
+    pub(crate) tint: Tint,
 }
 
 /// The unoccluded point form factors from a link's receiver samples to its source, and how

@@ -14,9 +14,9 @@ use std::f64::consts::PI;
 #[derive(Clone, Debug)]
 pub struct Element {
     /// Index into the `meshes` slice.
-    pub mesh: usize,
+    pub(crate) mesh: usize,
     /// Triangle index in that mesh.
-    pub triangle: usize,
+    pub(crate) triangle: usize,
     /// Index into [`Scene::polygons`].
     pub polygon: usize,
     /// World-space corners.
@@ -27,14 +27,14 @@ pub struct Element {
     /// Direct irradiance: the mean of the three vertices' exact values (W/m²).
     pub direct: DVec3,
     /// The mesh's vertex ids of the corners.
-    pub v: [u32; 3],
+    pub(crate) v: [u32; 3],
 }
 
 /// A node of the hierarchy; it covers the elements `lo..hi`.
 #[derive(Clone, Debug)]
 pub struct Node {
-    pub lo: u32,
-    pub hi: u32,
+    pub(crate) lo: u32,
+    pub(crate) hi: u32,
     /// Children (both lower indices), `None` for a leaf.
     pub kids: Option<[u32; 2]>,
     /// The polygon of a surface node (or leaf), [`NO_POLYGON`] for a cluster.
@@ -42,15 +42,15 @@ pub struct Node {
     /// Area, scene units².
     pub area: f64,
     /// Area-weighted reflectance.
-    pub rho: DVec3,
+    pub(crate) rho: DVec3,
     /// The largest direct irradiance of its elements (W/m², mean over RGB).
-    pub direct: f64,
-    pub min: DVec3,
-    pub max: DVec3,
+    pub(crate) direct: f64,
+    pub(crate) min: DVec3,
+    pub(crate) max: DVec3,
     /// Area-weighted centroid.
-    pub center: DVec3,
+    pub(crate) center: DVec3,
     /// Bounding radius about `center`.
-    pub radius: f64,
+    pub(crate) radius: f64,
     /// Unit normal of a surface node; zero for a cluster.
     pub normal: DVec3,
     /// Projected areas (scene units²) along `+x, +y, +z` and `-x, -y, -z`: the sums over the
@@ -76,7 +76,7 @@ pub struct Hierarchy {
     /// Nodes, children before parents; the last is the root.
     pub nodes: Vec<Node>,
     /// `leaf[e]`: the node of element `e`.
-    pub leaf: Vec<u32>,
+    pub(crate) leaf: Vec<u32>,
     pub(super) samples: Vec<Vec<Sample>>,
     /// Per surface node, its outline: the directed element edges whose reverse is not in the
     /// node (mesh vertex ids and world ends). Empty for clusters.
