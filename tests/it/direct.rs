@@ -829,7 +829,7 @@ fn held_and_falls(panel: [[f64; 3]; 4]) -> (Vec<f64>, Vec<f64>) {
 
 /// A black wall 4 m wide and 3 m tall in the plane z = 0, facing +z, and a lamp `panel` of
 /// radiance 1 (facing the side its corners turn counter-clockwise to).
-fn lamp_and_wall(panel: [[f64; 3]; 4]) -> GlbBuilder {
+pub(crate) fn lamp_and_wall(panel: [[f64; 3]; 4]) -> GlbBuilder {
     let mut b = GlbBuilder::new();
     let black = b.add_material(Material::diffuse("black", [0.0; 3]));
     let lamp = b.add_material(Material::diffuse("lamp", [0.0; 3]).emitting([1.0; 3]));

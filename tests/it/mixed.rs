@@ -248,29 +248,12 @@ fn light_groups_need_the_hierarchical_solver() {
 #[test]
 fn groups_near_and_far_from_a_receiver_bake_as_one() {
     let scene = || {
-        let mut b = GlbBuilder::new();
-        let black = b.add_material(Material::diffuse("black", [0.0; 3]));
-        b.add_mesh_node(
-            "wall",
-            &quad([
-                [-2.0, 0.0, 0.0],
-                [2.0, 0.0, 0.0],
-                [2.0, 3.0, 0.0],
-                [-2.0, 3.0, 0.0],
-            ]),
-            black,
-        );
-        let near = b.add_material(Material::diffuse("near", [0.0; 3]).emitting([1.0; 3]));
-        b.add_mesh_node(
-            "near",
-            &quad([
-                [-0.25, 1.25, 0.3],
-                [-0.25, 1.75, 0.3],
-                [0.25, 1.75, 0.3],
-                [0.25, 1.25, 0.3],
-            ]),
-            near,
-        );
+        let mut b = crate::direct::lamp_and_wall([
+            [-0.25, 1.25, 0.3],
+            [-0.25, 1.75, 0.3],
+            [0.25, 1.75, 0.3],
+            [0.25, 1.25, 0.3],
+        ]);
         let far = b.add_material(Material::diffuse("far", [0.0; 3]).emitting([400.0; 3]));
         b.add_mesh_node(
             "far",
@@ -290,7 +273,7 @@ fn groups_near_and_far_from_a_receiver_bake_as_one() {
         ..with(rules)
     };
     let all = bake(&scene(), &options(&[]));
-    let grouped = bake(&scene(), &options(&[group("near=near"), group("far=far")]));
+    let grouped = bake(&scene(), &options(&[group("lamp=near"), group("far=far")]));
     let peak = all.lightmap.max_value();
     let (near, far) = (layer(&grouped, "near"), layer(&grouped, "far"));
     let main = worst(&grouped.lightmap.texels, &all.lightmap.texels, peak);
