@@ -1,6 +1,7 @@
 //! The pipeline, stage by stage: [`bake`] reads like the table of contents of the crate.
 
 mod budget;
+mod maps;
 mod output;
 
 pub(crate) use budget::element_budget;
@@ -18,7 +19,6 @@ use crate::scene::{self, Scene, Side};
 use crate::solve::{self, Solution, SolveOptions};
 use crate::stats::{Stats, stage};
 use crate::visibility::Visibility;
-use glam::DVec3;
 
 /// Everything a bake can be told.
 #[derive(Clone, Debug)]
@@ -258,14 +258,7 @@ impl BakeOptions {
 /// lightmap.
 pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Result<Bake> {
     options.check()?;
-    let mut stats = Stats {
-        input: gltf.path.display().to_string(),
-        mesher: format!("{:?}", options.mesher).to_lowercase(),
-        threads: rayon::current_num_threads(),
-        lightmap_encoding: options.encoding.name().into(),
-        ..Default::default()
-    };
-    stats.double_sided.mode = options.double_sided.name().into();
+    let mut stats = stats_for(gltf, options);
     let t = &mut stats.timings_s;
     let (scene, cut, options) = stage(&mut t.load, "scene", progress, || scene_for(gltf, options))?;
     let options = &options;
@@ -288,66 +281,8 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         supersample: options.supersample,
         stitch: options.seams == Seams::Stitch,
     };
-    let t = &mut stats.timings_s;
-    let (lightmap, seams) = stage(&mut t.lightmap, "lightmap", progress, || {
-        lightmap_stage(&raster, &solution.irradiance, &solution.texel_lights)
-    });
-    stats.seams = seams;
-    let layers = stage(&mut t.lightmap, "light groups", progress, || {
-        solution
-            .layers
-            .iter()
-            .zip(&solution.layer_texel_lights)
-            .map(|((name, values), texel_lights)| {
-                let (map, _) = lightmap_stage(&raster, values, texel_lights);
-                (name.clone(), map)
-            })
-            .collect()
-    });
-    let directional = (!solution.light.is_empty()).then(|| {
-        stage(
-            &mut stats.timings_s.lightmap,
-            "directional",
-            progress,
-            || lightmap::directional::ratio_maps(&raster, &solution.light, &solution.irradiance),
-        )
-    });
-    let ao = options.ao.map(|ao| {
-        let (map, ao_stats) = stage(
-            &mut stats.timings_s.lightmap,
-            "ambient occlusion",
-            progress,
-            || lightmap::ao::ambient_occlusion(&raster, &ao),
-        );
-        stats.ao = Some(ao_stats);
-        map
-    });
-    let probes = match &options.probes {
-        Some(p) => {
-            let start = std::time::Instant::now();
-            progress("probes", 0, 1);
-            let probes = crate::probes::bake(
-                &scene,
-                &vis,
-                &meshes,
-                &solution.irradiance,
-                &options.solve,
-                p,
-            )
-            .map_err(|reason| Error::Option {
-                option: "--probes",
-                reason,
-            })?;
-            progress("probes", 1, 1);
-            stats.probes = Some(crate::stats::ProbeStats {
-                probes: probes.inside.len(),
-                inside: probes.inside.iter().filter(|&&i| i).count(),
-                seconds: start.elapsed().as_secs_f64(),
-            });
-            Some(probes)
-        }
-        None => None,
-    };
+    let maps = maps::rasterize(&raster, &solution, options, &mut stats, progress);
+    let probes = maps::probes(&raster, &solution, options, &mut stats, progress)?;
     stats.gather(&scene, &meshes, &solution, &atlas, &options.solve);
     check_light_is_finite(gltf, &solution)?;
     Ok(Bake {
@@ -356,13 +291,26 @@ pub fn bake(gltf: &Gltf, options: &BakeOptions, progress: &Progress<'_>) -> Resu
         meshes,
         solution,
         atlas,
-        lightmap,
-        ao,
-        layers,
+        lightmap: maps.lightmap,
+        ao: maps.ao,
+        layers: maps.layers,
         probes,
-        directional,
+        directional: maps.directional,
         stats,
     })
+}
+
+/// The statistics known before the stages run: the input and the options.
+fn stats_for(gltf: &Gltf, options: &BakeOptions) -> Stats {
+    let mut stats = Stats {
+        input: gltf.path.display().to_string(),
+        mesher: format!("{:?}", options.mesher).to_lowercase(),
+        threads: rayon::current_num_threads(),
+        lightmap_encoding: options.encoding.name().into(),
+        ..Default::default()
+    };
+    stats.double_sided.mode = options.double_sided.name().into();
+    stats
 }
 
 /// Classic radiosity's matrix is refused before any expensive stage.
@@ -507,18 +455,6 @@ fn mesh_and_solve(
         solve::radiosity(scene, vis, &meshes, &options.solve, progress)
     });
     Some(Ok((segments, meshes, solution)))
-}
-
-/// The lightmap stage: the meshes' irradiance rasterized into the atlas, the seams stitched
-/// (or only measured, with `--seams off`).
-fn lightmap_stage(
-    raster: &lightmap::Raster,
-    irradiance: &[Vec<DVec3>],
-    texel_lights: &solve::texel_lights::TexelLights,
-) -> (Lightmap, lightmap::seams::SeamStats) {
-    let mut map = lightmap::rasterize(raster, irradiance, texel_lights);
-    let seams = raster.stitch_seams(&mut map);
-    (map, seams)
 }
 
 /// Refuses a solution whose light is not finite or diverged (its unshot power grew).
