@@ -15,7 +15,9 @@
 //! is inside the volume, which many exporters mark double-sided by default.
 
 use crate::error::{Error, Result};
-use crate::scene::{Instance, LightKind, Material, PunctualLight, Scene, Side, emission};
+use crate::scene::{
+    Instance, LightKind, MAX_ALBEDO, Material, PunctualLight, Scene, Side, emission,
+};
 use base64::Engine;
 use glam::{DMat3, DMat4, DVec2, DVec3};
 use gltf::accessor::{DataType, Dimensions};
@@ -703,10 +705,6 @@ fn scene_walked(gltf: &Gltf, limits: &Limits, split_emission: bool) -> Result<Sc
 
 /// The deepest a node may lie in the node hierarchy (its root at depth 0).
 pub(crate) const MAX_DEPTH: usize = 1024;
-
-/// The largest albedo a surface is given: an albedo of 1 reflects everything it receives, so
-/// the bounces in a closed room never converge.
-pub(crate) const MAX_ALBEDO: f64 = 0.99;
 
 /// The largest scene a bake takes, in scene units across (the bounding box diagonal): every
 /// tolerance is relative to it, and the lightmap atlas and the BVH work in f32.

@@ -35,6 +35,10 @@ pub(crate) mod tolerance {
     pub(crate) const RAY: f64 = 1e-5;
 }
 
+/// The largest albedo a surface is given: an albedo of 1 reflects everything it receives, so
+/// the bounces in a closed room never converge.
+pub(crate) const MAX_ALBEDO: f64 = 0.99;
+
 /// A Lambertian surface material.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
@@ -518,7 +522,7 @@ impl Scene {
                     let tinted = Material {
                         name,
                         rho: (b.rho * mean)
-                            .clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO)),
+                            .clamp(DVec3::ZERO, DVec3::splat(MAX_ALBEDO)),
                         radiance: radiance.unwrap_or(b.radiance),
                         base: b.base.clone(),
                     };

@@ -2,6 +2,7 @@
 //! Field names are stable; later stages add fields.
 
 pub use crate::discontinuity::DmStats;
+pub use crate::lightmap::ao::AoStats;
 pub use crate::lightmap::seams::SeamStats;
 pub use crate::scene::cut::Cut;
 pub use crate::solve::direct::EmitterCost;
@@ -31,43 +32,50 @@ pub struct Timings {
     pub mesh: f64,
     pub solve: f64,
     pub lightmap: f64,
-    pub(crate) write: f64,
+    /// Writing the output (filled in by the binary and `bake_file`).
+    pub write: f64,
     pub total: f64,
 }
 
 /// `--stats`: `probes`.
 #[derive(Clone, Debug, Default, Serialize)]
-pub(crate) struct ProbeStats {
+pub struct ProbeStats {
     /// Probes baked, and of those the ones inside geometry.
-    pub(crate) probes: usize,
-    pub(crate) inside: usize,
+    pub probes: usize,
+    pub inside: usize,
     /// Wall time, s.
-    pub(crate) seconds: f64,
+    pub seconds: f64,
 }
 
 /// Everything `--stats` reports.
 #[derive(Clone, Debug, Default, Serialize)]
 pub struct Stats {
-    pub(crate) input: String,
-    pub(crate) mesher: String,
-    pub(crate) threads: usize,
+    /// The input file, as given.
+    pub input: String,
+    /// `--mesher`: `discontinuity`, `uniform` or `adaptive`.
+    pub mesher: String,
+    /// Worker threads of the bake.
+    pub threads: usize,
     /// Input triangles (before any cut).
     pub triangles: usize,
     /// Triangles too long for one atlas page, cut before the bake (`scene::cut`).
     pub cut: crate::scene::cut::Cut,
     pub polygons: usize,
-    pub(crate) instances: usize,
+    /// Placements of primitives in the scene (a mesh used twice counts twice).
+    pub instances: usize,
     pub area_emitters: usize,
-    pub(crate) punctual_lights: usize,
+    /// `KHR_lights_punctual` lights (a directional sun included).
+    pub punctual_lights: usize,
     /// The back sides of double-sided primitives: instances and triangles (included in
     /// `instances` and `triangles`), and how the output writes them (`separate` or `shared`).
     pub double_sided: DoubleSidedStats,
     /// The element budget the meshers aimed at, and what chose it (`--budget`, `lightmap texels`,
     /// `input triangles`, `geometry`, `minimum` or `maximum`; see `bake::element_budget`).
     pub budget: usize,
-    pub(crate) budget_from: String,
+    pub budget_from: String,
     pub elements: usize,
-    pub(crate) vertices: usize,
+    /// Mesh vertices, over every receiver mesh.
+    pub vertices: usize,
     /// Discontinuity meshing counters (only with `--mesher discontinuity`).
     pub discontinuity: Option<crate::discontinuity::DmStats>,
     pub solve: crate::solve::SolveStats,
@@ -80,19 +88,20 @@ pub struct Stats {
     /// Number of lightmap pages (images).
     pub lightmap_pages: u32,
     /// Transfer curve of the 8-bit lightmap images: `srgb` or `linear`.
-    pub(crate) lightmap_encoding: String,
-    pub(crate) texels_per_unit: f32,
+    pub lightmap_encoding: String,
+    /// Lightmap texels per scene unit (given, or chosen from the scene).
+    pub texels_per_unit: f32,
     /// `MOZ_lightmap` intensity: H (W/m²) of a full-scale texel.
-    pub(crate) lightmap_intensity: f64,
+    pub lightmap_intensity: f64,
     /// Seam edges, samples, stitched texels, and the seam mismatch before and after
     /// stitching (`lightmap::seams`).
     pub seams: crate::lightmap::seams::SeamStats,
     /// Ambient occlusion (`--ao`); its time is in `timings_s.lightmap`.
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub(crate) ao: Option<crate::lightmap::ao::AoStats>,
+    pub ao: Option<AoStats>,
     /// Light probes (`--probes`).
     #[serde(skip_serializing_if = "Option::is_none")]
-    pub(crate) probes: Option<ProbeStats>,
+    pub probes: Option<ProbeStats>,
     pub timings_s: Timings,
     pub warnings: Vec<String>,
 }

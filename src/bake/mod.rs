@@ -493,7 +493,7 @@ fn check_light_is_finite(gltf: &Gltf, solution: &Solution) -> Result<()> {
 /// options with that density filled in.
 fn scene_for(gltf: &Gltf, options: &BakeOptions) -> Result<(Scene, scene::cut::Cut, BakeOptions)> {
     let mut scene = load::scene_limited(gltf, &options.load.limits)?;
-    scene::mixed::apply(gltf, &mut scene, &options.lights)?;
+    scene::mixed::apply(&gltf.path, &gltf.json, &mut scene, &options.lights)?;
     check_mixed(gltf, &scene, options)?;
     if let Some(p) = &options.probes {
         crate::probes::grid(&scene, p.spacing).map_err(|reason| Error::Option {

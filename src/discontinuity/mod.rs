@@ -106,7 +106,7 @@ pub struct DmStats {
     /// Wedge pieces kept as constraints.
     pub kept: usize,
     /// Wedge pieces whose generator was hidden.
-    pub(crate) hidden: usize,
+    pub hidden: usize,
     /// Wedges whose generator the light does not see at any of [`GENERATOR_SAMPLES`](trace::GENERATOR_SAMPLES) points
     /// (an occluder behind a wall, in another room): not intersected with any receiver, as
     /// every piece of them would be hidden.
@@ -115,7 +115,7 @@ pub struct DmStats {
     pub dropped_threshold: usize,
     /// (Area emitter, occluder edge or vertex) pairs whose wedges were not built: no piece of
     /// them could reach the threshold (bound from the emitter's power and distance).
-    pub(crate) culled: usize,
+    pub culled: usize,
     /// Wedge pieces dropped to stay within the element budget.
     pub dropped_budget: usize,
     /// Constraint pieces spade refused (they would have crossed another; should be 0).
@@ -123,7 +123,7 @@ pub struct DmStats {
     /// Wedge pieces left out by the mesher because they run along a stronger line (the
     /// outline, a D0 line, a stronger wedge piece) within half an element, or all along the
     /// other boundary of their own penumbra.
-    pub(crate) crowded: usize,
+    pub crowded: usize,
 }
 
 /// Per receiver polygon: its discontinuity segments.

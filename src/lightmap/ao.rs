@@ -48,17 +48,17 @@ pub(crate) const SAMPLES_RANGE: std::ops::RangeInclusive<usize> = 1..=65536;
 
 /// `--stats`: `ao`.
 #[derive(Clone, Debug, Default, serde::Serialize)]
-pub(crate) struct AoStats {
+pub struct AoStats {
     /// `--ao`, scene units.
-    pub(crate) distance: f64,
+    pub distance: f64,
     /// Rays per sub-sample.
-    pub(crate) rays_per_sample: usize,
+    pub rays_per_sample: usize,
     /// Rays cast.
-    pub(crate) rays: u64,
+    pub rays: u64,
     /// Mean AO over the covered texels.
-    pub(crate) mean: f64,
+    pub mean: f64,
     /// Wall time, s.
-    pub(crate) seconds: f64,
+    pub seconds: f64,
 }
 
 /// The ambient occlusion of every texel of `atlas` (grey: the three channels equal), with the

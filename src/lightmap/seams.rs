@@ -518,15 +518,15 @@ pub struct SeamStats {
     pub samples: usize,
     /// Texels in the samples' footprints (the unknowns), and their connected groups.
     pub texels: usize,
-    pub(crate) groups: usize,
+    pub groups: usize,
     /// Most conjugate-gradient iterations a group took.
-    pub(crate) iterations: usize,
+    pub iterations: usize,
     /// Mean and largest seam mismatch before stitching, relative to the mean covered texel.
     pub mismatch_mean_before: f64,
     pub mismatch_max_before: f64,
     /// Where the largest mismatch before stitching is: the world point of its sample (`null`
     /// without samples).
-    pub(crate) worst_before_at: Option<[f64; 3]>,
+    pub worst_before_at: Option<[f64; 3]>,
     /// The same after stitching (equal to the before values with `--seams off`).
     pub mismatch_mean: f64,
     pub mismatch_max: f64,

@@ -5,7 +5,8 @@
 //! is kept the same way (emitters are split where it changes, [`crate::scene::emission`]); its
 //! mean scales the material's radiance where one value stands for the surface.
 
-use super::{Gltf, MAX_ALBEDO, MIB, limits, name_suffix, short};
+use super::{Gltf, MIB, limits, name_suffix, short};
+use crate::scene::MAX_ALBEDO;
 use crate::color::srgb_to_linear;
 use crate::error::Result;
 use crate::scene::texture::{Image, TextureRef, Wrap};

@@ -27,9 +27,9 @@ pub struct Cut {
     /// Input triangles that were split.
     pub triangles_cut: usize,
     /// Triangles the split ones became.
-    pub(crate) pieces: usize,
+    pub pieces: usize,
     /// Vertices added.
-    pub(crate) vertices_added: usize,
+    pub vertices_added: usize,
 }
 
 /// Splits every triangle edge of the scene longer than `max_edge` (scene units) by conforming

@@ -28,8 +28,9 @@
 
 use super::{Instance, Scene};
 use crate::error::{Error, Result};
-use crate::load::Gltf;
+use serde_json::Value;
 use std::collections::BTreeMap;
+use std::path::Path;
 
 /// How a light goes into the bake (`penumbra_bake`, `--light-bake`).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, PartialOrd, Ord)]
@@ -150,13 +151,13 @@ fn matches(pattern: &str, name: &str) -> bool {
 /// Overrides `rule` with an object's `extras` (`penumbra_bake`, `penumbra_group`); `item`
 /// names the object in errors.
 fn apply_extras(
-    gltf: &Gltf,
-    extras: &serde_json::Value,
+    path: &Path,
+    extras: &Value,
     item: &str,
     rule: &mut LightRule,
 ) -> Result<()> {
     let bad = |reason: String| Error::BadItem {
-        path: gltf.path.clone(),
+        path: path.into(),
         item: item.into(),
         reason,
     };
@@ -193,40 +194,38 @@ fn apply_cli(rules: &[CliRule], names: &[Option<&str>], rule: &mut LightRule) {
 /// The rules of `scene`'s lights from the file's extras and `cli`, stored in `scene.mixed`;
 /// then the lights with `bake: none` are taken out of the scene (punctual lights removed,
 /// emitting surfaces made non-emitting: they still reflect). An error names the item whose
-/// extras are not a rule.
-pub(crate) fn apply(gltf: &Gltf, scene: &mut Scene, cli: &[CliRule]) -> Result<()> {
-    let json = &gltf.json;
+/// extras are not a rule. `json` is the glTF JSON of the file at `path`.
+pub(crate) fn apply(path: &Path, json: &Value, scene: &mut Scene, cli: &[CliRule]) -> Result<()> {
     let node_name = |n: usize| json["nodes"][n]["name"].as_str();
     let mut lights = Vec::with_capacity(scene.lights.len());
     for l in &scene.lights {
         let mut rule = LightRule::default();
         let def = &json["extensions"]["KHR_lights_punctual"]["lights"][l.index];
         let item = format!("KHR_lights_punctual.lights[{}]", l.index);
-        apply_extras(gltf, &def["extras"], &item, &mut rule)?;
+        apply_extras(path, &def["extras"], &item, &mut rule)?;
         let node = format!("node {}", l.node);
-        apply_extras(gltf, &json["nodes"][l.node]["extras"], &node, &mut rule)?;
+        apply_extras(path, &json["nodes"][l.node]["extras"], &node, &mut rule)?;
         apply_cli(cli, &[Some(&l.name), node_name(l.node)], &mut rule);
         lights.push(rule);
     }
     let mut instances = Vec::with_capacity(scene.instances.len());
     for inst in &scene.instances {
-        instances.push(instance_rule(gltf, inst, cli)?);
+        instances.push(instance_rule(path, json, inst, cli)?);
     }
     scene.mixed = Mixed { lights, instances };
     silence(scene);
     Ok(())
 }
 
-fn instance_rule(gltf: &Gltf, inst: &Instance, cli: &[CliRule]) -> Result<LightRule> {
-    let json = &gltf.json;
+fn instance_rule(path: &Path, json: &Value, inst: &Instance, cli: &[CliRule]) -> Result<LightRule> {
     let mut rule = LightRule::default();
     let material = inst.gltf_material.map(|m| &json["materials"][m]);
     if let (Some(m), Some(i)) = (material, inst.gltf_material) {
-        apply_extras(gltf, &m["extras"], &format!("material {i}"), &mut rule)?;
+        apply_extras(path, &m["extras"], &format!("material {i}"), &mut rule)?;
     }
     let node = &json["nodes"][inst.node];
     apply_extras(
-        gltf,
+        path,
         &node["extras"],
         &format!("node {}", inst.node),
         &mut rule,

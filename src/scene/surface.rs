@@ -249,7 +249,7 @@ impl Scene {
             .is_some_and(|c| c.hole(&self.images, bary))
     }
 
-    /// Albedo (linear RGB, clamped to [`crate::load::MAX_ALBEDO`]) of triangle `t` at
+    /// Albedo (linear RGB, clamped to [`super::MAX_ALBEDO`]) of triangle `t` at
     /// barycentric `bary`: the base colour factor x the texture (bilinear, finest level) x the
     /// vertex colour; 0 in a hole.
     pub fn albedo_at(&self, t: usize, bary: [f64; 3]) -> DVec3 {
@@ -305,7 +305,7 @@ impl Scene {
                 }
             }
         };
-        (rho * colour).clamp(DVec3::ZERO, DVec3::splat(crate::load::MAX_ALBEDO))
+        (rho * colour).clamp(DVec3::ZERO, DVec3::splat(super::MAX_ALBEDO))
     }
 
     /// Texture units per scene unit on triangle `t` (the square root of the ratio of its

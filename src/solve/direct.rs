@@ -37,7 +37,7 @@ pub struct DirectStats {
     /// Exact method: pairs that fell back to shadow rays (occluders over `occluder_cap`, or
     /// too many visible pieces).
     pub fallbacks: u64,
-    pub(crate) occluder_cap: usize,
+    pub occluder_cap: usize,
     /// Exact method: candidate occluders (convex pieces) left after the shaft culling, summed
     /// over pairs: what the per-point clipping looked at.
     pub candidates: u64,
@@ -61,13 +61,13 @@ pub struct DirectStats {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct EmitterCost {
     /// Index into [`Scene::polygons`].
-    pub(crate) polygon: usize,
+    pub polygon: usize,
     /// Triangles of the emitter polygon and the convex pieces they were merged into.
-    pub(crate) triangles: usize,
+    pub triangles: usize,
     pub convex_pieces: usize,
     pub evaluations: u64,
     pub occluders: u64,
-    pub(crate) fallbacks: u64,
+    pub fallbacks: u64,
     /// Time spent on this emitter, summed over threads, s.
     pub seconds: f64,
 }

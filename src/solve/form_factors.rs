@@ -196,11 +196,11 @@ pub(crate) struct Kernel<'a> {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct HemicubeStats {
     /// Cells across the top face.
-    pub(crate) resolution: usize,
+    pub resolution: usize,
     /// Cells of one hemicube, `3 R²`.
     pub cells: usize,
     /// Sum of the delta form factors (1 in the limit).
-    pub(crate) delta_sum: f64,
+    pub delta_sum: f64,
     /// Hemicubes rendered (shooting patches, matrix rows, gathering vertices).
     pub hemicubes: u64,
 }

@@ -87,13 +87,13 @@ pub struct MatrixStats {
     /// Memory of the matrix, bytes.
     pub bytes: u64,
     /// The limit it had to fit, bytes.
-    pub(crate) limit_bytes: u64,
+    pub limit_bytes: u64,
     /// Entries that are not 0.
-    pub(crate) nonzero: u64,
+    pub nonzero: u64,
     /// Time to fill the matrix, seconds.
-    pub(crate) form_factor_seconds: f64,
+    pub form_factor_seconds: f64,
     /// Time of the Gauss-Seidel (or Jacobi, with `--bounces`) iterations, seconds.
-    pub(crate) solve_seconds: f64,
+    pub solve_seconds: f64,
     pub sweeps: usize,
     /// The power changed by the last sweep, relative to the source power.
     pub last_change: f64,

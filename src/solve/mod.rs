@@ -225,29 +225,29 @@ pub struct Solution {
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct SolveStats {
     /// The indirect solver (`progressive`, `hierarchical`, `matrix`).
-    pub(crate) solver: Option<Solver>,
+    pub solver: Option<Solver>,
     /// The patch solvers' form factors (`closed-form`, `raycast`, `hemicube`).
-    pub(crate) form_factors: Option<FormFactors>,
-    pub(crate) patches: usize,
-    pub(crate) shots: usize,
+    pub form_factors: Option<FormFactors>,
+    pub patches: usize,
+    pub shots: usize,
     /// Wall time of the indirect solve (patches, their solve and the final gather; or the
     /// hierarchical solve), seconds.
-    pub(crate) indirect_seconds: f64,
+    pub indirect_seconds: f64,
     /// Wall time of the patch solve alone (progressive refinement or the matrix), seconds.
-    pub(crate) patch_solve_seconds: f64,
+    pub patch_solve_seconds: f64,
     /// Wall time of the indirect light's directions (`--directional`), seconds.
     #[serde(skip_serializing_if = "is_zero")]
-    pub(crate) directional_seconds: f64,
-    pub(crate) rays: u64,
+    pub directional_seconds: f64,
+    pub rays: u64,
     /// Unshot power left at the end, relative to the power first received.
-    pub(crate) unshot_fraction: f64,
+    pub unshot_fraction: f64,
     /// Power emitted by area emitters, W (mean over RGB).
     pub emitted_power: f64,
     /// Power received directly by all patches, W (mean over RGB). The hierarchical solver
     /// counts the elements it solves, which leaves out those buried under closed geometry (a
     /// floor under a box): on interior-20 it reads 750 W where integrating the direct light
     /// over every element gives 761 W (`penumbra measure light-shown`).
-    pub(crate) direct_power: f64,
+    pub direct_power: f64,
     /// Power absorbed by all patches, W (mean over RGB).
     pub absorbed_power: f64,
     /// The direct light at the mesh vertices.
@@ -266,7 +266,7 @@ pub struct SolveStats {
     pub sky: Option<sky::SkyStats>,
     /// Caps that changed the result.
     #[serde(skip_serializing_if = "Vec::is_empty")]
-    pub(crate) warnings: Vec<String>,
+    pub warnings: Vec<String>,
 }
 
 /// Ray origins of receiving points from the BVH's offset (the pure constructors are

@@ -13,6 +13,7 @@ mod hardening;
 mod hemicube;
 mod hierarchical;
 mod known_answers;
+mod layout;
 mod loading;
 mod matrix;
 mod mixed;

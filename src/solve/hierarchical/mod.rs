@@ -326,30 +326,30 @@ const MAX_ITERATIONS: usize = 1000;
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct HierStats {
     /// Nodes of the hierarchy (leaves, surface nodes, clusters).
-    pub(crate) nodes: usize,
+    pub nodes: usize,
     /// Leaves: mesh elements.
-    pub(crate) elements: usize,
+    pub elements: usize,
     /// Cluster nodes (spanning more than one polygon).
-    pub(crate) clusters: usize,
+    pub clusters: usize,
     /// Links of the last refinement pass.
     pub links: usize,
     /// Links refined (split), summed over the passes.
-    pub(crate) refinements: u64,
+    pub refinements: u64,
     /// Jacobi iterations, summed over the passes.
-    pub(crate) iterations: usize,
+    pub iterations: usize,
     /// Shadow rays of the link estimates.
-    pub(crate) rays: u64,
+    pub rays: u64,
     /// The refinement tolerance in effect (after any cap), fraction of the reflected direct
     /// power.
     pub tolerance: f64,
     /// Seconds building the hierarchy.
-    pub(crate) build_seconds: f64,
+    pub build_seconds: f64,
     /// Seconds refining links (all passes).
-    pub(crate) link_seconds: f64,
+    pub link_seconds: f64,
     /// Seconds iterating (all passes).
-    pub(crate) solve_seconds: f64,
+    pub solve_seconds: f64,
     /// Seconds computing the vertex values.
-    pub(crate) vertex_seconds: f64,
+    pub vertex_seconds: f64,
 }
 
 /// The indirect light at every vertex of `meshes`, added to their direct light `direct_h`, by
