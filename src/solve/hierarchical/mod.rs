@@ -53,15 +53,17 @@
 //! area-averaged form factor `F(r→s)`, with visibility. So `H_r += K B_s` (W/m²), and the link
 //! carries the power `K B_s A_r` (W).
 //!
-//! `K` is estimated from up to four fixed sample points per node (a leaf: its centroid and the
-//! midpoints between centroid and corners; a larger node: the centroids of the elements at the
-//! 1/8, 3/8, 5/8, 7/8 points of its area, each on an element of its own):
+//! `K` is estimated from up to four fixed sample points per node (a leaf: the three points of
+//! Cowper's rule, at barycentric (2/3, 1/6, 1/6) and its permutations, exact for quadratics
+//! (G. R. Cowper, "Gaussian quadrature formulas for triangles", IJNME 1973); a larger node: the
+//! centroids of the elements at the 1/8, 3/8, 5/8, 7/8 points of its area, each on an element
+//! of its own):
 //!
 //! * **Surface to surface** (both nodes in one plane each): the exact unoccluded
 //!   point-to-polygon form factor (Lambert's contour formula) from each receiver sample to the
 //!   source (the disk formula below, about the source's centre, once the sample is more than
 //!   [`FAR_FIELD`] bounding radii away), averaged over the receiver samples, times the visible
-//!   fraction of the 4 × 4 sample pairs. When the source's bounding box is above the sample's
+//!   fraction of the sample pairs (at most 4 × 4). When the source's bounding box is above the sample's
 //!   horizon the contour sum runs over the source node's *outline* only (its element edges
 //!   whose reverse is not in the node: interior edges cancel in the contour sum), so a large
 //!   source costs its boundary, not its area (collinear runs of outline edges are merged into
@@ -161,14 +163,14 @@
 //! * **Partial visibility**: a surface-to-surface link whose tested sample pairs disagree
 //!   (some see each other, some do not) is split at its larger node while `B_s K_unoccluded`,
 //!   the irradiance its visible fraction decides, exceeds [`PARTIAL_VISIBILITY`] × `P / A`.
-//!   Also a bias, not noise: the visible fraction weights the 16 pairs alike, but the pairs
+//!   Also a bias, not noise: the visible fraction weights the pairs alike, but the pairs
 //!   that see past an occluder are usually the near ones, of the larger form factor. A link
 //!   over the limit is split as soon as its first pairs (one per sample) disagree, without the
 //!   other pairs' rays; one under the limit is kept with the visible fraction of those first
 //!   pairs (the irradiance its visibility decides is within the limit anyway). Only a link of
-//!   two leaves over the limit (it cannot be split) casts all sixteen pairs.
+//!   two leaves over the limit (it cannot be split) casts all its pairs.
 //! * **Hidden, in doubt**: a link that the power, variation or source test would split but
-//!   whose sixteen sample pairs are all hidden may still see past the occluder between them
+//!   whose sample pairs are all hidden may still see past the occluder between them
 //!   (a box's face and the wall behind the box). It is split like a partially visible link
 //!   while `B_s K_unoccluded` exceeds the same limit, else kept as `K = 0`.
 //!

@@ -530,9 +530,9 @@ fn node_samples(
     if count == 1 {
         let e = &elements[n.lo as usize];
         let c = (e.p[0] + e.p[1] + e.p[2]) / 3.0;
-        let mut out = vec![at(c, e)];
-        out.extend(e.p.iter().map(|q| at((c + *q) * 0.5, e)));
-        return out;
+        // Cowper's three-point rule, exact for quadratics (at barycentric (2/3, 1/6, 1/6)
+        // and its permutations): the link's `K` is the samples' plain mean.
+        return e.p.iter().map(|q| at((c + *q) * 0.5, e)).collect();
     }
     // The elements at the 1/8, 3/8, 5/8, 7/8 points of the node's area, not of its element
     // count: a discontinuity mesh's elements are smallest along its lines (a wall's foot, a
