@@ -63,8 +63,8 @@
 //!   point-to-polygon form factor (Lambert's contour formula) from each receiver sample to the
 //!   source (the disk formula below, about the source's centre, once the sample is more than
 //!   [`FAR_FIELD`] bounding radii away), averaged over the receiver samples, times the visible
-//!   fraction of the sample pairs (at most 4 × 4). When the source's bounding box is above the sample's
-//!   horizon the contour sum runs over the source node's *outline* only (its element edges
+//!   fraction of the sample pairs (at most 4 × 4). When the source's bounding box is above the
+//!   sample's horizon the contour sum runs over the source node's *outline* only (its element edges
 //!   whose reverse is not in the node: interior edges cancel in the contour sum), so a large
 //!   source costs its boundary, not its area (collinear runs of outline edges are merged into
 //!   one: a straight edge's term is the sum of its pieces'); a source straddling the horizon
