@@ -59,42 +59,66 @@ fn module_of(src: &Path, file: &Path) -> Option<Vec<String>> {
     Some(parts)
 }
 
-/// The paths a file's code names: `crate::a::b` and `super::c`, with one level of `{..}`
-/// groups expanded, outside comments and the `tests` module.
+/// The paths a file's code names: `crate::a::b` and `super::c`, with a `{..}` group's items
+/// (over several lines too, nested groups by their heads), outside comments and the `tests`
+/// module.
 fn named_paths(text: &str) -> Vec<(bool, Vec<String>)> {
-    let code = text.split("#[cfg(test)]\nmod tests").next().unwrap();
+    let code: String = text
+        .split("#[cfg(test)]\nmod tests")
+        .next()
+        .unwrap()
+        .lines()
+        .filter(|l| !l.trim_start().starts_with("//"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    let path_char = |c: char| c.is_alphanumeric() || c == '_' || c == ':';
     let mut out = Vec::new();
-    for line in code.lines().filter(|l| !l.trim_start().starts_with("//")) {
-        for (anchor, is_super) in [("crate::", false), ("super::", true)] {
-            for (at, _) in line.match_indices(anchor) {
-                if line[..at].ends_with(|c: char| c.is_alphanumeric() || c == '_' || c == ':') {
-                    continue;
-                }
-                let rest = &line[at + anchor.len()..];
-                let end = rest
-                    .find(|c: char| !(c.is_alphanumeric() || c == '_' || c == ':'))
-                    .unwrap_or(rest.len());
-                let path: Vec<String> = rest[..end]
-                    .split("::")
-                    .filter(|s| !s.is_empty())
-                    .map(String::from)
-                    .collect();
-                if let Some(group) = rest[end..].strip_prefix('{') {
-                    let group = group.split('}').next().unwrap();
-                    for item in group.split(',') {
-                        let head = item.trim().split("::").next().unwrap().to_string();
-                        if head.starts_with(|c: char| c.is_lowercase()) && head != "self" {
-                            let mut p = path.clone();
-                            p.push(head);
-                            out.push((is_super, p));
-                        }
-                    }
-                }
-                out.push((is_super, path));
+    for (anchor, is_super) in [("crate::", false), ("super::", true)] {
+        for (at, _) in code.match_indices(anchor) {
+            if code[..at].ends_with(path_char) {
+                continue;
             }
+            let rest = &code[at + anchor.len()..];
+            let end = rest.find(|c: char| !path_char(c)).unwrap_or(rest.len());
+            let path: Vec<String> = rest[..end]
+                .split("::")
+                .filter(|s| !s.is_empty())
+                .map(String::from)
+                .collect();
+            if let Some(group) = rest[end..].strip_prefix('{') {
+                // The group's top-level items, up to its closing brace.
+                let (mut depth, mut item) = (0, String::new());
+                for c in group.chars() {
+                    match c {
+                        '{' => depth += 1,
+                        '}' if depth == 0 => break,
+                        '}' => depth -= 1,
+                        ',' if depth == 0 => {
+                            out.extend(group_item(&path, &item).map(|p| (is_super, p)));
+                            item.clear();
+                            continue;
+                        }
+                        _ => {}
+                    }
+                    item.push(c);
+                }
+                out.extend(group_item(&path, &item).map(|p| (is_super, p)));
+            }
+            out.push((is_super, path));
         }
     }
     out
+}
+
+/// `path` extended by the head of a `use` group's item when that head is a module name
+/// (lower case, not `self`).
+fn group_item(path: &[String], item: &str) -> Option<Vec<String>> {
+    let head = item.trim().split("::").next()?.trim();
+    (head.starts_with(|c: char| c.is_lowercase()) && head != "self").then(|| {
+        let mut p = path.to_vec();
+        p.push(head.to_string());
+        p
+    })
 }
 
 #[test]
