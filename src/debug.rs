@@ -14,6 +14,7 @@ pub(crate) fn colour(kind: Kind) -> &'static str {
         Kind::Ve => "#1f77b4",
         Kind::Ev => "#2ca02c",
         Kind::Punctual => "#9467bd",
+        Kind::Corner => "#ff7f0e",
     }
 }
 
@@ -76,7 +77,7 @@ pub fn mesh_svg(polygon: &Polygon, mesh: &ReceiverMesh, segments: &[Segment], si
     }
     let legend_y = h - 8.0;
     let mut x = margin;
-    for kind in [Kind::D0, Kind::Ve, Kind::Ev, Kind::Punctual] {
+    for kind in [Kind::D0, Kind::Ve, Kind::Ev, Kind::Punctual, Kind::Corner] {
         let _ = writeln!(
             s,
             r#"<text x="{x:.0}" y="{legend_y:.0}" font-family="sans-serif" font-size="12" fill="{}">{kind:?}</text>"#,

@@ -6,13 +6,14 @@ use crate::scene::Scene;
 use glam::{DVec2, DVec3};
 
 /// Contact segments on receiver `r`: other triangles touching, crossing or lying in its plane,
-/// or hovering in front of it within [`NEAR_CONTACT`].
+/// or hovering in front of it within [`NEAR_CONTACT`]. Then the corners: the pieces along its
+/// outline where another surface reaches in front of it ([`Kind::Corner`](super::Kind::Corner)).
 pub(super) fn contacts(
     scene: &Scene,
     index: &PolygonIndex,
     r: usize,
     tol: f64,
-) -> Vec<(DVec3, DVec3)> {
+) -> [Vec<(DVec3, DVec3)>; 2] {
     let poly = &scene.polygons[r];
     let frame = &poly.frame;
     let near = NEAR_CONTACT * scene.extent();
@@ -22,6 +23,7 @@ pub(super) fn contacts(
         .flat_map(|&t| scene.triangles[t].p)
         .collect();
     let mut out = Vec::new();
+    let mut along_outline = Vec::new();
     let in_front: Vec<DVec3> = corners
         .iter()
         .flat_map(|&c| [c, c + frame.n * near])
@@ -46,11 +48,10 @@ pub(super) fn contacts(
             // Coplanar: its outline is where a different surface starts. Hovering just in
             // front (a light fitted a hair below a ceiling): it hides the whole hemisphere but
             // a sliver, so the light jumps across its outline as at a contact.
-            raw.extend(
-                op.boundary
-                    .iter()
-                    .map(|[a, b]| (op.frame.world_from_plane(*a), op.frame.world_from_plane(*b))),
-            );
+            raw.extend(op.boundary.iter().map(|[a, b]| {
+                let world = |p| op.frame.world_from_plane(p);
+                (world(*a), world(*b), false)
+            }));
         }
         for &t in op.triangles.iter().filter(|_| !flat) {
             let tri = &scene.triangles[t];
@@ -78,28 +79,27 @@ pub(super) fn contacts(
                     }
                 }
                 if best.0 > tol * tol {
-                    raw.push((best.1, best.2));
+                    raw.push((best.1, best.2, d.iter().any(|&x| x > tol)));
                 }
             }
         }
-        for (a, b) in raw {
+        for (a, b, in_front) in raw {
             // Project onto the plane, then keep the part inside the polygon and off its
-            // outline (a contact along the outline adds nothing).
+            // outline (a contact along the outline is no jump inside it: a corner, when the
+            // other surface reaches in front).
             let a = a - frame.n * frame.n.dot(a - frame.origin);
             let b = b - frame.n * frame.n.dot(b - frame.origin);
             for (p, q) in clip_segment_to_polygon(scene, index, r, a, b, &[], tol) {
-                if !on_outline(
-                    poly,
-                    frame.plane_from_world(p),
-                    frame.plane_from_world(q),
-                    10.0 * tol,
-                ) {
+                let (pp, pq) = (frame.plane_from_world(p), frame.plane_from_world(q));
+                if !on_outline(poly, pp, pq, 10.0 * tol) {
                     out.push((p, q));
+                } else if in_front {
+                    along_outline.push((p, q));
                 }
             }
         }
     }
-    out
+    [out, along_outline]
 }
 
 /// True when the plane segment `a-b` lies along one of the polygon's boundary edges.

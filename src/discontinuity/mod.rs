@@ -57,6 +57,10 @@ pub enum Kind {
     Ev,
     /// Silhouette edge of a punctual light.
     Punctual,
+    /// Another surface meets the receiver along its outline, in front of it (a wall's foot on
+    /// the ground, a roof against a taller neighbour's wall). No jump inside the polygon, but the
+    /// bounce light changes fastest beside it: the mesher grades its elements toward it.
+    Corner,
 }
 
 impl Kind {
@@ -64,6 +68,12 @@ impl Kind {
     /// interpolated across, so the mesher always keeps it and values its vertices per side.
     pub(crate) fn is_jump(self) -> bool {
         matches!(self, Kind::D0 | Kind::Punctual)
+    }
+
+    /// A piece of a light's wedge (ranked by significance, dropped for the budget when the
+    /// mesh cannot hold it); contacts and corners are the geometry's and always kept.
+    pub fn is_wedge(self) -> bool {
+        !matches!(self, Kind::D0 | Kind::Corner)
     }
 }
 
@@ -103,6 +113,8 @@ pub struct DmStats {
     pub wedges: usize,
     /// D0 (contact) segments.
     pub d0: usize,
+    /// Corner segments: outline edges that another surface meets in front ([`Kind::Corner`]).
+    pub corners: usize,
     /// Wedge pieces kept as constraints.
     pub kept: usize,
     /// Wedge pieces whose generator was hidden.
@@ -139,7 +151,7 @@ pub fn segments(
     let mut stats = DmStats::default();
 
     // D0: contacts, per receiver.
-    let d0: Vec<Vec<(DVec3, DVec3)>> = (0..scene.polygons.len())
+    let d0: Vec<[Vec<(DVec3, DVec3)>; 2]> = (0..scene.polygons.len())
         .into_par_iter()
         .map(|r| contacts(scene, &index, r, tol))
         .collect();
@@ -191,19 +203,26 @@ pub fn segments(
     let mut out: Vec<Vec<Segment>> = vec![Vec::new(); scene.polygons.len()];
     let first_d0_event = wedge_count as u32;
     let mut event = first_d0_event;
-    for (r, segs) in d0.iter().enumerate() {
+    for (r, [contacts, corners]) in d0.iter().enumerate() {
         let frame = &scene.polygons[r].frame;
-        for &(a, b) in segs {
+        let tagged = contacts
+            .iter()
+            .map(|s| (s, Kind::D0))
+            .chain(corners.iter().map(|s| (s, Kind::Corner)));
+        for (&(a, b), kind) in tagged {
             out[r].push(Segment {
                 a: frame.plane_from_world(a),
                 b: frame.plane_from_world(b),
-                kind: Kind::D0,
+                kind,
                 event,
                 significance: 1.0,
                 feature: 0,
             });
             event += 1;
-            stats.d0 += 1;
+            match kind {
+                Kind::D0 => stats.d0 += 1,
+                _ => stats.corners += 1,
+            }
         }
     }
     for p in pieces {

@@ -3,7 +3,7 @@
 //! within the element budget.
 
 use super::wedges::Light;
-use super::{DmStats, Kind, Segment};
+use super::{DmStats, Segment};
 use crate::geometry::point_polygon_form_factor;
 use crate::light::{luminance, punctual_unoccluded};
 use crate::scene::Scene;
@@ -23,7 +23,7 @@ pub fn keep_most_significant(
     let mut wedge: Vec<(f64, u32, usize, usize)> = Vec::new();
     for (polygon, segs) in segments.iter().enumerate() {
         for (i, s) in segs.iter().enumerate() {
-            if s.kind != Kind::D0 {
+            if s.kind.is_wedge() {
                 wedge.push((s.significance, s.event, polygon, i));
             }
         }
@@ -48,7 +48,7 @@ pub fn keep_most_significant(
         let mut kept: Vec<Segment> = Vec::with_capacity(segs.len());
         let mut wedges: Vec<Segment> = Vec::new();
         for (s, &k) in std::mem::take(segs).into_iter().zip(keep) {
-            if s.kind == Kind::D0 {
+            if !s.kind.is_wedge() {
                 kept.push(s);
             } else if k {
                 wedges.push(s);

@@ -4,7 +4,6 @@
 use crate::BakeOptions;
 use crate::bake::meshes;
 use crate::compare::{MeshSample, mesh_error, mesh_samples};
-use crate::discontinuity::Kind;
 use crate::mesh::{Mesher, ReceiverMesh};
 use crate::scene::Scene;
 use crate::solve::Direct;
@@ -169,7 +168,7 @@ impl DmCoverage {
                     .iter()
                     .map(|[a, b]| (*a, *b)),
             );
-            for s in segs.iter().filter(|s| s.kind != Kind::D0) {
+            for s in segs.iter().filter(|s| s.kind.is_wedge()) {
                 let len = s.a.distance(s.b);
                 total += len;
                 // 8 points along it, each followed when within 5 cm of an edge.

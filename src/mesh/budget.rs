@@ -4,7 +4,7 @@
 
 use super::cdt::triangulate_with;
 use super::{Lines, ReceiverMesh};
-use crate::discontinuity::{Kind, Segment};
+use crate::discontinuity::Segment;
 use crate::scene::{Polygon, Scene};
 use rayon::prelude::*;
 
@@ -191,7 +191,7 @@ pub(crate) fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: u
         .iter()
         .map(|segs| {
             segs.iter()
-                .filter(|s| s.kind == Kind::D0)
+                .filter(|s| !s.kind.is_wedge())
                 .cloned()
                 .collect()
         })

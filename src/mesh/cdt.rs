@@ -28,6 +28,12 @@ const LATTICE_FILL: f64 = 0.8;
 /// The lattice keeps this many of its steps from the outline and the lines.
 const LATTICE_CLEAR: f64 = 0.25;
 
+/// How far from a corner or contact line its row of vertices lies ([`corner_strip`]), as a
+/// fraction of the side of an element at the area cap (a square of the cap). Measured on a
+/// real city (Florence, the RMSE against a path-traced reference): 0.2 and 0.45 did worse than
+/// 0.3.
+const STRIP_OFFSET: f64 = 0.3;
+
 /// The most point-in-triangle tests [`open_lattice`] spends on one polygon.
 const LATTICE_TESTS: f64 = 5e7;
 
@@ -122,7 +128,7 @@ fn triangulate_in_frame(
     // out, they cannot be interpolated), then the wedges strongest first, each kept clear of
     // what went before.
     let jumps = Kind::is_jump;
-    let mut order: Vec<&Segment> = segments.iter().collect();
+    let mut order: Vec<&Segment> = segments.iter().filter(|s| s.kind != Kind::Corner).collect();
     order.sort_by(|s, t| {
         jumps(t.kind)
             .cmp(&jumps(s.kind))
@@ -158,12 +164,15 @@ fn triangulate_in_frame(
             }
         }
     }
+    let strip = corner_strip(polygon, segments, max_area, &obstacles);
     let arr = arrangement::build(&input, tol);
     // A polygon no larger than one element, with nothing inside, stays its outline's
     // triangulation: refining its slivers for their angles (a tessellated sphere's poles) would
     // spend the budget where the light is smooth at the element's scale anyway.
-    let refine =
-        polygon.area > max_area || !arr.edges.iter().all(|e| e.2.is_none()) || !points.is_empty();
+    let refine = polygon.area > max_area
+        || !arr.edges.iter().all(|e| e.2.is_none())
+        || !points.is_empty()
+        || !strip.is_empty();
     // The triangulation, refined; with `lattice`, seeded first with a lattice in the open
     // areas. Also whether the area pass ran out of vertices.
     let build = |lattice: bool, vertex_cap: usize| {
@@ -183,7 +192,7 @@ fn triangulate_in_frame(
                 refused += 1;
             }
         }
-        for p in points {
+        for p in points.iter().chain(&strip) {
             if polygon.contains(*p) {
                 let _ = cdt.insert(Point2::new(p.x, p.y));
             }
@@ -296,6 +305,49 @@ fn triangulate_in_frame(
         split_along(&mut mesh, &cuts);
     }
     (mesh, Inserted { refused, crowded })
+}
+
+/// Vertices in a row beside each corner line ([`Kind::Corner`], inside the polygon) and on
+/// both sides of each contact line ([`Kind::D0`]), [`STRIP_OFFSET`] times the side of an
+/// element away, so that the elements along them are thin. The light another surface
+/// reflects onto a receiver changes fastest where that surface meets it (a wall's foot beside
+/// the sunlit street, the street beside the wall), and an element's mean over the whole band
+/// misses that rise; the strip is inside the budget, since the budget search meshes with it.
+/// None in a polygon no larger than one element.
+fn corner_strip(
+    polygon: &Polygon,
+    segments: &[Segment],
+    max_area: f64,
+    obstacles: &Obstacles,
+) -> Vec<DVec2> {
+    if polygon.area <= max_area {
+        return Vec::new();
+    }
+    let offset = STRIP_OFFSET * max_area.sqrt();
+    let mut out = Vec::new();
+    for s in segments
+        .iter()
+        .filter(|s| matches!(s.kind, Kind::Corner | Kind::D0))
+    {
+        let along = s.b - s.a;
+        let len = along.length();
+        if len < 2.0 * offset {
+            continue;
+        }
+        let u = along / len;
+        // About twice the offset apart along the line, from one offset inside its ends.
+        let steps = (len / (2.0 * offset)).round().max(1.0) as usize;
+        for k in 0..=steps {
+            let base = s.a + u * (offset + (len - 2.0 * offset) * k as f64 / steps as f64);
+            for side in [u.perp(), -u.perp()] {
+                let q = base + side * offset;
+                if polygon.contains(q) && !obstacles.near(q, 0.5 * offset) {
+                    out.push(q);
+                }
+            }
+        }
+    }
+    out
 }
 
 /// Points of a lattice of equilateral triangles of [`LATTICE_FILL`] times `max_area` (scene

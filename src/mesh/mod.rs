@@ -180,7 +180,7 @@ pub(crate) fn discontinuity(
         .flat_map(|(p, segs)| {
             segs.iter()
                 .enumerate()
-                .filter(|(_, s)| s.kind != Kind::D0)
+                .filter(|(_, s)| s.kind.is_wedge())
                 .map(move |(i, _)| (p, i))
         })
         .collect();
@@ -195,7 +195,7 @@ pub(crate) fn discontinuity(
     let select = |keep: usize| -> Vec<Vec<Segment>> {
         let mut kept: Vec<Vec<bool>> = segments
             .iter()
-            .map(|segs| segs.iter().map(|s| s.kind == Kind::D0).collect())
+            .map(|segs| segs.iter().map(|s| !s.kind.is_wedge()).collect())
             .collect();
         for &(p, i) in &ranked[..keep] {
             kept[p][i] = true;

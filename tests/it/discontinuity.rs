@@ -46,10 +46,7 @@ fn world(b: &Bake, poly: usize, s: &Segment) -> (DVec3, DVec3) {
 fn square_occluder_segments_lie_on_the_analytic_lines() {
     let b = bake_dm(&fixtures::square_occluder());
     let f = floor(&b);
-    let segs: Vec<&Segment> = b.segments[f]
-        .iter()
-        .filter(|s| s.kind != Kind::D0)
-        .collect();
+    let segs: Vec<&Segment> = b.segments[f].iter().filter(|s| s.kind.is_wedge()).collect();
     assert!(
         segs.len() >= 16,
         "{} wedge segments on the floor",
@@ -447,7 +444,7 @@ fn wedges_the_light_cannot_see_are_not_traced() {
     let length = |segs: &[Vec<Segment>]| -> f64 {
         segs.iter()
             .flatten()
-            .filter(|s| s.kind != Kind::D0)
+            .filter(|s| s.kind.is_wedge())
             .map(|s| (s.b - s.a).length())
             .sum()
     };
@@ -474,7 +471,7 @@ fn a_budget_applied_after_the_trace_keeps_what_it_keeps_during_it() {
     let (all, all_stats) = run(usize::MAX);
     assert!(all_stats.kept > 200, "{all_stats:?}");
     let wedges =
-        |segs: &[Vec<Segment>]| segs.iter().flatten().filter(|s| s.kind != Kind::D0).count();
+        |segs: &[Vec<Segment>]| segs.iter().flatten().filter(|s| s.kind.is_wedge()).count();
     for max in [0, 1, all_stats.kept / 3, all_stats.kept - 1, all_stats.kept] {
         let (during, during_stats) = run(max);
         let (mut after, mut after_stats) = (all.clone(), all_stats.clone());
@@ -487,13 +484,13 @@ fn a_budget_applied_after_the_trace_keeps_what_it_keeps_during_it() {
         let weakest_kept = after
             .iter()
             .flatten()
-            .filter(|s| s.kind != Kind::D0)
+            .filter(|s| s.kind.is_wedge())
             .map(|s| s.significance)
             .fold(f64::INFINITY, f64::min);
         let strongest_dropped = all
             .iter()
             .flatten()
-            .filter(|s| s.kind != Kind::D0 && !after.iter().flatten().any(|k| k == *s))
+            .filter(|s| s.kind.is_wedge() && !after.iter().flatten().any(|k| k == *s))
             .map(|s| s.significance)
             .fold(0.0, f64::max);
         assert!(strongest_dropped <= weakest_kept, "limit {max}");
@@ -792,4 +789,60 @@ fn a_vertex_beside_an_unmeshed_shadow_takes_its_fans_share_of_the_light() {
         "the floor shows {:.4} of its exact light",
         shown / exact
     );
+}
+
+/// A box standing on a floor: each side face meets the floor along its foot, in front of it,
+/// so its foot is a corner line ([`Kind::Corner`]), and nothing else is: the box's convex
+/// edges have their neighbour behind, and the floor's outline touches nothing. The mesh then
+/// holds a row of thin elements along each foot: the triangles on a foot are at most half as
+/// tall as the side face's elements are across (without the row they are as tall).
+#[test]
+fn a_wall_foot_is_a_corner_with_thin_elements_along_it() {
+    let b = bake_dm(&fixtures::box_on_floor());
+    let corners = |p: usize| -> Vec<&Segment> {
+        b.segments[p]
+            .iter()
+            .filter(|s| s.kind == Kind::Corner)
+            .collect()
+    };
+    let mut sides = 0;
+    for (p, poly) in b.scene.polygons.iter().enumerate() {
+        let n = poly.frame.n;
+        let c = corners(p);
+        if n.y.abs() > 0.99 {
+            assert!(c.is_empty(), "polygon {p} (normal {n}) has corners {c:?}");
+            continue;
+        }
+        sides += 1;
+        let length: f64 = c.iter().map(|s| s.a.distance(s.b)).sum();
+        assert!(
+            (length - 1.0).abs() < 1e-6,
+            "side {p}: corner length {length}"
+        );
+        for s in &c {
+            let (a, e) = world(&b, p, s);
+            assert!(
+                a.y.abs() < 1e-6 && e.y.abs() < 1e-6,
+                "side {p}: corner {a} {e}"
+            );
+        }
+        let m = b.meshes.iter().find(|m| m.polygon == p).expect("a mesh");
+        let frame = &poly.frame;
+        let y = |v: u32| frame.world_from_plane(m.vertices[v as usize]).y;
+        let mut foot_height: f64 = 0.0;
+        let mut largest_side: f64 = 0.0;
+        for t in &m.triangles {
+            let q = t.map(|v| m.vertices[v as usize]);
+            let area = 0.5 * (q[1] - q[0]).perp_dot(q[2] - q[0]).abs();
+            largest_side = largest_side.max((2.0 * area).sqrt());
+            if t.iter().filter(|&&v| y(v).abs() < 1e-9).count() == 2 {
+                foot_height = foot_height.max(t.iter().map(|&v| y(v)).fold(0.0, f64::max));
+            }
+        }
+        assert!(
+            foot_height > 0.0 && foot_height < 0.5 * largest_side,
+            "side {p}: foot triangles {foot_height} m tall, elements up to {largest_side} m"
+        );
+    }
+    assert_eq!(sides, 4);
 }
