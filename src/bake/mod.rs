@@ -729,7 +729,7 @@ fn mesh_scene(
     // The geometry's floor is counted in the mesh stage's time.
     let budget = stage(&mut t.mesh, "budget", progress, || {
         element_budget(scene, options.budget, texels_per_unit, |b| {
-            mesh::lines_floor(scene, &traced.0, b)
+            mesh::lines_floor(scene, &traced.0, b, true)
         })
     });
     stats.budget = budget.elements;
@@ -751,8 +751,9 @@ fn mesh_scene(
             let evaluate = |meshes: &[ReceiverMesh]| {
                 crate::solve::direct_light(scene, vis, &direct, meshes, &|_, _, _| {})
             };
+            let strips = options.budget.is_none();
             let (meshes, inserted, dropped) = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::discontinuity(scene, &segments, budget, Some(&evaluate))
+                mesh::discontinuity(scene, &segments, budget, Some(&evaluate), strips)
             });
             dm_stats.refused = inserted.refused;
             dm_stats.crowded = inserted.crowded;

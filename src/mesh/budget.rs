@@ -186,7 +186,12 @@ pub(super) fn line_spacing(scene: &Scene, budget: usize) -> (f64, f64) {
 /// the angle bound refines thin or notched polygons (boards, walls with doors): the default
 /// element budget leaves room above it (`bake::element_budget`), and the discontinuity mesher
 /// gives its wedges a share of what is left above it ([`DM_SHARE`]).
-pub(crate) fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
+pub(crate) fn geometry_floor(
+    scene: &Scene,
+    segments: &[Vec<Segment>],
+    budget: usize,
+    strips: bool,
+) -> usize {
     let d0: Vec<Vec<Segment>> = segments
         .iter()
         .map(|segs| {
@@ -196,14 +201,19 @@ pub(crate) fn geometry_floor(scene: &Scene, segments: &[Vec<Segment>], budget: u
                 .collect()
         })
         .collect();
-    lines_floor(scene, &d0, budget)
+    lines_floor(scene, &d0, budget, strips)
 }
 
 /// The elements the geometry and every one of `segments` take at `budget`: as
 /// [`geometry_floor`], with the wedge pieces too. The default element budget stays above it
 /// (`bake::element_budget`), so that no line the discontinuity stage kept is dropped for the
 /// budget and the open areas between the lines are refined all the same.
-pub(crate) fn lines_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usize) -> usize {
+pub(crate) fn lines_floor(
+    scene: &Scene,
+    segments: &[Vec<Segment>],
+    budget: usize,
+    strips: bool,
+) -> usize {
     let (snap, clearance) = line_spacing(scene, budget);
     let d0 = segments;
     let coarsest = element_area(scene, budget) * COARSEST;
@@ -215,6 +225,7 @@ pub(crate) fn lines_floor(scene: &Scene, segments: &[Vec<Segment>], budget: usiz
                 snap,
                 clearance,
                 points: &[],
+                strips,
             },
             None => Lines::default(),
         };

@@ -53,6 +53,11 @@ pub struct Lines<'a> {
     pub clearance: f64,
     /// Extra vertices (plane coordinates) inserted before refinement: the light-driven splits.
     pub points: &'a [DVec2],
+    /// Rows of thin elements along the corner and contact lines of polygons a few elements
+    /// across (`cdt::corner_strip`). On for the default budget, which counts them in its
+    /// floor; off for a budget the user fixes, where they would come out of the elements the
+    /// light-driven rounds spend.
+    pub strips: bool,
 }
 
 /// What [`triangulate_with`] did with its segments besides inserting them.
@@ -172,6 +177,7 @@ pub(crate) fn discontinuity(
     segments: &[Vec<Segment>],
     budget: usize,
     refine: Option<&Evaluate<'_>>,
+    strips: bool,
 ) -> (Vec<ReceiverMesh>, Inserted, usize) {
     // Wedge pieces, strongest first (ties by polygon and position: a total, fixed order).
     let mut ranked: Vec<(usize, usize)> = segments
@@ -222,6 +228,7 @@ pub(crate) fn discontinuity(
                 snap,
                 clearance,
                 points,
+                strips,
             };
             let (m, ins) = triangulate_with(i, &scene.polygons[i], lines, area, cap);
             inserted.lock().unwrap_or_else(|e| e.into_inner())[i] = ins;
@@ -245,7 +252,7 @@ pub(crate) fn discontinuity(
         // search for the most pieces that fit, interpolating (the count grows about linearly
         // in the pieces kept) or bisecting between the most known to fit and the fewest known
         // not to.
-        let none = geometry_floor(scene, segments, budget);
+        let none = geometry_floor(scene, segments, budget, strips);
         let share = none + ((budget.saturating_sub(none)) as f64 * DM_SHARE) as usize;
         let (mut fits, mut fails) = ((0, none), (ranked.len(), all));
         for _ in 0..BUDGET_PASSES {
@@ -610,6 +617,7 @@ mod tests {
             snap: 1e-4,
             clearance: 0.5 * max_area.sqrt(),
             points: &[],
+            strips: false,
         };
         let (mesh, _) = triangulate_with(0, p, lines, max_area, vertex_cap(p, max_area));
         let largest = mesh
@@ -812,7 +820,7 @@ mod tests {
             ),
             0,
         );
-        let floor = geometry_floor(&scene, &[], 20_000);
+        let floor = geometry_floor(&scene, &[], 20_000, false);
         let coarsest = mesh_at(
             &scene,
             element_area(&scene, 20_000) * COARSEST,
@@ -831,7 +839,7 @@ mod tests {
             significance: 1.0,
             feature: 0,
         };
-        let count = |segs: Vec<Segment>| geometry_floor(&scene, &[segs, Vec::new()], 20_000);
+        let count = |segs: Vec<Segment>| geometry_floor(&scene, &[segs, Vec::new()], 20_000, false);
         let d0 = count(vec![segment(Kind::D0, 0.5)]);
         assert!(d0 > count(Vec::new()), "{d0}");
         assert_eq!(

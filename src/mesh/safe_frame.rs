@@ -72,6 +72,7 @@ pub(super) fn in_safe_frame(
             snap: lines.snap * s,
             clearance: lines.clearance * s,
             points: &points,
+            strips: lines.strips,
         };
         let (mut mesh, inserted) = triangulate(id, &scaled, lines, max_area * s * s, vertex_cap);
         for v in &mut mesh.vertices {

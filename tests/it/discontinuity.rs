@@ -793,9 +793,10 @@ fn a_vertex_beside_an_unmeshed_shadow_takes_its_fans_share_of_the_light() {
 
 /// A box standing on a floor: each side face meets the floor along its foot, in front of it,
 /// so its foot is a corner line ([`Kind::Corner`]), and nothing else is: the box's convex
-/// edges have their neighbour behind, and the floor's outline touches nothing. The mesh then
-/// holds a row of thin elements along each foot: the triangles on a foot are at most half as
-/// tall as the side face's elements are across (without the row they are as tall).
+/// edges have their neighbour behind, and the floor's outline touches nothing. A side face
+/// meshed at a few elements across with strips (the default budget's meshing) holds a row of
+/// thin elements along its foot: the triangles on the foot are at most half as tall as the
+/// face's elements are across; without strips (a fixed `--budget`) they are as tall.
 #[test]
 fn a_wall_foot_is_a_corner_with_thin_elements_along_it() {
     let b = bake_dm(&fixtures::box_on_floor());
@@ -826,22 +827,37 @@ fn a_wall_foot_is_a_corner_with_thin_elements_along_it() {
                 "side {p}: corner {a} {e}"
             );
         }
-        let m = b.meshes.iter().find(|m| m.polygon == p).expect("a mesh");
-        let frame = &poly.frame;
-        let y = |v: u32| frame.world_from_plane(m.vertices[v as usize]).y;
-        let mut foot_height: f64 = 0.0;
-        let mut largest_side: f64 = 0.0;
-        for t in &m.triangles {
-            let q = t.map(|v| m.vertices[v as usize]);
-            let area = 0.5 * (q[1] - q[0]).perp_dot(q[2] - q[0]).abs();
-            largest_side = largest_side.max((2.0 * area).sqrt());
-            if t.iter().filter(|&&v| y(v).abs() < 1e-9).count() == 2 {
-                foot_height = foot_height.max(t.iter().map(|&v| y(v)).fold(0.0, f64::max));
+        // Foot triangles' height and the largest element's side (m), meshed at 8 elements.
+        let foot = |strips: bool| {
+            let lines = penumbra::mesh::Lines {
+                segments: &b.segments[p],
+                snap: 1e-6,
+                clearance: 0.1,
+                points: &[],
+                strips,
+            };
+            let (m, _) = penumbra::mesh::triangulate_with(p, poly, lines, poly.area / 8.0, 1000);
+            let y = |v: u32| poly.frame.world_from_plane(m.vertices[v as usize]).y;
+            let (mut height, mut side): (f64, f64) = (0.0, 0.0);
+            for t in &m.triangles {
+                let q = t.map(|v| m.vertices[v as usize]);
+                let area = 0.5 * (q[1] - q[0]).perp_dot(q[2] - q[0]).abs();
+                side = side.max((2.0 * area).sqrt());
+                if t.iter().filter(|&&v| y(v).abs() < 1e-9).count() == 2 {
+                    height = height.max(t.iter().map(|&v| y(v)).fold(0.0, f64::max));
+                }
             }
-        }
+            (height, side)
+        };
+        let (with, side) = foot(true);
         assert!(
-            foot_height > 0.0 && foot_height < 0.5 * largest_side,
-            "side {p}: foot triangles {foot_height} m tall, elements up to {largest_side} m"
+            with > 0.0 && with < 0.5 * side,
+            "side {p}: foot triangles {with} m tall, elements up to {side} m"
+        );
+        let (without, side) = foot(false);
+        assert!(
+            without >= 0.5 * side,
+            "side {p}: without strips {without} m, {side} m"
         );
     }
     assert_eq!(sides, 4);
