@@ -37,8 +37,8 @@ const STRIP_OFFSET: f64 = 0.3;
 /// Only polygons at most this many element sides across (twice the area over the perimeter)
 /// get strips ([`corner_strip`]): a wall a few elements high. A polygon meshed finer already
 /// grades its elements towards its corners; there the rows of thin elements only take the
-/// budget from the rest (the Cornell box at 2 000 elements: a probe 3.8% dark).
-const STRIP_UP_TO: f64 = 2.0;
+/// budget from the rest.
+const STRIP_UP_TO: f64 = 3.0;
 
 /// The most point-in-triangle tests [`open_lattice`] spends on one polygon.
 const LATTICE_TESTS: f64 = 5e7;
