@@ -54,7 +54,8 @@ pub(crate) fn triangulate(
 }
 
 /// Triangulates one polygon: its boundary and the discontinuity `lines.segments` (plane
-/// coordinates) as constraints, the `lines.points` as vertices, refined so that no triangle is larger than `max_area` (scene units²) and,
+/// coordinates) as constraints, the `lines.points` as vertices (and with `lines.strips`, rows
+/// of vertices beside corner and contact lines: [`corner_strip`]), refined so that no triangle is larger than `max_area` (scene units²) and,
 /// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. At most
 /// `vertex_cap` vertices are added by refinement.
 ///
@@ -171,9 +172,10 @@ fn triangulate_in_frame(
             }
         }
     }
-    let strip = match strips {
-        true => corner_strip(polygon, segments, max_area, &obstacles),
-        false => Vec::new(),
+    let strip = if strips {
+        corner_strip(polygon, segments, max_area, &obstacles)
+    } else {
+        Vec::new()
     };
     let arr = arrangement::build(&input, tol);
     // A polygon no larger than one element, with nothing inside, stays its outline's
@@ -323,7 +325,7 @@ fn triangulate_in_frame(
 /// reflects onto a receiver changes fastest where that surface meets it (a wall's foot beside
 /// the sunlit street, the street beside the wall), and an element's mean over the whole band
 /// misses that rise; the strip is inside the budget, since the budget search meshes with it.
-/// None in a polygon no larger than one element.
+/// None in a polygon no larger than one element or more than [`STRIP_UP_TO`] elements across.
 fn corner_strip(
     polygon: &Polygon,
     segments: &[Segment],
