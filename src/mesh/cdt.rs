@@ -204,10 +204,9 @@ fn triangulate_in_frame(
                 refused += 1;
             }
         }
-        for p in points.iter().chain(&strip) {
-            if polygon.contains(*p) {
-                let _ = cdt.insert(Point2::new(p.x, p.y));
-            }
+        // The strip's points are inside already (`corner_strip` tests them).
+        for p in points.iter().filter(|p| polygon.contains(**p)).chain(&strip) {
+            let _ = cdt.insert(Point2::new(p.x, p.y));
         }
         if lattice {
             for q in open_lattice(polygon, lo, hi, max_area, &obstacles) {
