@@ -534,22 +534,80 @@ fn ray_cast_row_sum(
     vis: &Visibility,
     of: impl Fn(&Element) -> bool,
 ) -> f64 {
+    let (mut sum, mut total) = (0.0, 0.0);
+    for (e, seen) in ray_cast_row_sums(b, h, vis, of) {
+        let area = h.elements[e].area;
+        sum += area * seen;
+        total += area;
+    }
+    sum / total
+}
+
+/// The ray-cast row sum of each element of `h` that is `of`: (element, fraction seen).
+fn ray_cast_row_sums(
+    b: &Bake,
+    h: &Hierarchy,
+    vis: &Visibility,
+    of: impl Fn(&Element) -> bool,
+) -> Vec<(usize, f64)> {
     let mut reflects = vec![false; b.scene.polygons.len()];
     for e in &h.elements {
         reflects[e.polygon] |= e.rho.max_element() > 0.0;
     }
     let sky = Sky::new(&b.scene, DVec3::ONE, 256).expect("a sky");
-    let (mut sum, mut total) = (0.0, 0.0);
-    for e in h.elements.iter().filter(|e| of(e)) {
+    let mut out = Vec::new();
+    for (i, e) in h.elements.iter().enumerate().filter(|(_, e)| of(e)) {
         let at = SurfacePoint::new((e.p[0] + e.p[1] + e.p[2]) / 3.0, e.normal, e.polygon, vis);
         let seen = sky.hit_fraction(vis, &at, |t, d| {
             let t = &b.scene.triangles[t];
             t.polygon.is_some_and(|p| reflects[p]) && t.normal.dot(d) < 0.0
         });
-        sum += e.area * seen;
-        total += e.area;
+        out.push((i, seen));
     }
-    sum / total
+    out
+}
+
+/// No element is left without a part of what it sees, at any budget: the row sum of every
+/// element (what the links a bake keeps gather from unit radiosity) is at most 0.15 below
+/// the ray-cast fraction of its hemisphere that sees a reflecting surface, on the Cornell box
+/// at four budgets. A node's four samples may all miss where it sees most of a source: a
+/// floor node whose samples lie behind a box or away from the box's face, reaching to the
+/// foot of that face. Before the oracle bounded such a receiver's variation geometrically
+/// (`nearer_than_samples` in the hierarchical solver), the worst element was 0.17,
+/// 0.41, 0.52 and 0.48 short at these budgets (the floor beside the short box had half its
+/// row sum at 7 900, and the bake's lightmap was 2.1% off the Monte Carlo reference there
+/// against 0.85% at 8 000); with it, at most 0.11.
+#[test]
+fn every_element_keeps_its_row_sum_at_any_budget() {
+    for budget in [3000, 4000, 7900, 12_000] {
+        let o = BakeOptions {
+            budget: Some(budget),
+            resolution: Some(128),
+            ..Default::default()
+        };
+        let b = bake(&fixtures::cornell_box(), &o);
+        let vis = Visibility::new(&b.scene);
+        let h = Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.direct).expect("elements");
+        let full =
+            Hierarchy::build(&b.scene, &vis, &b.meshes, &b.solution.irradiance).expect("full");
+        let (radiosity, _) = full.reflected_direct();
+        let kept = bake_links(&h, &vis, &radiosity, h.mean_direct());
+        let ones = vec![DVec3::ONE; h.elements.len()];
+        let got = h.push(&h.gather(&kept, &h.pull(&ones)));
+        let (worst, at) = ray_cast_row_sums(&b, &h, &vis, |_| true)
+            .into_iter()
+            .map(|(e, seen)| (got[e].x - seen, e))
+            .fold((0.0, 0), |a, x| if x.0 < a.0 { x } else { a });
+        let e = &h.elements[at];
+        eprintln!("budget {budget}: worst row sum {worst:+.3} against ray casting");
+        assert!(
+            worst > -0.15,
+            "budget {budget}: element {at} at {:?} gathers {:.3} of its hemisphere less than \
+             ray casting finds",
+            (e.p[0] + e.p[1] + e.p[2]) / 3.0,
+            -worst
+        );
+    }
 }
 
 /// Small faces of every orientation gather their own light: on a town whose windows have

@@ -2,8 +2,8 @@
 //! refinement passes from the root-to-root link or from a previous pass's links.
 
 use super::transfer::{
-    Factors, PairVisibility, Tint, WHITE, across_plane, facing, pair_visibility, point_bound,
-    power_bound, seen_offset,
+    Factors, PairVisibility, Tint, WHITE, across_plane, facing, nearer_than_samples,
+    pair_visibility, point_bound, power_bound, seen_offset,
 };
 use super::tree::{Hierarchy, Node, Sample};
 use super::{DEFAULT_HR_TOLERANCE, MAX_LINKS, PARTIAL_VISIBILITY, SHADOWED_SOURCE};
@@ -299,6 +299,19 @@ impl Hierarchy {
                     tint,
                 })
             };
+        // A link whose tested sample pairs all see nothing of each other. A receiver's four
+        // samples may all miss its part that sees the source (a floor node reaching from
+        // behind a box to the foot of the box's face, whose samples all lie behind the box):
+        // its `K = 0` holds only for them. Such a receiver is split while the bound on what any
+        // of its points may receive is over the variation limit; under it the bound is kept as
+        // the link's spread, for a later pass to test again. `None`: split.
+        let doubt = |spread: f64| -> Option<f64> {
+            if nr.kids.is_none() {
+                return Some(spread);
+            }
+            let bound = point_bound(nr, ns);
+            (b_s * bound <= variation).then_some(spread.max(bound))
+        };
         let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
             *rays += 1;
             vis.transmitted_skipping(a.ray, b.ray, [a.polygon, b.polygon]) != DVec3::ZERO
@@ -369,7 +382,13 @@ impl Hierarchy {
         let (lo, hi) = f.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
             (lo.min(x), hi.max(x))
         });
-        let spread = if nr.kids.is_some() { hi - lo } else { 0.0 };
+        // Four samples stand for a receiver only where none of its points can be much nearer
+        // the source than they are: else its variation is bounded geometrically.
+        let spread = match nr.kids {
+            Some(_) if nearer_than_samples(nr, ns, sr) => (hi - lo).max(point_bound(nr, ns)),
+            Some(_) => hi - lo,
+            None => 0.0,
+        };
         let power = if can_split { unoccluded * nr.area } else { 0.0 };
         let reach = if ns.kids.is_some() { hi } else { 0.0 };
         let vary = b_s * spread > variation;
@@ -402,7 +421,10 @@ impl Hierarchy {
             // `shade` (the same rays would answer again; a later pass with brighter sources may
             // split it).
             if hidden && tested && b_s * unoccluded <= limits.visibility {
-                return keep(0.0, 0.0, 0.0, 0.0, unoccluded, DVec3::ZERO, WHITE);
+                return match doubt(0.0) {
+                    Some(spread) => keep(0.0, 0.0, spread, 0.0, unoccluded, DVec3::ZERO, WHITE),
+                    None => Decision::Split(true),
+                };
             }
             return split;
         }
@@ -429,6 +451,14 @@ impl Hierarchy {
             unoccluded
         } else {
             0.0
+        };
+        let spread = if tested > 0.0 && seen == 0.0 {
+            match doubt(spread) {
+                Some(spread) => spread,
+                None => return Decision::Split(true),
+            }
+        } else {
+            spread
         };
         let v = if tested > 0.0 { seen / tested } else { 1.0 };
         let toward = if ns.kids.is_some() {
@@ -646,7 +676,9 @@ impl Hierarchy {
                 out.refinements += 1;
                 split(&pairs, out);
             }
-            Decision::Keep(l) if l.k > 0.0 || l.power > 0.0 || l.spread > 0.0 || l.reach > 0.0 => {
+            Decision::Keep(l)
+                if l.k > 0.0 || l.power > 0.0 || l.spread > 0.0 || l.reach > 0.0 || l.shade > 0.0 =>
+            {
                 cx.keep(out);
                 out.links.push(l);
             }
