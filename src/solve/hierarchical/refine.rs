@@ -2,7 +2,7 @@
 //! refinement passes from the root-to-root link or from a previous pass's links.
 
 use super::transfer::{
-    Factors, PairVisibility, Tint, WHITE, across_plane, facing, nearer_than_samples,
+    Factors, PairVisibility, Tint, WHITE, across_plane, facing,
     pair_visibility, point_bound, power_bound, seen_offset,
 };
 use super::tree::{Hierarchy, Node, Sample};
@@ -299,18 +299,18 @@ impl Hierarchy {
                     tint,
                 })
             };
-        // A link whose tested sample pairs all see nothing of each other. A receiver's four
-        // samples may all miss its part that sees the source (a floor node reaching from
-        // behind a box to the foot of the box's face, whose samples all lie behind the box):
-        // its `K = 0` holds only for them. Such a receiver is split while the bound on what any
-        // of its points may receive is over the variation limit; under it the bound is kept as
-        // the link's spread, for a later pass to test again. `None`: split.
-        let doubt = |spread: f64| -> Option<f64> {
-            if nr.kids.is_none() {
-                return Some(spread);
+        // A link whose tested sample pairs all see nothing of each other: a receiver's four
+        // samples may all lie behind an occluder that the rest of it sees past (a floor node
+        // reaching from behind a box to the foot of the box's face). Where the receiver's
+        // point that sees the source most is much nearer than its samples, the link is split
+        // at the receiver while the irradiance that point may get is over the variation limit;
+        // under it, that form factor is kept as the link's spread, for a later pass to test
+        // again. `None`: split.
+        let doubt = |spread: f64, nearest: Option<f64>| -> Option<f64> {
+            match nearest {
+                Some(f) if nr.kids.is_some() => (b_s * f <= variation).then_some(spread.max(f)),
+                _ => Some(spread),
             }
-            let bound = point_bound(nr, ns);
-            (b_s * bound <= variation).then_some(spread.max(bound))
         };
         let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
             *rays += 1;
@@ -382,11 +382,11 @@ impl Hierarchy {
         let (lo, hi) = f.iter().fold((f64::INFINITY, 0.0f64), |(lo, hi), &x| {
             (lo.min(x), hi.max(x))
         });
-        // Four samples stand for a receiver only where none of its points can be much nearer
-        // the source than they are: else its variation is bounded geometrically.
+        // Where the receiver's point that sees the source most is much nearer than its samples,
+        // its form factor there widens the spread ([`Hierarchy::nearest_factor`]).
+        let nearest = nr.kids.and_then(|_| self.nearest_factor(r, s));
         let spread = match nr.kids {
-            Some(_) if nearer_than_samples(nr, ns, sr) => (hi - lo).max(point_bound(nr, ns)),
-            Some(_) => hi - lo,
+            Some(_) => hi.max(nearest.unwrap_or(0.0)) - lo,
             None => 0.0,
         };
         let power = if can_split { unoccluded * nr.area } else { 0.0 };
@@ -421,7 +421,7 @@ impl Hierarchy {
             // `shade` (the same rays would answer again; a later pass with brighter sources may
             // split it).
             if hidden && tested && b_s * unoccluded <= limits.visibility {
-                return match doubt(0.0) {
+                return match doubt(0.0, nearest) {
                     Some(spread) => keep(0.0, 0.0, spread, 0.0, unoccluded, DVec3::ZERO, WHITE),
                     None => Decision::Split(true),
                 };
@@ -453,7 +453,7 @@ impl Hierarchy {
             0.0
         };
         let spread = if tested > 0.0 && seen == 0.0 {
-            match doubt(spread) {
+            match doubt(spread, nearest) {
                 Some(spread) => spread,
                 None => return Decision::Split(true),
             }

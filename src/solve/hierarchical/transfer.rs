@@ -257,26 +257,11 @@ pub(super) fn point_bound(nr: &Node, ns: &Node) -> f64 {
     bound.min(projected_bound(ns, -axis / dist, cone) / (PI * gap * gap))
 }
 
-/// How much nearer the source than its nearest sample a receiver's point may be before the
-/// samples no longer stand for the receiver's variation (dimensionless, a ratio of distances
-/// to the source's centre): a point form factor grows as the inverse square of the distance,
-/// so at a half it may be four times the samples' largest.
+/// How much nearer than its nearest sample a receiver's point may be to where the source is
+/// seen most before the samples no longer stand for the receiver's variation (dimensionless,
+/// a ratio of distances): a point form factor grows as the inverse square of the distance, so
+/// at a half it may be four times the samples' largest.
 const NEARER: f64 = 0.5;
-
-/// True when a point of node `r` may lie more than [`NEARER`] times nearer the centre of node
-/// `s` than the nearest of `r`'s `samples`: then the samples may all miss where `r` sees most
-/// of `s` (a floor node whose samples lie away from the foot of a box's face, which the node
-/// reaches), and the oracle bounds the variation across `r` by [`point_bound`] instead. On the
-/// Cornell box, without it, floor elements beside the boxes were left with half of their row
-/// sums at some budgets (`tests/it/hierarchical.rs`).
-pub(super) fn nearer_than_samples(nr: &Node, ns: &Node, samples: &[Sample]) -> bool {
-    let nearest_point = (nr.center.distance(ns.center) - nr.radius).max(0.0);
-    let nearest_sample = samples
-        .iter()
-        .map(|a| a.p.distance(ns.center))
-        .fold(f64::INFINITY, f64::min);
-    nearest_point < NEARER * nearest_sample
-}
 
 /// The bound on the power (per unit source radiosity, scene units²) a link `r ← s` can carry,
 /// for when the sampled estimate cannot be trusted (a cluster end): `A_r F(r→s)`, and by
@@ -450,6 +435,41 @@ impl Hierarchy {
             *fi = self.point_factor(a, s, up);
         }
         Some((f, sr.len().min(4)))
+    }
+
+    /// The unoccluded form factor to the surface node `s` at the point of the surface node `r`
+    /// that sees it most, when that point may be more than [`NEARER`] times nearer to it than
+    /// `r`'s nearest sample; else `None` (the samples stand for `r`). The point: on `r`'s
+    /// plane, within its bounding box, nearest to the point one bounding radius in front of
+    /// `s`'s centre (a floor node beside a box's face: the floor in front of the face's foot).
+    /// Four samples of a large receiver may all miss that part of it (lie behind the box, or
+    /// away from the face), and the oracle then took the link as uniform or hidden: on the
+    /// Cornell box floor elements beside the boxes kept half their row sums at some budgets
+    /// (`tests/it/hierarchical.rs`). `None` too for a source of more than
+    /// [`CONTOUR_ELEMENTS`] elements straddling that point's horizon.
+    pub(super) fn nearest_factor(&self, r: u32, s: u32) -> Option<f64> {
+        let (nr, ns) = (&self.nodes[r as usize], &self.nodes[s as usize]);
+        let target = ns.center + ns.normal * ns.radius;
+        let nearest_sample = self.samples[r as usize]
+            .iter()
+            .map(|a| a.p.distance(target))
+            .fold(f64::INFINITY, f64::min);
+        if target.distance(nr.center) - nr.radius >= NEARER * nearest_sample {
+            return None;
+        }
+        let q = target.clamp(nr.min, nr.max);
+        let q = q - nr.normal * nr.normal.dot(q - nr.center);
+        let above = box_above(q, nr.normal, ns);
+        if !above && ns.hi - ns.lo > CONTOUR_ELEMENTS {
+            return None;
+        }
+        let at = Sample {
+            p: q,
+            n: nr.normal,
+            ray: q,
+            polygon: nr.polygon,
+        };
+        Some(self.point_factor(&at, s, above))
     }
 
     /// The unoccluded form factor from the sample `a` to the surface node `s` (zero when `a`
