@@ -138,12 +138,14 @@
 //!   geometric bound on its form factor ([`point_bound`](transfer::point_bound)) is over the
 //!   limit: its part in front still sees the source (with a sample in front, the variation
 //!   test decides on the samples' own values). Four samples stand for a receiver only where
-//!   none of its points can be much nearer the source than they are: where one may be more
-//!   than twice as near the source's centre as the nearest sample (a floor node whose samples
-//!   lie away from a box's face, which it reaches), the spread is at least the geometric bound
-//!   [`point_bound`](transfer::point_bound) (without it, floor elements beside the Cornell
-//!   box's boxes kept half their row sums at some budgets). The source's coarseness needs no
-//!   such test: the contour formula is exact for the whole source from each receiver point.
+//!   none of its points sees the source much better than they do: where the receiver's point
+//!   that sees it most (on its plane, nearest the point one radius in front of the source's
+//!   centre) may be more than twice as near as the nearest sample (a floor node whose samples
+//!   lie away from a box's face, which it reaches), the form factor there counts in the spread
+//!   ([`nearest_factor`](Hierarchy::nearest_factor); without it, floor elements beside the
+//!   Cornell box's boxes kept half their row sums at some budgets). The source's coarseness
+//!   needs no such test: the contour formula is exact for the whole source from each receiver
+//!   point.
 //!   A large surface source straddling the receiver's horizon (estimated by the disk formula,
 //!   crude at a contact) is split while `B_s K̂` exceeds the same limit.
 //! * **Cluster receivers**: a cluster pushes the irradiance it gathers unchanged to all its
@@ -178,8 +180,8 @@
 //!   whose sample pairs are all hidden may still see past the occluder between them
 //!   (a box's face and the wall behind the box). It is split like a partially visible link
 //!   while `B_s K_unoccluded` exceeds the same limit, else kept as `K = 0` for a later pass
-//!   to test again. And a receiver with children whose samples all see nothing of the source
-//!   (hidden, or behind it) is split while `B_s` times the geometric bound exceeds the
+//!   to test again. And a receiver with children whose sample pairs are all hidden, with that
+//!   nearest point's form factor at hand, is split while `B_s` times that factor exceeds the
 //!   variation limit: its samples may all lie behind an occluder that the rest of it sees past.
 //!
 //! A self-link of a cluster becomes the four links between its two children; a link between
@@ -629,4 +631,3 @@ struct Iterated {
 
 #[cfg(test)]
 mod tests;
-

@@ -2,8 +2,8 @@
 //! refinement passes from the root-to-root link or from a previous pass's links.
 
 use super::transfer::{
-    Factors, PairVisibility, Tint, WHITE, across_plane, facing,
-    pair_visibility, point_bound, power_bound, seen_offset,
+    Factors, PairVisibility, Tint, WHITE, across_plane, facing, pair_visibility, point_bound,
+    power_bound, seen_offset,
 };
 use super::tree::{Hierarchy, Node, Sample};
 use super::{DEFAULT_HR_TOLERANCE, MAX_LINKS, PARTIAL_VISIBILITY, SHADOWED_SOURCE};
