@@ -338,10 +338,7 @@ fn corner_strip(
     }
     let offset = STRIP_OFFSET * max_area.sqrt();
     let mut out = Vec::new();
-    for s in segments
-        .iter()
-        .filter(|s| matches!(s.kind, Kind::Corner | Kind::D0))
-    {
+    for s in segments.iter().filter(|s| !s.kind.is_wedge()) {
         let along = s.b - s.a;
         let len = along.length();
         if len < 2.0 * offset {

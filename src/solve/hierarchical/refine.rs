@@ -308,8 +308,8 @@ impl Hierarchy {
         // again. `None`: split.
         let doubt = |spread: f64, nearest: Option<f64>| -> Option<f64> {
             match nearest {
-                Some(f) if nr.kids.is_some() => (b_s * f <= variation).then_some(spread.max(f)),
-                _ => Some(spread),
+                Some(f) => (b_s * f <= variation).then_some(spread.max(f)),
+                None => Some(spread),
             }
         };
         let visible = |a: &Sample, b: &Sample, rays: &mut u64| {
@@ -383,7 +383,8 @@ impl Hierarchy {
             (lo.min(x), hi.max(x))
         });
         // Where the receiver's point that sees the source most is much nearer than its samples,
-        // its form factor there widens the spread ([`Hierarchy::nearest_factor`]).
+        // its form factor there widens the spread ([`Hierarchy::nearest_factor`]; only a
+        // receiver with children has a spread, so only it is asked).
         let nearest = nr.kids.and_then(|_| self.nearest_factor(r, s));
         let spread = match nr.kids {
             Some(_) => hi.max(nearest.unwrap_or(0.0)) - lo,
