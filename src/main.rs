@@ -342,6 +342,11 @@ struct BakeArgs {
     /// below this fraction (0..1) of the brightest piece's.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
+    /// Refine every element larger than a tenth of the area cap to the 25-degree angle limit,
+    /// with no vertex limit (off: the vertices the lines' small features take can leave open
+    /// areas in slivers). Its elements come out of the budget.
+    #[arg(long)]
+    strict_angles: bool,
     /// Direct light of area emitters: `exact` (backprojection: the visible part of each emitter)
     /// or `sampled` (shadow rays).
     #[arg(long, value_enum, default_value_t = DirectMethod::Exact)]
@@ -519,7 +524,7 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         load: args.input_args.options(),
         ..BakeOptions::default()
     };
-    let (scene, segments, meshes) = penumbra::bake::meshes(&gltf, &options)?;
+    let (scene, segments, meshes, _) = penumbra::bake::meshes(&gltf, &options)?;
     if args.list {
         use std::io::Write;
         let mut out = std::io::stdout().lock();
@@ -829,6 +834,7 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         mesher: args.mesher,
         budget: args.budget,
         dm_threshold: args.dm_threshold,
+        strict_angles: args.strict_angles,
         solve: SolveOptions {
             direct: args.direct,
             shadow_samples: args.shadow_samples,

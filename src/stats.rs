@@ -74,6 +74,10 @@ pub struct Stats {
     pub budget: usize,
     pub budget_from: String,
     pub elements: usize,
+    /// The area cap of the uniform and discontinuity meshers (scene units²): no element is
+    /// larger, and none has an angle under the mesher's limit but where constraints meet at a
+    /// smaller one (the adaptive mesher has none).
+    pub area_cap: Option<f64>,
     /// Mesh vertices, over every receiver mesh.
     pub vertices: usize,
     /// Discontinuity meshing counters (only with `--mesher discontinuity`).

@@ -30,6 +30,11 @@ pub struct BakeOptions {
     /// Discontinuity pieces where their light's unoccluded irradiance is below this fraction
     /// (0..1) of the brightest piece's are dropped.
     pub dm_threshold: f64,
+    /// Refine every element larger than a tenth of the area cap to the angle limit, with no
+    /// vertex limit (`--strict-angles`; the shape pass of `mesh::cdt`). Off by default: its
+    /// elements come out of the budget, and at the default budget that cost the real cities'
+    /// light-driven refinement more than it gained (docs/decisions.md).
+    pub strict_angles: bool,
     pub solve: SolveOptions,
     /// Lightmap texels per scene unit; `None`: derived from `resolution`.
     pub texels_per_unit: Option<f32>,
@@ -102,6 +107,7 @@ impl Default for BakeOptions {
             mesher: Mesher::Discontinuity,
             budget: None,
             dm_threshold: 0.01,
+            strict_angles: false,
             solve: SolveOptions::default(),
             texels_per_unit: None,
             resolution: None,
@@ -738,9 +744,10 @@ fn mesh_scene(
     let t = &mut stats.timings_s;
     match options.mesher {
         Mesher::Uniform => {
-            let meshes = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::uniform(scene, budget)
+            let (meshes, cap) = stage(&mut t.mesh, "mesh", progress, || {
+                mesh::uniform_with_cap(scene, budget, options.strict_angles)
             });
+            stats.area_cap = Some(cap);
             (Vec::new(), meshes)
         }
         Mesher::Discontinuity => {
@@ -752,9 +759,17 @@ fn mesh_scene(
                 crate::solve::direct_light(scene, vis, &direct, meshes, &|_, _, _| {})
             };
             let strips = options.budget.is_none();
-            let (meshes, inserted, dropped) = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::discontinuity(scene, &segments, budget, Some(&evaluate), strips)
+            let (meshes, inserted, dropped, cap) = stage(&mut t.mesh, "mesh", progress, || {
+                mesh::discontinuity(
+                    scene,
+                    &segments,
+                    budget,
+                    Some(&evaluate),
+                    strips,
+                    options.strict_angles,
+                )
             });
+            stats.area_cap = Some(cap);
             dm_stats.refused = inserted.refused;
             dm_stats.crowded = inserted.crowded;
             dm_stats.dropped_budget += dropped;
@@ -800,12 +815,14 @@ fn scene_atlas(
     })
 }
 
-/// Loads the scene and runs the discontinuity and mesh stages only (for debug views), with the
-/// bake's element budget (the default one needs the atlas's estimate of its texel density).
-pub fn meshes(
-    gltf: &Gltf,
-    options: &BakeOptions,
-) -> Result<(Scene, Vec<Vec<Segment>>, Vec<ReceiverMesh>)> {
+/// The scene, its discontinuity segments per polygon, its receiver meshes, and the stats of
+/// the stages that made them ([`meshes`]).
+pub type Meshed = (Scene, Vec<Vec<Segment>>, Vec<ReceiverMesh>, Stats);
+
+/// Loads the scene and runs the discontinuity and mesh stages only (for debug views and mesh
+/// measures), with the bake's element budget (the default one needs the atlas's estimate of its
+/// texel density). The stats hold those stages' counts and timings.
+pub fn meshes(gltf: &Gltf, options: &BakeOptions) -> Result<Meshed> {
     options.check()?;
     let (scene, _, options) = scene_for(gltf, options)?;
     let options = &options;
@@ -814,6 +831,7 @@ pub fn meshes(
     if options.budget.is_none() {
         scene_atlas(gltf, &scene, options, &mut |t| texels_per_unit = t)?;
     }
+    let mut stats = Stats::default();
     let (segments, meshes) = catch_mesh_failure(gltf, &scene, || {
         mesh_scene(
             &scene,
@@ -821,11 +839,11 @@ pub fn meshes(
             options,
             texels_per_unit,
             None,
-            &mut Stats::default(),
+            &mut stats,
             &|_, _, _| {},
         )
     })?;
-    Ok((scene, segments, meshes))
+    Ok((scene, segments, meshes, stats))
 }
 
 /// Runs `f` (the mesh stage), turning a triangulation's panic ([`crate::mesh::MeshFailure`])

@@ -153,7 +153,7 @@ impl DmCoverage {
     /// Meshes the scene and prints the followed length.
     pub(crate) fn run(&self) -> anyhow::Result<()> {
         let gltf = super::read(&self.input)?;
-        let (scene, segments, meshes) = meshes(&gltf, &BakeOptions::default())?;
+        let (scene, segments, meshes, _) = meshes(&gltf, &BakeOptions::default())?;
         let (mut total, mut covered) = (0.0, 0.0);
         for m in &meshes {
             let segs = &segments[m.polygon];

@@ -226,6 +226,7 @@ pub(crate) fn lines_floor(
                 clearance,
                 points: &[],
                 strips,
+                shape: false,
             },
             None => Lines::default(),
         };

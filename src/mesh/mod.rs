@@ -10,6 +10,7 @@ pub(crate) mod arrangement;
 mod budget;
 mod cdt;
 mod lines;
+pub mod quality;
 mod safe_frame;
 
 use budget::{
@@ -18,7 +19,7 @@ use budget::{
 };
 pub(crate) use budget::{BUDGET_SLACK, element_count, geometry_floor, lines_floor};
 pub use cdt::triangulate_with;
-pub(crate) use cdt::{ANGLE_LIMIT_DEG, triangulate, triangulate_points};
+pub(crate) use cdt::{ANGLE_LIMIT_DEG, triangulate_points};
 pub(crate) use safe_frame::MeshFailure;
 
 use crate::discontinuity::{Kind, Segment};
@@ -58,6 +59,11 @@ pub struct Lines<'a> {
     /// floor; off for a budget the user fixes, where they would come out of the elements the
     /// light-driven rounds spend.
     pub strips: bool,
+    /// The shape pass ([`cdt::SHAPE_FLOOR`]; `--strict-angles`): every element above that fraction
+    /// of the area cap refined to the angle limit, with no vertex limit. Never on for the
+    /// floors the element budget is raised to (`lines_floor`, `geometry_floor`), which count
+    /// what the geometry and its lines take, not how the elements between them are shaped.
+    pub shape: bool,
 }
 
 /// What [`triangulate_with`] did with its segments besides inserting them.
@@ -150,10 +156,23 @@ pub(crate) fn mesh_of_polygon(scene: &Scene, meshes: &[ReceiverMesh]) -> Vec<usi
 
 /// The uniform mesher: every polygon refined to one area cap, about `budget` triangles in all.
 pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
+    uniform_with_cap(scene, budget, false).0
+}
+
+/// [`uniform`], with the shape pass if `shape` ([`Lines::shape`]), and the area cap it meshed
+/// to (scene units²).
+pub(crate) fn uniform_with_cap(
+    scene: &Scene,
+    budget: usize,
+    shape: bool,
+) -> (Vec<ReceiverMesh>, f64) {
+    let lines = Lines {
+        shape,
+        ..Lines::default()
+    };
     to_budget(scene, budget, with_slack(budget), |i, area, cap| {
-        triangulate(i, &scene.polygons[i], area, cap)
+        triangulate_with(i, &scene.polygons[i], lines, area, cap).0
     })
-    .0
 }
 
 /// The discontinuity mesher: each polygon's discontinuity `segments` as constraints, then the
@@ -170,15 +189,18 @@ pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
 /// rounds of the adaptive mesher's rule,
 /// splitting at the centroid so that no split lands on a line). The uniform step before them
 /// stays under where the rounds stop ([`rounds_stop`]) whenever the lines leave room there.
-/// Returns the meshes, what became of the segments passed to the triangulation and the wedge
-/// pieces dropped for the budget.
+/// With `shape`, every meshing has the shape pass ([`Lines::shape`]).
+///
+/// Returns the meshes, what became of the segments passed to the triangulation, the wedge
+/// pieces dropped for the budget and the area cap of the last meshing (scene units²).
 pub(crate) fn discontinuity(
     scene: &Scene,
     segments: &[Vec<Segment>],
     budget: usize,
     refine: Option<&Evaluate<'_>>,
     strips: bool,
-) -> (Vec<ReceiverMesh>, Inserted, usize) {
+    shape: bool,
+) -> (Vec<ReceiverMesh>, Inserted, usize, f64) {
     // Wedge pieces, strongest first (ties by polygon and position: a total, fixed order).
     let mut ranked: Vec<(usize, usize)> = segments
         .iter()
@@ -221,14 +243,18 @@ pub(crate) fn discontinuity(
     // What became of each polygon's segments: decided before refinement, so the same at every
     // cap; the last meshing (the final selection) writes last.
     let inserted = std::sync::Mutex::new(vec![Inserted::default(); scene.polygons.len()]);
-    let mesh_one =
-        |selected: &[Vec<Segment>], i: usize, points: &[DVec2], area: f64, cap: usize| {
+    let mesh_one = |selected: &[Vec<Segment>],
+                    i: usize,
+                    points: &[DVec2],
+                    area: f64,
+                    cap: usize| {
             let lines = Lines {
                 segments: &selected[i],
                 snap,
                 clearance,
                 points,
                 strips,
+                shape,
             };
             let (m, ins) = triangulate_with(i, &scene.polygons[i], lines, area, cap);
             inserted.lock().unwrap_or_else(|e| e.into_inner())[i] = ins;
@@ -311,7 +337,7 @@ pub(crate) fn discontinuity(
         // Where the light varies little, the rounds stop short of the budget: the rest refines
         // uniformly, keeping the points added.
         if element_count(&meshes) * 10 < budget * 9 {
-            (meshes, _) = to_budget(scene, budget, with_slack(budget), |i, area, vertices| {
+            (meshes, cap) = to_budget(scene, budget, with_slack(budget), |i, area, vertices| {
                 mesh_one(&selected, i, &added[i], area, vertices + 4 * added[i].len())
             });
         }
@@ -324,7 +350,7 @@ pub(crate) fn discontinuity(
             refused: t.refused + i.refused,
             crowded: t.crowded + i.crowded,
         });
-    (meshes, total, ranked.len() - keep)
+    (meshes, total, ranked.len() - keep, cap)
 }
 
 /// The a-posteriori adaptive mesher, the classic alternative to discontinuity meshing (e.g.
@@ -578,7 +604,8 @@ mod tests {
     /// footprints on a 1 m pitch, overlapping their neighbours at small angles, like a real
     /// city's buildings on one ground polygon): refinement spent its whole vertex cap around
     /// the lines and left the open ground in elements up to 211 times the area cap. The
-    /// polygon is triangulated again with a lattice in its open areas.
+    /// polygon is triangulated again with a lattice in its open areas, and the shape pass
+    /// brings every element within the cap and the angle limit.
     #[test]
     fn crowded_lines_leave_the_open_ground_its_share_of_the_cap() {
         let scene = rectangle(200.0, 200.0);
@@ -618,20 +645,15 @@ mod tests {
             clearance: 0.5 * max_area.sqrt(),
             points: &[],
             strips: false,
+            shape: true,
         };
         let (mesh, _) = triangulate_with(0, p, lines, max_area, vertex_cap(p, max_area));
-        let largest = mesh
-            .triangles
-            .iter()
-            .map(|t| mesh.triangle_area(t))
-            .fold(0.0, f64::max);
-        // Measured: 211 times the cap before the lattice, 6.4 times with it. Not yet within
-        // the cap: the band along the outline's long edges, between the lattice and the
-        // outline's far-apart corners, is left to refinement, which has no vertices left.
-        assert!(
-            largest <= 8.0 * max_area,
-            "largest element {largest:.2} against the cap {max_area:.2}"
-        );
+        // Measured: 211 times the cap before the lattice, 6.4 times with it (the band along the
+        // outline, between the lattice and the outline's far-apart corners, was left to
+        // refinement with no vertices left); within it with the shape pass.
+        let q = quality::measure(std::slice::from_ref(&mesh), max_area);
+        assert_eq!(q.over_cap, 0, "{q:?}");
+        assert_eq!(q.sharp, 0, "{q:?}");
         assert!((mesh.area() / p.area - 1.0).abs() < 1e-9);
     }
 
@@ -824,7 +846,7 @@ mod tests {
         let coarsest = mesh_at(
             &scene,
             element_area(&scene, 20_000) * COARSEST,
-            &|i, a, c| triangulate(i, &scene.polygons[i], a, c),
+            &|i, a, c| triangulate_with(i, &scene.polygons[i], Lines::default(), a, c).0,
         );
         assert_eq!(floor, element_count(&coarsest));
         let board = coarsest.iter().find(|m| m.polygon == 1).expect("board");

@@ -835,6 +835,7 @@ fn a_wall_foot_is_a_corner_with_thin_elements_along_it() {
                 clearance: 0.1,
                 points: &[],
                 strips,
+                shape: true,
             };
             let (m, _) = penumbra::mesh::triangulate_with(p, poly, lines, poly.area / 8.0, 1000);
             let y = |v: u32| poly.frame.world_from_plane(m.vertices[v as usize]).y;

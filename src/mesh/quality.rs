@@ -1,0 +1,239 @@
+//! The element quality a meshing promises, measured: no element larger than the area cap, and
+//! no angle under [`ANGLE_LIMIT_DEG`] but where the constraints force one, in the elements
+//! larger than [`SHAPE_FLOOR`] of the cap (the smaller ones are at the scale of the features
+//! that make them: see [`SHAPE_FLOOR`]).
+
+use super::cdt::SHAPE_FLOOR;
+use super::{ANGLE_LIMIT_DEG, ReceiverMesh};
+use glam::DVec2;
+use std::collections::HashMap;
+
+/// What [`measure`] found over a set of meshes.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Quality {
+    pub elements: usize,
+    /// Elements larger than the cap (by more than rounding), and the largest element's area
+    /// as a multiple of the cap.
+    pub over_cap: usize,
+    pub largest: f64,
+    /// Elements with an angle under the limit at a corner where constraints (the outline, the
+    /// discontinuity lines) meet at less than the limit: the corner forces it.
+    pub forced: usize,
+    /// Elements larger than [`SHAPE_FLOOR`] of the cap with an angle under the limit elsewhere,
+    /// and the smallest such angle (degrees; 180 when there is none).
+    pub sharp: usize,
+    pub sharpest: f64,
+    /// Elements smaller than [`SHAPE_FLOOR`] of the cap with an angle under the limit elsewhere.
+    pub sharp_below_floor: usize,
+    /// Where the worst of each was: (polygon, element, area / cap or angle in degrees).
+    pub worst_over: Option<(usize, usize, f64)>,
+    pub worst_sharp: Option<(usize, usize, f64)>,
+}
+
+/// Measures the elements of `meshes` against the area cap `cap` (scene units²): their areas,
+/// and their angles against [`ANGLE_LIMIT_DEG`] (Shewchuk 2002: Delaunay refinement bounds the
+/// angles except at small input angles). A small angle is forced where it lies inside a
+/// corner of two constraint edges (the outline's, the mesh's [`Constraint`](super::Constraint)s,
+/// the cuts along the jumps) less than the limit apart, at the same vertex position.
+pub fn measure(meshes: &[ReceiverMesh], cap: f64) -> Quality {
+    let mut q = Quality {
+        sharpest: 180.0,
+        ..Default::default()
+    };
+    for m in meshes {
+        let angles = small_angles(m);
+        for (ti, t) in m.triangles.iter().enumerate() {
+            q.elements += 1;
+            let ratio = m.triangle_area(t) / cap;
+            q.largest = q.largest.max(ratio);
+            if ratio > 1.0 + 1e-6 {
+                q.over_cap += 1;
+                if q.worst_over.is_none_or(|w| ratio > w.2) {
+                    q.worst_over = Some((m.polygon, ti, ratio));
+                }
+            }
+            match angles[ti] {
+                SmallAngle::Sharp(_) if ratio < SHAPE_FLOOR => q.sharp_below_floor += 1,
+                SmallAngle::Sharp(a) => {
+                    q.sharp += 1;
+                    if a < q.sharpest {
+                        q.sharpest = a;
+                        q.worst_sharp = Some((m.polygon, ti, a));
+                    }
+                }
+                SmallAngle::Forced => q.forced += 1,
+                SmallAngle::None => {}
+            }
+        }
+    }
+    q
+}
+
+/// An element's angles against [`ANGLE_LIMIT_DEG`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SmallAngle {
+    /// None under the limit.
+    None,
+    /// Under the limit only inside corners of constraints that meet at less than the limit.
+    Forced,
+    /// The smallest angle under the limit elsewhere (degrees).
+    Sharp(f64),
+}
+
+/// Each element's [`SmallAngle`], in `m.triangles` order.
+pub fn small_angles(m: &ReceiverMesh) -> Vec<SmallAngle> {
+    let limit = ANGLE_LIMIT_DEG.to_radians();
+    let corners = constraint_directions(m);
+    m.triangles
+        .iter()
+        .map(|t| {
+            let p = t.map(|i| m.vertices[i as usize]);
+            let mut out = SmallAngle::None;
+            for k in 0..3 {
+                let (v, a, b) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+                let angle = (a - v).angle_to(b - v).abs();
+                if angle >= limit {
+                    continue;
+                }
+                let forced = corners
+                    .get(&key(v))
+                    .is_some_and(|dirs| inside_narrow_corner(dirs, a - v, b - v, limit));
+                out = match (out, forced) {
+                    (SmallAngle::Sharp(s), _) if forced => SmallAngle::Sharp(s),
+                    (_, true) => SmallAngle::Forced,
+                    (SmallAngle::Sharp(s), false) => SmallAngle::Sharp(s.min(angle.to_degrees())),
+                    (_, false) => SmallAngle::Sharp(angle.to_degrees()),
+                };
+            }
+            out
+        })
+        .collect()
+}
+
+/// A vertex position as a hash key (split vertices share theirs).
+fn key(p: DVec2) -> (u64, u64) {
+    (p.x.to_bits(), p.y.to_bits())
+}
+
+/// Per vertex position, the directions (radians) of the constraint edges that leave it: the
+/// mesh's constraints and its boundary edges (the outline, and the cuts along the jumps).
+fn constraint_directions(m: &ReceiverMesh) -> HashMap<(u64, u64), Vec<f64>> {
+    let mut edges: HashMap<(u32, u32), u32> = HashMap::new();
+    for t in &m.triangles {
+        for k in 0..3 {
+            let (a, b) = (t[k], t[(k + 1) % 3]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    let lines = edges
+        .iter()
+        .filter(|(_, n)| **n == 1)
+        .map(|(e, _)| *e)
+        .chain(m.constraints.iter().map(|c| (c.a, c.b)));
+    let mut dirs: HashMap<(u64, u64), Vec<f64>> = HashMap::new();
+    for (a, b) in lines {
+        let (pa, pb) = (m.vertices[a as usize], m.vertices[b as usize]);
+        if pa == pb {
+            continue;
+        }
+        let d = pb - pa;
+        dirs.entry(key(pa)).or_default().push(d.y.atan2(d.x));
+        dirs.entry(key(pb)).or_default().push((-d.y).atan2(-d.x));
+    }
+    dirs
+}
+
+/// Whether the wedge from `a` to `b` (at a vertex) lies inside a corner between two of the
+/// constraint directions `dirs` (radians) that are less than `limit` apart.
+fn inside_narrow_corner(dirs: &[f64], a: DVec2, b: DVec2, limit: f64) -> bool {
+    if dirs.len() < 2 {
+        return false;
+    }
+    use std::f64::consts::TAU;
+    // The wedge's bisector, and the constraints next to it on either side.
+    let (ta, tb) = (a.y.atan2(a.x), b.y.atan2(b.x));
+    let mut span = (tb - ta).rem_euclid(TAU);
+    let (start, mut width) = if span <= std::f64::consts::PI {
+        (ta, span)
+    } else {
+        span = TAU - span;
+        (tb, span)
+    };
+    width = width.max(0.0);
+    let mid = start + width / 2.0;
+    let ccw = dirs
+        .iter()
+        .map(|d| (d - mid).rem_euclid(TAU))
+        .fold(TAU, f64::min);
+    let cw = dirs
+        .iter()
+        .map(|d| (mid - d).rem_euclid(TAU))
+        .fold(TAU, f64::min);
+    ccw + cw < limit + 1e-9
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::discontinuity::Kind;
+    use crate::mesh::Constraint;
+
+    fn mesh(vertices: &[(f64, f64)], triangles: &[[u32; 3]]) -> ReceiverMesh {
+        ReceiverMesh {
+            polygon: 0,
+            vertices: vertices.iter().map(|&(x, y)| DVec2::new(x, y)).collect(),
+            triangles: triangles.to_vec(),
+            constraints: Vec::new(),
+        }
+    }
+
+    /// A right triangle is fine; a sliver's small angle at the outline's 90-degree corner is
+    /// not forced; inside a 10-degree corner of the outline it is; an element over the cap
+    /// is counted whatever its shape.
+    #[test]
+    fn small_angles_are_forced_only_inside_narrow_corners() {
+        let right = mesh(&[(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)], &[[0, 1, 2]]);
+        assert_eq!(small_angles(&right), vec![SmallAngle::None]);
+        // A 4 x 0.5 rectangle in two triangles: each has a 7-degree angle at a right-angled
+        // corner of the outline.
+        let board = mesh(
+            &[(0.0, 0.0), (4.0, 0.0), (4.0, 0.5), (0.0, 0.5)],
+            &[[0, 1, 2], [0, 2, 3]],
+        );
+        let q = measure(&[board], 1.0);
+        assert_eq!((q.sharp, q.forced, q.over_cap), (2, 0, 0), "{q:?}");
+        assert!((q.sharpest - 0.5f64.atan2(4.0).to_degrees()).abs() < 1e-9);
+        // A 10-degree wedge of the outline: the element at the apex keeps the outline's angle
+        // (forced).
+        let t = 10f64.to_radians();
+        let (c, s) = (t.cos(), t.sin());
+        let wedge = mesh(
+            &[(0.0, 0.0), (1.0, 0.0), (c, s), (2.0, 0.0), (2.0 * c, 2.0 * s)],
+            &[[0, 1, 2], [1, 3, 4], [1, 4, 2]],
+        );
+        let angles = small_angles(&wedge);
+        assert_eq!(angles[0], SmallAngle::Forced);
+        // The element beyond it, between the same two sides, has 20 degrees where the outline
+        // runs straight: the measure excuses the corner's own elements only.
+        assert!(matches!(angles[1], SmallAngle::Sharp(a) if a > 19.0 && a < 21.0));
+        // A 10-degree element in a right-angled corner of the outline is not forced; with a
+        // constraint along its side, the constraints meet at 10 degrees and it is.
+        let mut corner = mesh(
+            &[(0.0, 0.0), (1.0, 0.0), (c, s), (0.0, 1.0)],
+            &[[0, 1, 2], [0, 2, 3]],
+        );
+        assert!(matches!(small_angles(&corner)[0], SmallAngle::Sharp(a) if (a - 10.0).abs() < 1e-9));
+        assert_eq!(small_angles(&corner)[1], SmallAngle::None);
+        corner.constraints.push(Constraint {
+            a: 0,
+            b: 2,
+            kind: Kind::D0,
+            event: 0,
+        });
+        assert_eq!(small_angles(&corner)[0], SmallAngle::Forced);
+        // Over the cap, by area alone.
+        let q = measure(&[right], 0.4);
+        assert_eq!(q.over_cap, 1);
+        assert!((q.largest - 1.25).abs() < 1e-12);
+    }
+}
