@@ -17,15 +17,15 @@ use spade::{
 /// Minimum angle for quality refinement, degrees.
 pub(crate) const ANGLE_LIMIT_DEG: f64 = 25.0;
 
-/// Elements larger than this fraction of the area cap are refined for their angles with no
-/// vertex limit but their count (the *shape* pass, before the bounded pass for the smaller
-/// ones), in every polygon, small ones included: so that the vertices the lines and their
-/// small features take never leave the open areas in slivers (a city's ground, with five
-/// thousand lines, was fans of slivers 10 m long from its footprint corners) and a wall smaller
-/// than one element is not two triangles 20 m long. Below it, elements are at the scale of
-/// the features that make them (lines a few centimetres apart, short outline edges), where
-/// refining them for their angles costs without bound: at a hundredth of the cap with no vertex
-/// limit, the generated 5 000-triangle city took 16 times the elements.
+/// With [`Lines::shape`] (`--strict-angles`), elements larger than this fraction of the area
+/// cap are refined for their angles with no vertex limit but their count (the *shape* pass),
+/// in every polygon, small ones included: so that the vertices the lines and their small
+/// features take never leave the open areas in slivers (the generated city's ground, with five
+/// thousand lines, keeps fans of slivers 10 m long from its footprint corners without it) and a
+/// wall smaller than one element is not two triangles 20 m long. Below it, elements are at the
+/// scale of the features that make them (lines a few centimetres apart, short outline edges),
+/// where refining them for their angles costs without bound: at a hundredth of the cap, the
+/// generated 5 000-triangle city took 18 times the elements.
 pub(crate) const SHAPE_FLOOR: f64 = 0.1;
 
 /// Rounds of circumcentres inserted where the refinement leaves skinny elements above the
@@ -64,8 +64,10 @@ const LATTICE_TESTS: f64 = 5e7;
 /// Triangulates one polygon: its boundary and the discontinuity `lines.segments` (plane
 /// coordinates) as constraints, the `lines.points` as vertices (and with `lines.strips`, rows
 /// of vertices beside corner and contact lines: [`corner_strip`]), refined so that no triangle is larger than `max_area` (scene units²) and,
-/// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. At most
-/// `vertex_cap` vertices are added by refinement.
+/// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. The area and angle
+/// passes add at most `vertex_cap` vertices, which can leave both short where the lines' small
+/// features take them; with `lines.shape`, the shape pass ([`SHAPE_FLOOR`]) completes both above
+/// its floor.
 ///
 /// Points closer than `lines.snap` (scene units; at least 1e-9 of the polygon's size) are merged,
 /// and segments within `snap` of each other (or of the outline) become one: use the tolerance the

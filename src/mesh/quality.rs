@@ -1,7 +1,7 @@
-//! The element quality a meshing promises, measured: no element larger than the area cap, and
-//! no angle under [`ANGLE_LIMIT_DEG`] but where the constraints force one, in the elements
-//! larger than [`SHAPE_FLOOR`] of the cap (the smaller ones are at the scale of the features
-//! that make them: see [`SHAPE_FLOOR`]).
+//! The element quality of a meshing, measured: elements larger than the area cap, and angles
+//! under [`ANGLE_LIMIT_DEG`] but where the constraints force one, in the elements larger than
+//! [`SHAPE_FLOOR`] of the cap (the smaller ones are at the scale of the features that make
+//! them). With `--strict-angles` (the shape pass) a meshing has neither.
 
 use super::cdt::SHAPE_FLOOR;
 use super::{ANGLE_LIMIT_DEG, ReceiverMesh};
