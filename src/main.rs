@@ -249,6 +249,9 @@ struct MeshArgs {
     /// As for bake.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
+    /// As for bake.
+    #[arg(long)]
+    strict_angles: bool,
     /// As for bake: the sky's light drives the mesher's refinement too.
     #[arg(long, value_name = "R,G,B")]
     sky: Option<String>,
@@ -516,6 +519,7 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         mesher: args.mesher,
         budget: args.budget,
         dm_threshold: args.dm_threshold,
+        strict_angles: args.strict_angles,
         solve: SolveOptions {
             bounces: Some(0),
             sky: sky_radiance(args.sky.as_deref())?,
