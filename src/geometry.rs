@@ -372,6 +372,18 @@ pub fn convex_hull(points: &[DVec2]) -> Vec<DVec2> {
     hull
 }
 
+/// The midpoint of the longest edge of the triangle `t` (ties: the first edge).
+pub(crate) fn longest_edge_midpoint(t: &[DVec2; 3]) -> DVec2 {
+    let e = (0..3)
+        .max_by(|&i, &j| {
+            let li = t[i].distance_squared(t[(i + 1) % 3]);
+            let lj = t[j].distance_squared(t[(j + 1) % 3]);
+            li.total_cmp(&lj).then(j.cmp(&i))
+        })
+        .unwrap_or(0);
+    (t[e] + t[(e + 1) % 3]) * 0.5
+}
+
 /// Signed area of a 2D polygon (scene units²): positive when counter-clockwise. A fan from the
 /// first corner (the shoelace formula); fewer than three corners give 0.
 pub(crate) fn signed_area(poly: &[DVec2]) -> f64 {

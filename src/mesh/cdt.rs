@@ -565,16 +565,7 @@ fn skinny_centres(
             if polygon.contains(DVec2::new(c.x, c.y)) {
                 return Some(c);
             }
-            let k = (0..3)
-                .max_by(|&i, &j| {
-                    let (li, lj) = (
-                        p[i].distance_squared(p[(i + 1) % 3]),
-                        p[j].distance_squared(p[(j + 1) % 3]),
-                    );
-                    li.total_cmp(&lj).then(j.cmp(&i))
-                })
-                .unwrap_or(0);
-            let m = (p[k] + p[(k + 1) % 3]) * 0.5;
+            let m = crate::geometry::longest_edge_midpoint(&p);
             Some(Point2::new(m.x, m.y))
         })
         .collect()

@@ -367,17 +367,7 @@ pub(crate) fn adaptive(scene: &Scene, budget: usize, evaluate: &Evaluate<'_>) ->
         budget,
         8,
         evaluate,
-        |t| {
-            // The midpoint of the longest edge.
-            let e = (0..3)
-                .max_by(|&i, &j| {
-                    let li = t[i].distance_squared(t[(i + 1) % 3]);
-                    let lj = t[j].distance_squared(t[(j + 1) % 3]);
-                    li.total_cmp(&lj).then(j.cmp(&i))
-                })
-                .unwrap_or(0);
-            (t[e] + t[(e + 1) % 3]) * 0.5
-        },
+        |t| crate::geometry::longest_edge_midpoint(&t),
         |mi, points| {
             let m = &start[mi];
             let mut all = m.vertices.clone();
