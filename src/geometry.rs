@@ -384,6 +384,35 @@ pub(crate) fn longest_edge_midpoint(t: &[DVec2; 3]) -> DVec2 {
     (t[e] + t[(e + 1) % 3]) * 0.5
 }
 
+/// Whether the wedge from `a` to `b` (at a vertex) lies inside a corner between two of the
+/// constraint directions `dirs` (radians) that are less than `limit` apart.
+pub(crate) fn inside_narrow_corner(dirs: &[f64], a: DVec2, b: DVec2, limit: f64) -> bool {
+    if dirs.len() < 2 {
+        return false;
+    }
+    use std::f64::consts::TAU;
+    // The wedge's bisector, and the constraints next to it on either side.
+    let (ta, tb) = (a.y.atan2(a.x), b.y.atan2(b.x));
+    let mut span = (tb - ta).rem_euclid(TAU);
+    let (start, mut width) = if span <= std::f64::consts::PI {
+        (ta, span)
+    } else {
+        span = TAU - span;
+        (tb, span)
+    };
+    width = width.max(0.0);
+    let mid = start + width / 2.0;
+    let ccw = dirs
+        .iter()
+        .map(|d| (d - mid).rem_euclid(TAU))
+        .fold(TAU, f64::min);
+    let cw = dirs
+        .iter()
+        .map(|d| (mid - d).rem_euclid(TAU))
+        .fold(TAU, f64::min);
+    ccw + cw < limit + 1e-9
+}
+
 /// Signed area of a 2D polygon (scene units²): positive when counter-clockwise. A fan from the
 /// first corner (the shoelace formula); fewer than three corners give 0.
 pub(crate) fn signed_area(poly: &[DVec2]) -> f64 {

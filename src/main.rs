@@ -249,9 +249,6 @@ struct MeshArgs {
     /// As for bake.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
-    /// As for bake.
-    #[arg(long)]
-    strict_angles: bool,
     /// As for bake: the sky's light drives the mesher's refinement too.
     #[arg(long, value_name = "R,G,B")]
     sky: Option<String>,
@@ -345,11 +342,6 @@ struct BakeArgs {
     /// below this fraction (0..1) of the brightest piece's.
     #[arg(long, default_value_t = 0.01)]
     dm_threshold: f64,
-    /// Refine every element larger than a tenth of the area cap to the 25-degree angle limit,
-    /// with no vertex limit (off: the vertices the lines' small features take can leave open
-    /// areas in slivers). Its elements come out of the budget.
-    #[arg(long)]
-    strict_angles: bool,
     /// Direct light of area emitters: `exact` (backprojection: the visible part of each emitter)
     /// or `sampled` (shadow rays).
     #[arg(long, value_enum, default_value_t = DirectMethod::Exact)]
@@ -519,7 +511,6 @@ fn mesh(args: MeshArgs) -> anyhow::Result<()> {
         mesher: args.mesher,
         budget: args.budget,
         dm_threshold: args.dm_threshold,
-        strict_angles: args.strict_angles,
         solve: SolveOptions {
             bounces: Some(0),
             sky: sky_radiance(args.sky.as_deref())?,
@@ -838,7 +829,6 @@ fn bake(args: BakeArgs) -> anyhow::Result<()> {
         mesher: args.mesher,
         budget: args.budget,
         dm_threshold: args.dm_threshold,
-        strict_angles: args.strict_angles,
         solve: SolveOptions {
             direct: args.direct,
             shadow_samples: args.shadow_samples,

@@ -74,9 +74,8 @@ pub struct Stats {
     pub budget: usize,
     pub budget_from: String,
     pub elements: usize,
-    /// The area cap the uniform and discontinuity meshers refined to (scene units²): with
-    /// `--strict-angles` no element is larger (`mesh::quality` measures it). None for the
-    /// adaptive mesher.
+    /// The area cap the uniform and discontinuity meshers refined to (scene units²): no element
+    /// is larger (`mesh::quality` measures it). None for the adaptive mesher.
     pub area_cap: Option<f64>,
     /// Mesh vertices, over every receiver mesh.
     pub vertices: usize,

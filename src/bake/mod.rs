@@ -30,11 +30,6 @@ pub struct BakeOptions {
     /// Discontinuity pieces where their light's unoccluded irradiance is below this fraction
     /// (0..1) of the brightest piece's are dropped.
     pub dm_threshold: f64,
-    /// Refine every element larger than a tenth of the area cap to the angle limit, with no
-    /// vertex limit (`--strict-angles`; the shape pass of `mesh::cdt`). Off by default: its
-    /// elements come out of the budget, and at the default budget that cost the real cities'
-    /// light-driven refinement more than it gained (docs/decisions.md).
-    pub strict_angles: bool,
     pub solve: SolveOptions,
     /// Lightmap texels per scene unit; `None`: derived from `resolution`.
     pub texels_per_unit: Option<f32>,
@@ -107,7 +102,6 @@ impl Default for BakeOptions {
             mesher: Mesher::Discontinuity,
             budget: None,
             dm_threshold: 0.01,
-            strict_angles: false,
             solve: SolveOptions::default(),
             texels_per_unit: None,
             resolution: None,
@@ -745,7 +739,7 @@ fn mesh_scene(
     match options.mesher {
         Mesher::Uniform => {
             let (meshes, cap) = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::uniform_with_cap(scene, budget, options.strict_angles)
+                mesh::uniform_with_cap(scene, budget)
             });
             stats.area_cap = Some(cap);
             (Vec::new(), meshes)
@@ -760,14 +754,7 @@ fn mesh_scene(
             };
             let strips = options.budget.is_none();
             let (meshes, inserted, dropped, cap) = stage(&mut t.mesh, "mesh", progress, || {
-                mesh::discontinuity(
-                    scene,
-                    &segments,
-                    budget,
-                    Some(&evaluate),
-                    strips,
-                    options.strict_angles,
-                )
+                mesh::discontinuity(scene, &segments, budget, Some(&evaluate), strips)
             });
             stats.area_cap = Some(cap);
             dm_stats.refused = inserted.refused;

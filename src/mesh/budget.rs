@@ -226,7 +226,6 @@ pub(crate) fn lines_floor(
                 clearance,
                 points: &[],
                 strips,
-                shape: false,
             },
             None => Lines::default(),
         };

@@ -17,20 +17,15 @@ use spade::{
 /// Minimum angle for quality refinement, degrees.
 pub(crate) const ANGLE_LIMIT_DEG: f64 = 25.0;
 
-/// With [`Lines::shape`] (`--strict-angles`), elements larger than this fraction of the area
-/// cap are refined for their angles with no vertex limit but their count (the *shape* pass),
-/// in every polygon, small ones included: so that the vertices the lines and their small
-/// features take never leave the open areas in slivers (the generated city's ground, with five
-/// thousand lines, keeps fans of slivers 10 m long from its footprint corners without it) and a
-/// wall smaller than one element is not two triangles 20 m long. Below it, elements are at the
-/// scale of the features that make them (lines a few centimetres apart, short outline edges),
-/// where refining them for their angles costs without bound: at a hundredth of the cap, the
-/// generated 5 000-triangle city took 18 times the elements.
+/// The repair ([`repair`]) gives every element larger than this fraction of the area cap
+/// the angle limit, in every polygon, small ones included: so that the vertices the lines and
+/// their small features take never leave the open areas in slivers (the generated city's
+/// ground, with five thousand lines, kept fans of slivers 10 m long from its footprint corners)
+/// and a wall smaller than one element is not two triangles 20 m long. Below it, elements are
+/// at the scale of the features that make them (lines a few centimetres apart, short outline
+/// edges), where refining them for their angles costs without bound: at a hundredth of the
+/// cap, the generated 5 000-triangle city took 18 times the elements.
 pub(crate) const SHAPE_FLOOR: f64 = 0.1;
-
-/// Rounds of circumcentres inserted where the refinement leaves skinny elements above the
-/// shape floor ([`skinny_centres`]).
-const SHAPE_ROUNDS: usize = 3;
 
 /// The bounded passes refine no element smaller than this fraction of the area cap.
 const DETAIL_FLOOR: f64 = 1e-3;
@@ -66,8 +61,8 @@ const LATTICE_TESTS: f64 = 5e7;
 /// of vertices beside corner and contact lines: [`corner_strip`]), refined so that no triangle is larger than `max_area` (scene units²) and,
 /// where the constraints allow, none has an angle under [`ANGLE_LIMIT_DEG`]. The area and angle
 /// passes add at most `vertex_cap` vertices, which can leave both short where the lines' small
-/// features take them; with `lines.shape`, the shape pass ([`SHAPE_FLOOR`]) completes both above
-/// its floor.
+/// features take them; the repair ([`repair`]) then completes both above [`SHAPE_FLOOR`] of the
+/// cap.
 ///
 /// Points closer than `lines.snap` (scene units; at least 1e-9 of the polygon's size) are merged,
 /// and segments within `snap` of each other (or of the outline) become one: use the tolerance the
@@ -122,7 +117,6 @@ fn triangulate_in_frame(
         clearance,
         points,
         strips,
-        shape,
     } = lines;
     let (lo, hi) = polygon.triangles_plane.iter().flatten().fold(
         (DVec2::splat(f64::INFINITY), DVec2::splat(f64::NEG_INFINITY)),
@@ -189,9 +183,9 @@ fn triangulate_in_frame(
         Vec::new()
     };
     let arr = arrangement::build(&input, tol);
-    // A polygon no larger than one element, with nothing inside, gets only the shape pass (if
-    // on): refining its slivers for their angles (a tessellated sphere's poles) would spend the
-    // budget where the light is smooth at the element's scale anyway.
+    // A polygon no larger than one element, with nothing inside, gets only the repair: refining
+    // its small slivers for their angles (a tessellated sphere's poles) would spend the budget
+    // where the light is smooth at the element's scale anyway.
     let detail = polygon.area > max_area
         || !arr.edges.iter().all(|e| e.2.is_none())
         || !points.is_empty()
@@ -243,37 +237,11 @@ fn triangulate_in_frame(
             }
             let added = cdt.num_vertices() - before;
             starved = added >= vertex_cap;
-            // Then the shape pass: the cap and the angles of every element above SHAPE_FLOOR of
-            // it, limited only by the elements that floor allows and the grading along the
-            // constraints. It also finishes the area cap where the first pass ran out.
-            let shape_vertices = (4.0 * polygon.area / (SHAPE_FLOOR * max_area)).min(1e8) as usize
-                + 16 * (polygon.boundary.len() + arr.edges.len() + points.len())
-                + 64;
-            if shape {
-                cdt.refine(params(ANGLE_LIMIT_DEG, SHAPE_FLOOR, shape_vertices));
-            }
             // Then the smaller elements' angles, with at most half as many vertices again as
             // the area pass took.
             if detail {
                 let angle_cap = (added / 2).max(vertex_cap / 4);
                 cdt.refine(params(ANGLE_LIMIT_DEG, DETAIL_FLOOR, angle_cap));
-            }
-            // The bounded pass can leave elements over the cap (a Delaunay cavity's new
-            // triangle) or skinny above the floor, and spade's refinement skips some skinny
-            // elements between two constraints (it takes any two vertices it inserted on
-            // constraints from one input vertex for a small input angle, whatever the angle):
-            // the shape pass again, with the circumcentres of those it left inserted first.
-            if shape {
-                for round in 0..=SHAPE_ROUNDS {
-                    cdt.refine(params(ANGLE_LIMIT_DEG, SHAPE_FLOOR, shape_vertices));
-                    let centres = skinny_centres(&cdt, polygon, SHAPE_FLOOR * max_area);
-                    if round == SHAPE_ROUNDS || centres.is_empty() {
-                        break;
-                    }
-                    for c in centres {
-                        let _ = cdt.insert(c);
-                    }
-                }
             }
         }
         (cdt, handles, refused, starved)
@@ -284,6 +252,16 @@ fn triangulate_in_frame(
     let (mut cdt, mut handles, mut refused, starved) = build(false, vertex_cap);
     if starved && polygon.area > LATTICE_FROM * max_area {
         (cdt, handles, refused, _) = build(true, vertex_cap);
+    }
+    // The bounded passes leave elements over the cap where they ran out of vertices (or a
+    // Delaunay cavity made one), and skinny ones where the lines' small features took the
+    // vertices: the repair finishes both above SHAPE_FLOOR of the cap.
+    if cdt.num_vertices() >= 3 && !cdt.all_vertices_on_line() {
+        let limit = (4.0 * polygon.area / (SHAPE_FLOOR * max_area)).min(1e8) as usize
+            + 16 * (polygon.boundary.len() + arr.edges.len() + points.len())
+            + 64;
+        let cap = max_area.max(polygon.area * 1e-9);
+        repair(&mut cdt, polygon, cap, SHAPE_FLOOR * cap, limit);
     }
     let (mut mesh, remap) = inside_faces(id, polygon, &cdt);
     let mut constraint_edges: Vec<(u32, u32)> = cdt
@@ -537,38 +515,115 @@ pub(crate) fn triangulate_points(id: usize, polygon: &Polygon, points: &[DVec2])
     inside_faces(id, polygon, &cdt).0
 }
 
-/// The circumcentres (where outside `polygon`, the midpoints of their longest edges) of the
-/// faces of `cdt` inside it larger than `floor` (scene units²) with an angle under
-/// [`ANGLE_LIMIT_DEG`].
-fn skinny_centres(
-    cdt: &ConstrainedDelaunayTriangulation<Point2<f64>>,
+/// Most rounds of [`repair`].
+const REPAIR_ROUNDS: usize = 24;
+
+/// Repairs the faces of `cdt` inside `polygon` that are larger than `max_area`, or larger
+/// than `floor` (scene units²) with an angle under [`ANGLE_LIMIT_DEG`] outside a corner where
+/// constraints meet at less: each round, every such face gets its circumcentre inserted where
+/// it lies in the polygon with no constraint between it and the face, and otherwise splits the
+/// first constraint edge in the way at its midpoint (Ruppert's rule, "A Delaunay refinement
+/// algorithm for quality 2-dimensional mesh generation", 1995, applied to these faces only).
+/// Unlike spade's refinement it never splits a constraint edge only because a vertex
+/// encroaches it: among a real city's thousands of close lines those splits cascade (a tenth
+/// of Munich's ground's elements came out under 1e-4 of the cap). At most `limit` vertices.
+fn repair(
+    cdt: &mut ConstrainedDelaunayTriangulation<Point2<f64>>,
     polygon: &Polygon,
+    max_area: f64,
     floor: f64,
-) -> Vec<Point2<f64>> {
-    let limit = ANGLE_LIMIT_DEG.to_radians();
-    cdt.inner_faces()
-        .filter_map(|f| {
+    limit: usize,
+) {
+    let angle_limit = ANGLE_LIMIT_DEG.to_radians();
+    let start = cdt.num_vertices();
+    for _ in 0..REPAIR_ROUNDS {
+        let mut centres: Vec<Point2<f64>> = Vec::new();
+        let mut splits: Vec<[FixedVertexHandle; 2]> = Vec::new();
+        for f in cdt.inner_faces() {
             let p = f.positions().map(|p| DVec2::new(p.x, p.y));
             let area = crate::geometry::signed_area(&p);
-            if area < floor || !polygon.contains((p[0] + p[1] + p[2]) / 3.0) {
-                return None;
+            if area < floor {
+                continue;
             }
-            let sharp = (0..3).any(|k| {
-                let (v, a, b) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
-                (a - v).angle_to(b - v).abs() < limit
-            });
-            if !sharp {
-                return None;
+            let centroid = (p[0] + p[1] + p[2]) / 3.0;
+            if !polygon.contains(centroid) {
+                continue;
             }
-            // Where the circumcentre is outside, the midpoint of the longest edge.
+            let vertices = f.vertices();
+            let bad = area > max_area
+                || (0..3).any(|k| {
+                    let (v, a, b) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+                    let angle = (a - v).angle_to(b - v).abs();
+                    if angle >= angle_limit {
+                        return false;
+                    }
+                    let dirs: Vec<f64> = vertices[k]
+                        .out_edges()
+                        .filter(|e| e.is_constraint_edge())
+                        .map(|e| {
+                            let d = e.to().position();
+                            let d = DVec2::new(d.x, d.y) - v;
+                            d.y.atan2(d.x)
+                        })
+                        .collect();
+                    !crate::geometry::inside_narrow_corner(&dirs, a - v, b - v, angle_limit)
+                });
+            if !bad {
+                continue;
+            }
             let c = f.circumcenter();
-            if polygon.contains(DVec2::new(c.x, c.y)) {
-                return Some(c);
+            let from = Point2::new(centroid.x, centroid.y);
+            match cdt.get_conflicting_edges_between_points(from, c).next() {
+                Some(e) => splits.push(e.vertices().map(|v| v.fix())),
+                None if polygon.contains(DVec2::new(c.x, c.y)) => centres.push(c),
+                None => {}
             }
-            let m = crate::geometry::longest_edge_midpoint(&p);
-            Some(Point2::new(m.x, m.y))
-        })
-        .collect()
+        }
+        if centres.is_empty() && splits.is_empty() {
+            break;
+        }
+        for [a, b] in splits {
+            if cdt.num_vertices() - start >= limit {
+                return;
+            }
+            split_constraint(cdt, a, b);
+        }
+        for c in centres {
+            if cdt.num_vertices() - start >= limit {
+                return;
+            }
+            let _ = cdt.insert(c);
+        }
+    }
+}
+
+/// Splits the constraint edge from `a` to `b`, if there still is one, at its midpoint: the
+/// midpoint is inserted and the two halves are constraints (rounding puts it a hair off the
+/// line, where spade would not split the edge itself).
+fn split_constraint(
+    cdt: &mut ConstrainedDelaunayTriangulation<Point2<f64>>,
+    a: FixedVertexHandle,
+    b: FixedVertexHandle,
+) {
+    let Some(edge) = cdt.get_edge_from_neighbors(a, b) else {
+        return;
+    };
+    if !edge.is_constraint_edge() {
+        return;
+    }
+    let edge = edge.fix().as_undirected();
+    let [pa, pb] = [a, b].map(|v| cdt.vertex(v).position());
+    let m = Point2::new(0.5 * (pa.x + pb.x), 0.5 * (pa.y + pb.y));
+    cdt.remove_constraint_edge(edge);
+    match cdt.insert(m) {
+        Ok(v) if v != a && v != b => {
+            cdt.try_add_constraint(a, v);
+            cdt.try_add_constraint(v, b);
+        }
+        _ => {
+            cdt.try_add_constraint(a, b);
+        }
+    }
 }
 
 /// The faces of `cdt` inside the polygon (centroid test against its own triangles, nonzero

@@ -59,11 +59,6 @@ pub struct Lines<'a> {
     /// floor; off for a budget the user fixes, where they would come out of the elements the
     /// light-driven rounds spend.
     pub strips: bool,
-    /// The shape pass ([`cdt::SHAPE_FLOOR`]; `--strict-angles`): every element above that fraction
-    /// of the area cap refined to the angle limit, with no vertex limit. Never on for the
-    /// floors the element budget is raised to (`lines_floor`, `geometry_floor`), which count
-    /// what the geometry and its lines take, not how the elements between them are shaped.
-    pub shape: bool,
 }
 
 /// What [`triangulate_with`] did with its segments besides inserting them.
@@ -156,22 +151,13 @@ pub(crate) fn mesh_of_polygon(scene: &Scene, meshes: &[ReceiverMesh]) -> Vec<usi
 
 /// The uniform mesher: every polygon refined to one area cap, about `budget` triangles in all.
 pub fn uniform(scene: &Scene, budget: usize) -> Vec<ReceiverMesh> {
-    uniform_with_cap(scene, budget, false).0
+    uniform_with_cap(scene, budget).0
 }
 
-/// [`uniform`], with the shape pass if `shape` ([`Lines::shape`]), and the area cap it meshed
-/// to (scene units²).
-pub(crate) fn uniform_with_cap(
-    scene: &Scene,
-    budget: usize,
-    shape: bool,
-) -> (Vec<ReceiverMesh>, f64) {
-    let lines = Lines {
-        shape,
-        ..Lines::default()
-    };
+/// [`uniform`], and the area cap it meshed to (scene units²).
+pub(crate) fn uniform_with_cap(scene: &Scene, budget: usize) -> (Vec<ReceiverMesh>, f64) {
     to_budget(scene, budget, with_slack(budget), |i, area, cap| {
-        triangulate_with(i, &scene.polygons[i], lines, area, cap).0
+        triangulate_with(i, &scene.polygons[i], Lines::default(), area, cap).0
     })
 }
 
@@ -189,7 +175,6 @@ pub(crate) fn uniform_with_cap(
 /// rounds of the adaptive mesher's rule,
 /// splitting at the centroid so that no split lands on a line). The uniform step before them
 /// stays under where the rounds stop ([`rounds_stop`]) whenever the lines leave room there.
-/// With `shape`, every meshing has the shape pass ([`Lines::shape`]).
 ///
 /// Returns the meshes, what became of the segments passed to the triangulation, the wedge
 /// pieces dropped for the budget and the area cap of the last meshing (scene units²).
@@ -199,7 +184,6 @@ pub(crate) fn discontinuity(
     budget: usize,
     refine: Option<&Evaluate<'_>>,
     strips: bool,
-    shape: bool,
 ) -> (Vec<ReceiverMesh>, Inserted, usize, f64) {
     // Wedge pieces, strongest first (ties by polygon and position: a total, fixed order).
     let mut ranked: Vec<(usize, usize)> = segments
@@ -254,7 +238,6 @@ pub(crate) fn discontinuity(
                 clearance,
                 points,
                 strips,
-                shape,
             };
             let (m, ins) = triangulate_with(i, &scene.polygons[i], lines, area, cap);
             inserted.lock().unwrap_or_else(|e| e.into_inner())[i] = ins;
@@ -594,8 +577,8 @@ mod tests {
     /// footprints on a 1 m pitch, overlapping their neighbours at small angles, like a real
     /// city's buildings on one ground polygon): refinement spent its whole vertex cap around
     /// the lines and left the open ground in elements up to 211 times the area cap. The
-    /// polygon is triangulated again with a lattice in its open areas, and the shape pass
-    /// brings every element within the cap and the angle limit.
+    /// polygon is triangulated again with a lattice in its open areas, and the repair brings
+    /// every element within the cap and the angle limit.
     #[test]
     fn crowded_lines_leave_the_open_ground_its_share_of_the_cap() {
         let scene = rectangle(200.0, 200.0);
@@ -635,12 +618,11 @@ mod tests {
             clearance: 0.5 * max_area.sqrt(),
             points: &[],
             strips: false,
-            shape: true,
         };
         let (mesh, _) = triangulate_with(0, p, lines, max_area, vertex_cap(p, max_area));
         // Measured: 211 times the cap before the lattice, 6.4 times with it (the band along the
         // outline, between the lattice and the outline's far-apart corners, was left to
-        // refinement with no vertices left); within it with the shape pass.
+        // refinement with no vertices left); within it with the repair.
         let q = quality::measure(std::slice::from_ref(&mesh), max_area);
         assert_eq!(q.over_cap, 0, "{q:?}");
         assert_eq!(q.sharp, 0, "{q:?}");

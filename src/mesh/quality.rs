@@ -1,7 +1,7 @@
 //! The element quality of a meshing, measured: elements larger than the area cap, and angles
 //! under [`ANGLE_LIMIT_DEG`] but where the constraints force one, in the elements larger than
 //! [`SHAPE_FLOOR`] of the cap (the smaller ones are at the scale of the features that make
-//! them). With `--strict-angles` (the shape pass) a meshing has neither.
+//! them). The repair of `mesh::cdt` leaves a meshing neither.
 
 use super::cdt::SHAPE_FLOOR;
 use super::{ANGLE_LIMIT_DEG, ReceiverMesh};
@@ -97,7 +97,7 @@ pub fn small_angles(m: &ReceiverMesh) -> Vec<SmallAngle> {
                 }
                 let forced = corners
                     .get(&key(v))
-                    .is_some_and(|dirs| inside_narrow_corner(dirs, a - v, b - v, limit));
+                    .is_some_and(|dirs| crate::geometry::inside_narrow_corner(dirs, a - v, b - v, limit));
                 out = match (out, forced) {
                     (SmallAngle::Sharp(s), _) if forced => SmallAngle::Sharp(s),
                     (_, true) => SmallAngle::Forced,
@@ -141,35 +141,6 @@ fn constraint_directions(m: &ReceiverMesh) -> HashMap<(u64, u64), Vec<f64>> {
         dirs.entry(key(pb)).or_default().push((-d.y).atan2(-d.x));
     }
     dirs
-}
-
-/// Whether the wedge from `a` to `b` (at a vertex) lies inside a corner between two of the
-/// constraint directions `dirs` (radians) that are less than `limit` apart.
-fn inside_narrow_corner(dirs: &[f64], a: DVec2, b: DVec2, limit: f64) -> bool {
-    if dirs.len() < 2 {
-        return false;
-    }
-    use std::f64::consts::TAU;
-    // The wedge's bisector, and the constraints next to it on either side.
-    let (ta, tb) = (a.y.atan2(a.x), b.y.atan2(b.x));
-    let mut span = (tb - ta).rem_euclid(TAU);
-    let (start, mut width) = if span <= std::f64::consts::PI {
-        (ta, span)
-    } else {
-        span = TAU - span;
-        (tb, span)
-    };
-    width = width.max(0.0);
-    let mid = start + width / 2.0;
-    let ccw = dirs
-        .iter()
-        .map(|d| (d - mid).rem_euclid(TAU))
-        .fold(TAU, f64::min);
-    let cw = dirs
-        .iter()
-        .map(|d| (mid - d).rem_euclid(TAU))
-        .fold(TAU, f64::min);
-    ccw + cw < limit + 1e-9
 }
 
 #[cfg(test)]

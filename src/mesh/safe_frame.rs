@@ -73,7 +73,6 @@ pub(super) fn in_safe_frame(
             clearance: lines.clearance * s,
             points: &points,
             strips: lines.strips,
-            shape: lines.shape,
         };
         let (mut mesh, inserted) = triangulate(id, &scaled, lines, max_area * s * s, vertex_cap);
         for v in &mut mesh.vertices {
