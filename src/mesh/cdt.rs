@@ -615,14 +615,14 @@ fn split_constraint(
     let [pa, pb] = [a, b].map(|v| cdt.vertex(v).position());
     let m = Point2::new(0.5 * (pa.x + pb.x), 0.5 * (pa.y + pb.y));
     cdt.remove_constraint_edge(edge);
-    match cdt.insert(m) {
+    let split = match cdt.insert(m) {
         Ok(v) if v != a && v != b => {
-            cdt.try_add_constraint(a, v);
-            cdt.try_add_constraint(v, b);
+            !cdt.try_add_constraint(a, v).is_empty() && !cdt.try_add_constraint(v, b).is_empty()
         }
-        _ => {
-            cdt.try_add_constraint(a, b);
-        }
+        _ => false,
+    };
+    if !split {
+        cdt.try_add_constraint(a, b);
     }
 }
 

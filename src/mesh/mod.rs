@@ -629,6 +629,28 @@ mod tests {
         assert!((mesh.area() / p.area - 1.0).abs() < 1e-9);
     }
 
+    /// A 20 x 4 m wall meshed at a cap larger than itself: the bounded passes leave it alone
+    /// (two triangles at 11°), and the repair splits its long sides (the circumcentres lie
+    /// across them, outside the wall) until no element above a tenth of the cap is skinny,
+    /// with a handful of elements and the outline intact.
+    #[test]
+    fn a_wall_smaller_than_one_element_is_not_two_slivers() {
+        let scene = rectangle(20.0, 4.0);
+        let p = &scene.polygons[0];
+        let cap = 100.0;
+        let (mesh, _) = triangulate_with(0, p, Lines::default(), cap, vertex_cap(p, cap));
+        let q = quality::measure(std::slice::from_ref(&mesh), cap);
+        assert_eq!((q.over_cap, q.sharp), (0, 0), "{q:?}");
+        assert!(mesh.triangles.len() > 2 && mesh.triangles.len() <= 24, "{q:?}");
+        assert!((mesh.area() / p.area - 1.0).abs() < 1e-12);
+        // Every vertex on the outline or inside it, none outside.
+        for v in &mesh.vertices {
+            assert!(p.contains(*v) || p.boundary.iter().any(|[a, b]| {
+                (*b - *a).perp_dot(*v - *a).abs() < 1e-9 * (*b - *a).length()
+            }));
+        }
+    }
+
     /// A `w` x `d` floor at y = 0 (two triangles).
     fn rectangle(w: f64, d: f64) -> Scene {
         floor_scene(
