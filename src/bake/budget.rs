@@ -8,10 +8,16 @@ use crate::scene::Scene;
 /// costs time for nothing.
 pub(crate) const TEXELS_PER_ELEMENT: f64 = 32.0;
 
-/// The default element budget is at least this many elements per input triangle, and per
-/// element of the geometry's own coarsest meshing ([`mesh::geometry_floor`]), so that the light
-/// has elements of its own beyond the geometry's.
+/// The default element budget is at least this many elements per input triangle, so that the
+/// light has elements of its own beyond the geometry's.
 pub(crate) const ELEMENTS_PER_TRIANGLE: f64 = 1.5;
+
+/// The default element budget is at least this many elements per element of the coarsest
+/// meshing of the geometry with every discontinuity line ([`mesh::lines_floor`]): as many again
+/// for the light between the lines as the lines and the geometry take. Measured on a real
+/// city (Florence, the RMSE against two 64-path references): at 1.5, 5.05% with 559 758
+/// elements in 100 s; at 2, 3.96% with 878 172 in 128 s.
+pub(crate) const ELEMENTS_PER_FLOOR_ELEMENT: f64 = 2.0;
 
 /// How many times [`element_budget`] counts the geometry's floor, each time at the budget the
 /// last count raised it to.
@@ -43,7 +49,7 @@ pub(crate) struct Budget {
 ///   `texels_per_unit` (the bake passes the atlas's first estimate of its density, so that the
 ///   mesh need not wait for the final packing: within a few percent of the final density),
 /// * [`ELEMENTS_PER_TRIANGLE`] per input triangle,
-/// * [`ELEMENTS_PER_TRIANGLE`] per element that the geometry and its discontinuity lines take,
+/// * [`ELEMENTS_PER_FLOOR_ELEMENT`] per element that the geometry and its discontinuity lines take,
 ///   `geometry_floor(b)` (the bake passes [`mesh::lines_floor`]; called only for a default
 ///   budget) at `b`, the larger of the first two within [`DEFAULT_BUDGET`] and at least the
 ///   triangle count; counted again at the budget it raised to, up to [`FLOOR_PASSES`] times,
@@ -92,7 +98,7 @@ pub(crate) fn element_budget(
             let (mut at, mut chosen) = (b.max(triangles), (b, from));
             for _ in 0..FLOOR_PASSES {
                 let count = geometry_floor(at);
-                let geometry = count as f64 * ELEMENTS_PER_TRIANGLE;
+                let geometry = count as f64 * ELEMENTS_PER_FLOOR_ELEMENT;
                 if geometry <= chosen.0 as f64 {
                     break;
                 }

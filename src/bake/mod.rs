@@ -913,9 +913,9 @@ mod tests {
         };
         let (near, _, from) = budget(1_000);
         assert!(near && from == "lightmap texels", "{:?}", budget(1_000));
-        assert_eq!(budget(40_000), (false, 60_000, "geometry"));
-        assert_eq!(budget(200_000), (false, 300_000, "geometry"));
-        assert_eq!(budget(800_000), (false, LINES_BUDGET_MAX, "maximum"));
+        assert_eq!(budget(40_000), (false, 80_000, "geometry"));
+        assert_eq!(budget(200_000), (false, 400_000, "geometry"));
+        assert_eq!(budget(600_000), (false, LINES_BUDGET_MAX, "maximum"));
         // The texels alone stay within the default maximum.
         let dense = element_budget(&scene, None, texels_per_unit * 10.0, |_| 1_000);
         assert_eq!(
