@@ -525,8 +525,9 @@ const REPAIR_ROUNDS: usize = 24;
 /// first constraint edge in the way at its midpoint (Ruppert's rule, "A Delaunay refinement
 /// algorithm for quality 2-dimensional mesh generation", 1995, applied to these faces only).
 /// Unlike spade's refinement it never splits a constraint edge only because a vertex
-/// encroaches it: among a real city's thousands of close lines those splits cascade (a tenth
-/// of Munich's ground's elements came out under 1e-4 of the cap). At most `limit` vertices.
+/// encroaches it: among a real city's thousands of close lines those splits cascade (in the
+/// repair's place, spade's refinement gave Munich's ground 4 times its elements, half of them
+/// under 1e-4 of the cap). At most `limit` vertices.
 fn repair(
     cdt: &mut ConstrainedDelaunayTriangulation<Point2<f64>>,
     polygon: &Polygon,
