@@ -384,6 +384,30 @@ pub(crate) fn longest_edge_midpoint(t: &[DVec2; 3]) -> DVec2 {
     (t[e] + t[(e + 1) % 3]) * 0.5
 }
 
+/// The angles of the triangle `p` under `limit` (radians): the smallest of those that
+/// `forced(k, a, b)` does not excuse (the angle at corner `k`, between the edges to `a` and
+/// `b`, as offsets from the corner), and whether any it excuses.
+pub(crate) fn small_angles_of(
+    p: &[DVec2; 3],
+    limit: f64,
+    mut forced: impl FnMut(usize, DVec2, DVec2) -> bool,
+) -> (Option<f64>, bool) {
+    let (mut sharpest, mut excused) = (None::<f64>, false);
+    for k in 0..3 {
+        let (v, a, b) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
+        let angle = (a - v).angle_to(b - v).abs();
+        if angle >= limit {
+            continue;
+        }
+        if forced(k, a - v, b - v) {
+            excused = true;
+        } else {
+            sharpest = Some(sharpest.map_or(angle, |s| s.min(angle)));
+        }
+    }
+    (sharpest, excused)
+}
+
 /// Whether the wedge from `a` to `b` (at a vertex) lies inside a corner between two of the
 /// constraint directions `dirs` (radians) that are less than `limit` apart.
 pub(crate) fn inside_narrow_corner(dirs: &[f64], a: DVec2, b: DVec2, limit: f64) -> bool {

@@ -551,24 +551,23 @@ fn repair(
                 continue;
             }
             let vertices = f.vertices();
+            // The constraints at a corner, as directions (radians).
+            let forced = |k: usize, a, b| {
+                let dirs: Vec<f64> = vertices[k]
+                    .out_edges()
+                    .filter(|e| e.is_constraint_edge())
+                    .map(|e| {
+                        let d = e.to().position();
+                        let d = DVec2::new(d.x, d.y) - p[k];
+                        d.y.atan2(d.x)
+                    })
+                    .collect();
+                crate::geometry::inside_narrow_corner(&dirs, a, b, angle_limit)
+            };
             let bad = area > max_area
-                || (0..3).any(|k| {
-                    let (v, a, b) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
-                    let angle = (a - v).angle_to(b - v).abs();
-                    if angle >= angle_limit {
-                        return false;
-                    }
-                    let dirs: Vec<f64> = vertices[k]
-                        .out_edges()
-                        .filter(|e| e.is_constraint_edge())
-                        .map(|e| {
-                            let d = e.to().position();
-                            let d = DVec2::new(d.x, d.y) - v;
-                            d.y.atan2(d.x)
-                        })
-                        .collect();
-                    !crate::geometry::inside_narrow_corner(&dirs, a - v, b - v, angle_limit)
-                });
+                || crate::geometry::small_angles_of(&p, angle_limit, forced)
+                    .0
+                    .is_some();
             if !bad {
                 continue;
             }

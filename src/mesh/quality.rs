@@ -88,24 +88,16 @@ pub fn small_angles(m: &ReceiverMesh) -> Vec<SmallAngle> {
         .iter()
         .map(|t| {
             let p = t.map(|i| m.vertices[i as usize]);
-            let mut out = SmallAngle::None;
-            for k in 0..3 {
-                let (v, a, b) = (p[k], p[(k + 1) % 3], p[(k + 2) % 3]);
-                let angle = (a - v).angle_to(b - v).abs();
-                if angle >= limit {
-                    continue;
-                }
-                let forced = corners
-                    .get(&key(v))
-                    .is_some_and(|dirs| crate::geometry::inside_narrow_corner(dirs, a - v, b - v, limit));
-                out = match (out, forced) {
-                    (SmallAngle::Sharp(s), _) if forced => SmallAngle::Sharp(s),
-                    (_, true) => SmallAngle::Forced,
-                    (SmallAngle::Sharp(s), false) => SmallAngle::Sharp(s.min(angle.to_degrees())),
-                    (_, false) => SmallAngle::Sharp(angle.to_degrees()),
-                };
+            let forced = |k: usize, a, b| {
+                corners
+                    .get(&key(p[k]))
+                    .is_some_and(|dirs| crate::geometry::inside_narrow_corner(dirs, a, b, limit))
+            };
+            match crate::geometry::small_angles_of(&p, limit, forced) {
+                (Some(s), _) => SmallAngle::Sharp(s.to_degrees()),
+                (None, true) => SmallAngle::Forced,
+                (None, false) => SmallAngle::None,
             }
-            out
         })
         .collect()
 }
